@@ -1,0 +1,17 @@
+"""BRDF models behind one small interface (:class:`~pmdsim.brdf.base.BRDF`)."""
+
+from .base import BRDF
+from .mirror import Mirror
+from .ward import Ward
+
+
+def brdf_from_config(cfg) -> BRDF:
+    if cfg.model == "ward":
+        ax, ay = cfg.alphas
+        return Ward(ax, ay, cfg.rho_s, cfg.normalization)
+    if cfg.model == "mirror":
+        return Mirror()
+    raise ValueError(f"brdf.model: unknown model {cfg.model!r}")
+
+
+__all__ = ["BRDF", "Mirror", "Ward", "brdf_from_config"]

@@ -1,0 +1,22 @@
+"""Small vector helpers (float64, vectors in the last axis of 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def normalize(v: np.ndarray) -> np.ndarray:
+    """Unit vectors along the last axis; zero vectors stay zero (no NaN)."""
+    v = np.asarray(v, dtype=np.float64)
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot product over the last axis."""
+    return np.einsum("...k,...k->...", a, b)
+
+
+def reflect(i: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Mirror direction of ``i`` (pointing away from the surface) about the normal ``n``."""
+    return 2.0 * dot(i, n)[..., None] * n - i

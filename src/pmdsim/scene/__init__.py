@@ -1,0 +1,67 @@
+"""The scene: camera, monitor, surface, anisotropy frame, BRDF and bundle sampling."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..brdf import BRDF, Mirror, brdf_from_config
+from ..config import RunConfig
+from ..sampling import ConeSampling
+from .anisotropy import AnisotropyFrame
+from .camera import Camera
+from .monitor import Monitor
+from .surfaces import FlatRectangle, Surface, surface_from_config
+
+ESTIMATORS = ("paper", "weighted_mean")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything the tracer needs, in world millimetres.
+
+    ``estimator``: ``paper`` = (1/N) sum f_p I_p (the paper), ``weighted_mean`` =
+    sum f_p I_p / sum f_p (see ``docs/physics.md``).
+    """
+
+    camera: Camera
+    monitor: Monitor
+    surface: Surface
+    anisotropy: AnisotropyFrame
+    brdf: BRDF
+    sampling: ConeSampling
+    estimator: str = "paper"
+
+    def __post_init__(self):
+        if self.estimator not in ESTIMATORS:
+            raise ValueError(f"estimator must be one of {ESTIMATORS}, got {self.estimator!r}")
+
+    @classmethod
+    def from_config(cls, cfg: RunConfig) -> "Scene":
+        s = cfg.sampling
+        return cls(
+            camera=Camera.from_config(cfg.camera),
+            monitor=Monitor.from_config(cfg.monitor),
+            surface=surface_from_config(cfg.surface),
+            anisotropy=AnisotropyFrame.from_config(cfg.anisotropy),
+            brdf=brdf_from_config(cfg.brdf),
+            sampling=ConeSampling(
+                s.n_rays, float(np.deg2rad(s.theta_max_deg)), s.scheme, s.mode, s.seed
+            ),
+            estimator=s.estimator,
+        )
+
+    def specular(self) -> "Scene":
+        """The same scene with the ideal mirror: the reference every deviation is measured from."""
+        return replace(self, brdf=Mirror())
+
+    def replace(self, **changes) -> "Scene":
+        return replace(self, **changes)
+
+    @property
+    def rays_per_pixel(self) -> int:
+        return 1 if self.brdf.is_delta else self.sampling.n_rays
+
+
+__all__ = ["Scene", "Camera", "Monitor", "FlatRectangle", "AnisotropyFrame", "ESTIMATORS"]
