@@ -158,23 +158,25 @@ def _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
             bj = b[j]
             cj = c[j]
             dn = aj * A1 + bj * A2 + cj * A3
-            t = T / dn
-            u = U0 + t * (aj * B1 + bj * B2 + cj * B3)
-            v = V0 + t * (aj * C1 + bj * C2 + cj * C3)
             hx = X0 + aj * X1 + bj * X2 + cj * X3
             hy = Y0 + aj * Y1 + bj * Y2 + cj * Y3
             oz = aj * Z1 + bj * Z2 + cj * Z3
             hz = Z0 + oz
+            hz2 = hz * hz
+            # one division serves t = T / dn and 1 / hz^2
+            inv = 1.0 / (dn * hz2)
+            t = T * hz2 * inv
+            u = U0 + t * (aj * B1 + bj * B2 + cj * B3)
+            v = V0 + t * (aj * C1 + bj * C2 + cj * C3)
             ozp = max(oz, 1e-300)
-            e = exp_neg(-(hx * hx * iax2 + hy * hy * iay2) / (hz * hz))
+            e = exp_neg(-(hx * hx * iax2 + hy * hy * iay2) * dn * inv)
             if norm == NORM_WARD1992:
                 f = k0 * e / math.sqrt(ozp)
             elif norm == NORM_DUER2006:
                 f = k0 * e / ozp
             else:
-                hh = hx * hx + hy * hy + hz * hz
-                hz2 = hz * hz
-                f = k0 * e * hh / (hz2 * hz2)
+                hh = hx * hx + hy * hy + hz2
+                f = k0 * e * hh * (dn * inv) * (dn * inv)
             f = f if oz > 0.0 else 0.0
             inside = (dn < 0.0) & (t > 0.0) & (u >= -0.5) & (u < umax) & (v >= -0.5) & (v < vmax)
             fh = f if inside else 0.0
