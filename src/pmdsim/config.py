@@ -311,8 +311,23 @@ class OutputConfig(_Model):
     figures: bool = True
 
 
+class VariantConfig(_Model):
+    """One member of a comparison (e.g. two surface finishes side by side): the sections it
+    gives replace the run's own; everything else is shared."""
+
+    name: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")]
+    description: str = ""
+    brdf: BrdfConfig | None = None
+    anisotropy: AnisotropyConfig | None = None
+    sampling: SamplingConfig | None = None
+
+
 class RunConfig(_Model):
-    """Everything a simulation needs."""
+    """Everything a simulation needs.
+
+    With ``variants`` the run simulates each variant (same camera, monitor, surface shape
+    and patterns; its own BRDF/anisotropy/sampling); :meth:`expand` lists them.
+    """
 
     name: str = "pmdsim-run"
     camera: CameraConfig
@@ -324,16 +339,39 @@ class RunConfig(_Model):
     patterns: PatternsConfig = PatternsConfig()
     compute: ComputeConfig = ComputeConfig()
     output: OutputConfig = OutputConfig()
+    variants: tuple[VariantConfig, ...] = ()
 
     @model_validator(mode="after")
     def _check(self) -> "RunConfig":
-        if isinstance(self.brdf, WardConfig) and self.brdf.alpha_tangential is not None:
-            if self.anisotropy.frame != "rotational":
-                raise ValueError(
-                    "brdf.alpha_tangential/alpha_radial need anisotropy.frame = 'rotational'; "
-                    "with a fixed frame use alpha_x/alpha_y"
-                )
+        _check_alpha_frame(self.brdf, self.anisotropy, "brdf")
+        names = [v.name for v in self.variants]
+        if len(set(names)) != len(names):
+            raise ValueError(f"variants: names must be unique, got {names}")
+        for k, v in enumerate(self.variants):
+            _check_alpha_frame(v.brdf or self.brdf, v.anisotropy or self.anisotropy,
+                               f"variants.{k}.brdf")
         return self
+
+    def expand(self) -> list[tuple[str, "RunConfig"]]:
+        """(name, config) of every variant with its sections applied; the run itself when
+        there are no variants."""
+        if not self.variants:
+            return [(self.name, self)]
+        out = []
+        for v in self.variants:
+            changes = {k: getattr(v, k) for k in ("brdf", "anisotropy", "sampling")
+                       if getattr(v, k) is not None}
+            out.append((v.name, self.model_copy(update=dict(changes, variants=(), name=v.name))))
+        return out
+
+
+def _check_alpha_frame(brdf, anisotropy, where: str) -> None:
+    if isinstance(brdf, WardConfig) and brdf.alpha_tangential is not None:
+        if anisotropy.frame != "rotational":
+            raise ValueError(
+                f"{where}.alpha_tangential/alpha_radial need anisotropy.frame = 'rotational'; "
+                "with a fixed frame use alpha_x/alpha_y"
+            )
 
 
 def _format_errors(err: ValidationError, source: str) -> str:
