@@ -35,9 +35,22 @@ Unwrapping methods (one fringe direction at a time; ``widths`` in any order):
     about ``pi / (2 max p_j)``.
 
 For every method the widest (synthetic) period ``L`` is cut where no monitor pixel lies: its
-positions are wrapped into ``[(extent_px - L - 1) / 2, (extent_px + L - 1) / 2)``, so noise at
-the monitor edges never wraps (with ``L == extent_px`` this is exactly the monitor,
-``[-0.5, extent_px - 0.5)``).
+positions are wrapped into ``[(extent_px - L - 1) / 2, (extent_px + L - 1) / 2)`` (with
+``L == extent_px`` this is exactly the monitor, ``[-0.5, extent_px - 0.5)``). When ``L`` is a
+multiple of the finest width (number-theoretic: always) the cut is applied to the final, precise
+position, so pixels at the monitor edges do not alias by ``L`` even when the coarse phase is
+noisy; otherwise keep ``L`` clearly larger than ``extent_px``.
+
+What flags can and cannot catch: an unwrapping step whose order error is ``e`` orders has the
+residual ``|e|`` for ``|e| < 0.5`` and ``1 - |e|`` beyond, so with ``max_order_residual = 0.25``
+every order error between 0.25 and 0.75 is flagged; a larger one (a gross phase error, or a far
+Gaussian tail) cannot be told from a correct order by that step. A phase error that makes the
+phases of all widths consistent with another position is invisible to every method: e.g. for
+heterodyne widths ``[48, 54, 60]`` a contrast reversal (phase pi) of the 48 px fringes is exactly
+the pattern at ``u + 1080`` (1080 = 22.5 * 48 = 20 * 54 = 18 * 60); it is flagged only when
+that position is off the monitor. To be safe against contrast reversal, no multiple of the
+least common multiple of the other widths (below ``L``) should be an odd multiple of half the
+finest width (true for ``[50, 400, 3200]`` and ``[96, 128, 160]``).
 
 Reliability flags (``uint8`` bit field, :class:`DecodeFlag`; ``valid = flags == 0``):
 
@@ -252,10 +265,38 @@ def _check_thresholds(min_amplitude, min_relative_amplitude, max_order_residual)
     return a, rel, res
 
 
+def _check_shifts(shifts) -> int:
+    """K from an integer K or from the K shift angles (which must be 2 pi k / K)."""
+    if np.ndim(shifts) == 1:
+        try:
+            deltas = np.asarray(shifts, dtype=np.float64)
+        except (TypeError, ValueError):
+            deltas = np.full(1, np.nan)
+        n = deltas.size
+        expected = 2.0 * np.pi * np.arange(n) / n
+        if n < 3 or not np.allclose(deltas, expected, rtol=0.0, atol=1e-9):
+            raise ValueError(
+                "shifts given as angles must be the K >= 3 equal shifts 2 pi k / K, "
+                f"k = 0..K-1 (rad), got {np.asarray(shifts).tolist()}"
+            )
+        return n
+    if isinstance(shifts, bool) or not isinstance(shifts, (int, np.integer)) or shifts < 3:
+        raise ValueError(
+            f"shifts must be an integer K >= 3 (number of phase shifts) or the K shift "
+            f"angles 2 pi k / K, got {shifts!r}"
+        )
+    return int(shifts)
+
+
 def _check_widths(widths) -> np.ndarray:
-    w = np.atleast_1d(np.asarray(widths, dtype=np.float64))
+    try:
+        w = np.atleast_1d(np.asarray(widths, dtype=np.float64))
+    except (TypeError, ValueError):
+        w = np.empty((0, 0))
     if w.ndim != 1 or w.size == 0:
-        raise ValueError(f"widths must be a non-empty 1-D sequence of fringe widths, got {widths!r}")
+        raise ValueError(
+            f"widths must be a non-empty 1-D sequence of fringe widths (monitor px), got {widths!r}"
+        )
     if not np.all(np.isfinite(w) & (w > 0)):
         raise ValueError(f"widths must be positive finite monitor px, got {w.tolist()}")
     if np.unique(w).size != w.size:
@@ -273,6 +314,7 @@ class _Plan:
     finest_width: float
     range_px: float
     window_lo: float
+    rewrap_period: float = 0.0
     # chain methods
     coef: np.ndarray | None = None
     chain_w: np.ndarray | None = None
@@ -330,6 +372,10 @@ def _plan(widths, extent_px, method: str) -> _Plan:
     def window(period):
         return 0.5 * (extent - period - 1.0)
 
+    def rewrap(chain_w):
+        ratio = chain_w[0] / chain_w[-1]
+        return float(chain_w[0]) if abs(ratio - round(ratio)) <= 1e-9 * ratio else 0.0
+
     if method == "hierarchical":
         order = np.argsort(-w)
         if w[order[0]] < extent:
@@ -340,7 +386,7 @@ def _plan(widths, extent_px, method: str) -> _Plan:
             )
         coef = np.eye(w.size)[order]
         return _Plan(method, w.size, fine, float(w[fine]), float(w.max()), window(w.max()),
-                     coef=np.ascontiguousarray(coef), chain_w=w[order].copy())
+                     rewrap(w[order]), coef=np.ascontiguousarray(coef), chain_w=w[order].copy())
 
     if w.size < 2:
         raise ValueError(f"widths: method={method!r} needs at least two widths, got {w.tolist()}")
@@ -354,7 +400,7 @@ def _plan(widths, extent_px, method: str) -> _Plan:
                 "together (longer beats) or add a width"
             )
         return _Plan(method, w.size, fine, float(w[fine]), float(chain_w[0]), window(chain_w[0]),
-                     coef=np.ascontiguousarray(coef), chain_w=chain_w)
+                     rewrap(chain_w), coef=np.ascontiguousarray(coef), chain_w=chain_w)
 
     # number-theoretic
     rounded = np.round(w)
@@ -486,8 +532,8 @@ def _run_unwrap(plan: _Plan, phase, extent, max_residual, abs_phase, coord, resi
                           plan.step_period, plan.unit, plan.window_lo, extent, max_residual,
                           abs_phase, coord, residual, flags)
     else:
-        _k.unwrap_chain(phase, plan.coef, plan.chain_w, plan.window_lo, extent, max_residual,
-                        abs_phase, coord, residual, flags)
+        _k.unwrap_chain(phase, plan.coef, plan.chain_w, plan.window_lo, plan.rewrap_period,
+                        extent, max_residual, abs_phase, coord, residual, flags)
 
 
 def unwrap_phase(
@@ -587,8 +633,9 @@ def decode_sequence(
         float64 or integer. Not modified.
     widths : sequence of float, monitor px
         Fringe widths (periods), any order (the order of ``frames``).
-    shifts : int
-        Number K >= 3 of equal phase shifts per width; must equal ``frames.shape[1]``.
+    shifts : int or (K,) array_like, rad
+        Number K >= 3 of equal phase shifts per width, or the shifts themselves (they must be
+        ``2 pi k / K``, k = 0..K-1); K must equal ``frames.shape[1]``.
     extent_px : float, monitor px
         Monitor extent along this direction (number of monitor pixels).
     method : {"hierarchical", "heterodyne", "number_theoretic"}
@@ -620,14 +667,13 @@ def decode_sequence(
     plan = _plan(widths, extent_px, method)
     extent = float(extent_px)
     a_min, rel, res = _check_thresholds(min_amplitude, min_relative_amplitude, max_order_residual)
-    w = np.atleast_1d(np.asarray(widths, dtype=np.float64))
+    w = _check_widths(widths)
     n, n_shifts, height, width = arr.shape
     if n != w.size:
         raise ValueError(
             f"frames has {n} widths along axis 0 but widths has {w.size} entries ({w.tolist()})"
         )
-    if isinstance(shifts, bool) or not isinstance(shifts, (int, np.integer)) or shifts < 3:
-        raise ValueError(f"shifts must be an integer K >= 3 (number of phase shifts), got {shifts!r}")
+    shifts = _check_shifts(shifts)
     if n_shifts != shifts:
         raise ValueError(
             f"shifts = {shifts} but frames has {n_shifts} phase-shifted frames along axis 1"
@@ -647,8 +693,8 @@ def decode_sequence(
                           extent, res, wrapped, amplitude, offset, modulation,
                           abs_phase, coord, residual, flags)
     else:
-        _k.decode_chain(arr, cos_d, sin_d, plan.coef, plan.chain_w, plan.window_lo, extent,
-                        res, wrapped, amplitude, offset, modulation,
+        _k.decode_chain(arr, cos_d, sin_d, plan.coef, plan.chain_w, plan.window_lo,
+                        plan.rewrap_period, extent, res, wrapped, amplitude, offset, modulation,
                         abs_phase, coord, residual, flags)
     if a_min > 0 or rel > 0:
         _k.flag_low_amplitude(amplitude, _amplitude_thresholds(amplitude, a_min, rel), flags)
@@ -717,31 +763,38 @@ _PNG_SUFFIXES = (".png",)
 def _read_one(path: Path) -> np.ndarray:
     """(pages, H, W) array of one file, raw counts."""
     suffix = path.suffix.lower()
-    if suffix in _TIFF_SUFFIXES:
-        import tifffile
+    if suffix not in _TIFF_SUFFIXES + _PNG_SUFFIXES:
+        raise ValueError(f"paths: {str(path)!r} is neither TIFF (.tif, .tiff) nor PNG (.png)")
+    channels = None
+    try:
+        if suffix in _TIFF_SUFFIXES:
+            import tifffile
 
-        with tifffile.TiffFile(path) as tif:
-            series = tif.series[0]
-            if "S" in series.axes:
-                raise ValueError(
-                    f"paths: {str(path)!r} is not a single-channel image (axes "
-                    f"{series.axes!r}, shape {series.shape}); convert it to grayscale"
-                )
-            img = np.asarray(series.asarray())
-        return img.reshape((-1,) + img.shape[-2:]) if img.ndim >= 2 else img
-    if suffix in _PNG_SUFFIXES:
-        # Pillow (a matplotlib dependency) keeps the raw 8/16-bit counts, as TIFF does;
-        # matplotlib.image.imread would rescale them to [0, 1].
-        from PIL import Image
+            with tifffile.TiffFile(path) as tif:
+                series = tif.series[0]
+                if "S" in series.axes:
+                    channels = f"axes {series.axes!r}, shape {series.shape}"
+                else:
+                    img = np.asarray(series.asarray())
+        else:
+            # Pillow (a matplotlib dependency) keeps the raw 8/16-bit counts, as TIFF does;
+            # matplotlib.image.imread would rescale them to [0, 1].
+            from PIL import Image
 
-        with Image.open(path) as img:
-            if img.mode not in ("L", "I", "I;16", "I;16B", "I;16L", "F"):
-                raise ValueError(
-                    f"paths: {str(path)!r} is not a single-channel image (PNG mode "
-                    f"{img.mode!r}); convert it to grayscale"
-                )
-            return np.asarray(img)[None]
-    raise ValueError(f"paths: {str(path)!r} is neither TIFF (.tif, .tiff) nor PNG (.png)")
+            with Image.open(path) as png:
+                if png.mode not in ("L", "I", "I;16", "I;16B", "I;16L", "F"):
+                    channels = f"PNG mode {png.mode!r}"
+                else:
+                    img = np.asarray(png)
+    except Exception as exc:  # a corrupt, truncated or mislabelled file
+        raise ValueError(f"paths: cannot read image file {str(path)!r}: {exc}") from exc
+    if channels is not None or img.ndim < 2 or img.dtype.kind not in "uif":
+        what = channels or f"array shape {img.shape}, dtype {img.dtype}"
+        raise ValueError(
+            f"paths: {str(path)!r} is not a single-channel image ({what}); convert it to "
+            "grayscale"
+        )
+    return img.reshape((-1,) + img.shape[-2:])
 
 
 def load_image_stack(paths: Iterable[str | os.PathLike]) -> np.ndarray:
@@ -776,17 +829,7 @@ def load_image_stack(paths: Iterable[str | os.PathLike]) -> np.ndarray:
     for path in path_list:
         if not path.is_file():
             raise FileNotFoundError(f"paths: image file {str(path)!r} does not exist")
-        try:
-            img = _read_one(path)
-        except ValueError:
-            raise
-        except Exception as exc:  # a corrupt or truncated file
-            raise ValueError(f"paths: cannot read image file {str(path)!r}: {exc}") from exc
-        if img.ndim != 3 or img.dtype.kind not in "uif":
-            raise ValueError(
-                f"paths: {str(path)!r} is not a single-channel image (array shape {img.shape}, "
-                f"dtype {img.dtype}); convert it to grayscale"
-            )
+        img = _read_one(path)
         if shape is None:
             shape = img.shape[1:]
         elif img.shape[1:] != shape:

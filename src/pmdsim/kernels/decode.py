@@ -81,8 +81,8 @@ def atan2(y, x):
 
     Octant reduction to ``t = min/max`` in [0, 1], then ``atan(t)`` by the Cephes rational
     approximation, with ``atan(t) = pi/4 + atan((t - 1)/(t + 1))`` for ``t > 0.66``. Absolute
-    error below 1e-15 (tested against ``np.arctan2``); ``atan2(0, 0) = 0``; ``y = -0.0`` with
-    ``x < 0`` gives ``+pi``.
+    error below 1e-15 (tested against ``np.arctan2``); ``atan2(0, 0) = 0``; results that round
+    to ``-pi`` (``y`` zero or tiny negative with ``x < 0``) give ``+pi``.
     """
     ax = np.abs(x)
     ay = np.abs(y)
@@ -99,7 +99,8 @@ def atan2(y, x):
     r = r + _PI_4_MOREBITS if big else r
     r = 0.5 * np.pi - r if ay > ax else r
     r = np.pi - r if x < 0.0 else r
-    return -r if y < 0.0 else r
+    r = -r if y < 0.0 else r
+    return np.pi if r <= -np.pi else r
 
 
 @fastjit(fastmath=_FASTMATH)
@@ -149,7 +150,7 @@ def phase_shift(frames, cos_d, sin_d, phase, amplitude, offset, modulation):
 
 
 @fastjit(fastmath=_FASTMATH)
-def _chain_row(phase, coef, chain_w, window_lo, extent, max_residual,
+def _chain_row(phase, coef, chain_w, window_lo, rewrap_period, extent, max_residual,
                abs_phase, coord, residual, flags):
     """Coarse-to-fine order rounding along a chain (hierarchical and heterodyne).
 
@@ -157,7 +158,10 @@ def _chain_row(phase, coef, chain_w, window_lo, extent, max_residual,
     phase ``sum_j coef[L, j] phase[j]`` (integer coefficients: one-hot for hierarchical,
     beat combinations for heterodyne) and the period ``chain_w[L]`` monitor px; ``chain_w``
     decreases and its last element is a measured width (one-hot row). The first element is
-    absolute once wrapped into ``[window_lo, window_lo + chain_w[0])`` monitor px. Writes the
+    absolute once wrapped into ``[window_lo, window_lo + chain_w[0])`` monitor px. If
+    ``rewrap_period > 0`` (``chain_w[0]``, when it is a multiple of the finest width) the final
+    position is wrapped into that window once more: the cut is then decided by the precise
+    fine position, not by the noisy coarse one, so monitor-edge pixels do not alias. Writes the
     absolute phase of the last element (rad), its monitor coordinate (px), the largest order
     residual and the flags (1 NaN, 4 residual, 8 out of range; bit 2 is left to the caller).
     """
@@ -198,6 +202,9 @@ def _chain_row(phase, coef, chain_w, window_lo, extent, max_residual,
                 worst = rr
             u = u_fine + m * lam
             big_phi = p + _TWO_PI * m
+        if rewrap_period > 0.0:
+            big_phi -= _TWO_PI * (rewrap_period / lam) * np.floor(
+                (big_phi * lam * _INV_TWO_PI - window_lo) / rewrap_period)
         u = big_phi * lam * _INV_TWO_PI
         abs_phase[c] = big_phi
         coord[c] = u
@@ -278,7 +285,7 @@ def _coprime_row(phase, order, widths, step_factor, step_inverse, step_period, u
 
 
 @parallel_jit(fastmath=_FASTMATH)
-def unwrap_chain(phase, coef, chain_w, window_lo, extent, max_residual,
+def unwrap_chain(phase, coef, chain_w, window_lo, rewrap_period, extent, max_residual,
                  abs_phase, coord, residual, flags):
     """Chain unwrapping (hierarchical / heterodyne) of wrapped phases (n, H, W), rows in
     parallel; outputs (H, W). See :func:`_chain_row`."""
@@ -288,7 +295,7 @@ def unwrap_chain(phase, coef, chain_w, window_lo, extent, max_residual,
         for j in range(n):
             for c in range(width):
                 rows[j, c] = phase[j, r, c]
-        _chain_row(rows, coef, chain_w, window_lo, extent, max_residual,
+        _chain_row(rows, coef, chain_w, window_lo, rewrap_period, extent, max_residual,
                    abs_phase[r], coord[r], residual[r], flags[r])
     return
 
@@ -325,7 +332,8 @@ def _shift_widths_row(frames, r, cos_d, sin_d, re, im, total, rows,
 
 
 @parallel_jit(fastmath=_FASTMATH)
-def decode_chain(frames, cos_d, sin_d, coef, chain_w, window_lo, extent, max_residual,
+def decode_chain(frames, cos_d, sin_d, coef, chain_w, window_lo, rewrap_period, extent,
+                 max_residual,
                  wrapped, amplitude, offset, modulation, abs_phase, coord, residual, flags):
     """Fused phase shifting + chain unwrapping of frames (n, K, H, W), one pass per row."""
     n, n_shifts, height, width = frames.shape
@@ -336,7 +344,7 @@ def decode_chain(frames, cos_d, sin_d, coef, chain_w, window_lo, extent, max_res
         rows = np.empty((n, width))
         _shift_widths_row(frames, r, cos_d, sin_d, re, im, total, rows,
                           wrapped, amplitude, offset, modulation)
-        _chain_row(rows, coef, chain_w, window_lo, extent, max_residual,
+        _chain_row(rows, coef, chain_w, window_lo, rewrap_period, extent, max_residual,
                    abs_phase[r], coord[r], residual[r], flags[r])
     return
 
