@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numba
 
-JIT_OPTIONS = dict(nopython=True, nogil=True, cache=True, error_model="numpy")
+JIT_OPTIONS = dict(nogil=True, cache=True, error_model="numpy")
 FAST_OPTIONS = dict(JIT_OPTIONS, fastmath=True)
 
 
