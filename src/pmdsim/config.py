@@ -291,9 +291,26 @@ class ImageConfig(_Model):
 
 
 class PatternsConfig(_Model):
+    """What the monitor shows. ``fringes = false`` in TOML turns the default fringes off."""
+
     fringes: FringeConfig | None = FringeConfig()
     dots: DotConfig | None = None
     images: ImageConfig | None = None
+
+    @field_validator("fringes", mode="before")
+    @classmethod
+    def _no_fringes(cls, v):
+        if v is False:
+            return None
+        if v is True:
+            return FringeConfig()
+        return v
+
+    @model_validator(mode="after")
+    def _something(self) -> "PatternsConfig":
+        if self.fringes is None and self.dots is None and self.images is None:
+            raise ValueError("nothing to show: give fringes, dots or images")
+        return self
 
 
 class ComputeConfig(_Model):
