@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import tomllib
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 import numpy as np
 from pydantic import (
@@ -48,6 +48,15 @@ def _unit(name: str, v: Vec3) -> Vec3:
     return v
 
 
+def _nonzero_vector(v, info):
+    """Field validator: a direction must be a non-zero, finite 3-vector (error names the field)."""
+    if v is not None:
+        n = math.sqrt(sum(x * x for x in v))
+        if not np.isfinite(n) or n < 1e-12:
+            raise ValueError("must be a non-zero, finite 3-vector")
+    return v
+
+
 class CameraConfig(_Model):
     """Pinhole camera. Pose by ``position_mm`` + ``look_at_mm`` + ``up``, or by an explicit
     ``rotation`` (3x3, columns = camera x (right), y (down), z (viewing direction) in
@@ -66,6 +75,8 @@ class CameraConfig(_Model):
     look_at_mm: Vec3 | None = None
     up: Vec3 = (0.0, 1.0, 0.0)
     rotation: tuple[Vec3, Vec3, Vec3] | None = None
+
+    _up = field_validator("up")(_nonzero_vector)
 
     @model_validator(mode="after")
     def _check(self) -> "CameraConfig":
@@ -125,6 +136,8 @@ class MonitorConfig(_Model):
         "the pixel centre); continuous: analytic fringes evaluated at the exact hit point",
     )
 
+    _up = field_validator("up")(_nonzero_vector)
+
     @model_validator(mode="after")
     def _check(self) -> "MonitorConfig":
         if self.white_level <= self.black_level:
@@ -146,6 +159,8 @@ class FlatSurfaceConfig(_Model):
     centre_mm: Vec3 = (0.0, 0.0, 0.0)
     normal: Vec3 = (0.0, 0.0, 1.0)
     x_axis: Vec3 = (1.0, 0.0, 0.0)
+
+    _directions = field_validator("normal", "x_axis")(_nonzero_vector)
 
     @model_validator(mode="after")
     def _check(self) -> "FlatSurfaceConfig":
@@ -172,6 +187,8 @@ class AnisotropyConfig(_Model):
     centre_mm: Vec3 = (0.0, 0.0, 0.0)
     axis: Vec3 | None = Field(None, description="turning axis; default: the surface normal")
     x_direction: Vec3 = (1.0, 0.0, 0.0)
+
+    _directions = field_validator("axis", "x_direction")(_nonzero_vector)
 
     @model_validator(mode="after")
     def _check(self) -> "AnisotropyConfig":
@@ -358,6 +375,14 @@ class RunConfig(_Model):
     output: OutputConfig = OutputConfig()
     variants: tuple[VariantConfig, ...] = ()
 
+    @model_validator(mode="before")
+    @classmethod
+    def _default_surface_type(cls, data):
+        # ``surface.type`` defaults to "flat" (as documented); the tagged union needs the tag.
+        if isinstance(data, dict) and isinstance(data.get("surface"), dict) and "type" not in data["surface"]:
+            data = dict(data, surface=dict(data["surface"], type="flat"))
+        return data
+
     @model_validator(mode="after")
     def _check(self) -> "RunConfig":
         _check_alpha_frame(self.brdf, self.anisotropy, "brdf")
@@ -391,11 +416,31 @@ def _check_alpha_frame(brdf, anisotropy, where: str) -> None:
             )
 
 
+def _union_tags(union, field: str) -> set:
+    inner = get_args(union)[0]  # Annotated[X | Y, Field(discriminator=...)] -> X | Y
+    return {t for m in (get_args(inner) or (inner,)) for t in get_args(m.model_fields[field].annotation)}
+
+
+#: Tagged unions (field name -> its tags): pydantic puts the tag into error locations
+#: (``brdf.ward.alpha_x``); the messages show the path as written in the file (``brdf.alpha_x``).
+_UNION_TAGS = {"surface": _union_tags(SurfaceConfig, "type"), "brdf": _union_tags(BrdfConfig, "model")}
+
+
+def _error_path(loc) -> list:
+    return [p for k, p in enumerate(loc)
+            if not (k > 0 and isinstance(loc[k - 1], str) and p in _UNION_TAGS.get(loc[k - 1], ()))]
+
+
 def _format_errors(err: ValidationError, source: str) -> str:
     lines = [f"invalid configuration ({source}):"]
     for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        path = _error_path(e["loc"])
         msg = e["msg"].removeprefix("Value error, ")
+        if e["type"] in ("union_tag_not_found", "union_tag_invalid"):
+            path.append(str(e.get("ctx", {}).get("discriminator", "")).strip("'\""))
+            if e["type"] == "union_tag_not_found":
+                msg = "required field is missing"
+        loc = ".".join(str(p) for p in path) or "(top level)"
         if e["type"] == "extra_forbidden":
             msg = "unknown field (check the spelling; see docs/configuration.md)"
         elif e["type"] == "missing":
