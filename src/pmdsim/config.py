@@ -239,14 +239,53 @@ class MirrorConfig(_Model):
     model: Literal["mirror"] = "mirror"
 
 
-BrdfConfig = Annotated[WardConfig | MirrorConfig, Field(discriminator="model")]
+class BeckmannConfig(_Model):
+    """Anisotropic Beckmann micro-facet BRDF F D G / (4 cos_i cos_o) (mitsuba's
+    ``roughconductor`` with ``distribution = "beckmann"``). ``alpha_u`` acts along the local
+    x axis, ``alpha_v`` along y (each sqrt(2) x the RMS micro-facet slope along it, as
+    Ward's alpha_x/alpha_y); in a ``rotational`` frame the aliases ``alpha_tangential`` /
+    ``alpha_radial`` may be used instead. ``rho_s`` is the Fresnel factor F (a constant);
+    ``shadowing``: Smith's G1(i) G1(o) or none (G = 1)."""
+
+    model: Literal["beckmann"] = "beckmann"
+    alpha_u: PositiveFloat | None = None
+    alpha_v: PositiveFloat | None = None
+    alpha_tangential: PositiveFloat | None = None
+    alpha_radial: PositiveFloat | None = None
+    rho_s: PositiveFloat = 0.4
+    shadowing: Literal["smith", "none"] = "smith"
+
+    @model_validator(mode="after")
+    def _check(self) -> "BeckmannConfig":
+        by_axis = (self.alpha_u, self.alpha_v)
+        by_dir = (self.alpha_tangential, self.alpha_radial)
+        if any(v is not None for v in by_axis) and any(v is not None for v in by_dir):
+            raise ValueError(
+                "give either alpha_u/alpha_v or alpha_tangential/alpha_radial, not both"
+            )
+        if all(v is None for v in by_dir) and None in by_axis:
+            raise ValueError("give both alpha_u and alpha_v (or alpha_tangential and alpha_radial)")
+        if all(v is None for v in by_axis) and None in by_dir:
+            raise ValueError("give both alpha_tangential and alpha_radial")
+        return self
+
+    @property
+    def alphas(self) -> tuple[float, float]:
+        """(alpha along local x, alpha along local y)."""
+        if self.alpha_u is not None:
+            return float(self.alpha_u), float(self.alpha_v)
+        return float(self.alpha_tangential), float(self.alpha_radial)
+
+
+BrdfConfig = Annotated[WardConfig | BeckmannConfig | MirrorConfig, Field(discriminator="model")]
 
 
 class SamplingConfig(_Model):
     """The scattered bundle and the estimator.
 
     ``n_rays`` counts every ray of the bundle, the principal reflection direction P
-    included (as in the paper). ``mode = "stratified"`` uses one deterministic,
+    included (as in the paper; the ``radiometric`` estimator draws all ``n_rays`` from the
+    lobe and adds no P). ``mode = "stratified"`` uses one deterministic,
     low-discrepancy sample set for every pixel (sampling error becomes a structured,
     repeatable pattern); ``"random"`` rotates that set per pixel by a seeded random
     Cranley-Patterson shift (sampling error becomes noise).
@@ -257,7 +296,13 @@ class SamplingConfig(_Model):
     scheme: Literal["polar", "solid_angle"] = "polar"
     mode: Literal["stratified", "random"] = "stratified"
     seed: Annotated[int, Field(ge=0)] = 0
-    estimator: Literal["paper", "weighted_mean"] = "paper"
+    estimator: Literal["paper", "weighted_mean", "radiometric"] = Field(
+        "paper",
+        description="paper: (1/N) sum f I over the cone (the paper); weighted_mean: "
+        "sum f I / sum f over the cone; radiometric: (1/N) sum f I cos_o / pdf over N "
+        "directions importance-sampled from the whole lobe (no cone: theta_max_deg and "
+        "scheme are not used, P is not added; see docs/physics.md)",
+    )
 
 
 class FringeConfig(_Model):
@@ -437,11 +482,12 @@ class RunConfig(_Model):
 
 
 def _check_alpha_frame(brdf, anisotropy, where: str) -> None:
-    if isinstance(brdf, WardConfig) and brdf.alpha_tangential is not None:
+    if isinstance(brdf, (WardConfig, BeckmannConfig)) and brdf.alpha_tangential is not None:
         if anisotropy.frame != "rotational":
             raise ValueError(
                 f"{where}.alpha_tangential/alpha_radial need anisotropy.frame = 'rotational'; "
-                "with a fixed frame use alpha_x/alpha_y"
+                "with a fixed frame use "
+                + ("alpha_u/alpha_v" if isinstance(brdf, BeckmannConfig) else "alpha_x/alpha_y")
             )
 
 

@@ -18,7 +18,11 @@ client is active and ``scheduler="distributed"``.
 Estimators (``Scene.estimator``):
 
 - ``paper``: I_C = (1/N) sum_p f_p L_p (N = rays per pixel, P included);
-- ``weighted_mean``: I_C = sum_p f_p L_p / sum_p f_p.
+- ``weighted_mean``: I_C = sum_p f_p L_p / sum_p f_p;
+- ``radiometric``: I_C = (1/N) sum_p w_p L_p, w_p = f_p cos(theta_p) / pdf_p, over N
+  directions importance-sampled from the BRDF lobe (no cone, no P;
+  :func:`pmdsim.kernels.bundle.render_tile_lobe`): the rendering integral of f L cos over
+  the hemisphere. Its ``f_total`` is the directional albedo estimate.
 
 Rays that miss the monitor see black (L = 0) but keep their weight in sum f.
 """
@@ -173,13 +177,21 @@ class Simulation:
         with _Progress():
             return dask.compute(*tasks, **kwargs)
 
+    @property
+    def _lobe(self) -> bool:
+        """True when the radiometric estimator samples the BRDF lobe (not for the mirror)."""
+        return self.scene.estimator == "radiometric" and not self.scene.brdf.is_delta
+
     def _render(self, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
                 images=None, dots=None, progress=None):
         scene = self.scene
         delta = scene.brdf.is_delta
         samp = scene.sampling
+        lobe = self._lobe
         if delta:
             u1 = u2 = np.zeros(0)
+        elif lobe:
+            u1, u2 = samp.lobe_unit_points()
         else:
             u1, u2 = samp.unit_points()
         brdf = scene.brdf.kernel_params()
@@ -198,10 +210,16 @@ class Simulation:
             geo, _ = scene_geometry_rows(scene, r0, r1)
             rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
             out = np.empty((geo.shape[0], ncols))
-            kb.render_tile(
-                geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, True, mshape, mode,
-                table_u, table_v, k_u, k_v, images, dots, out, none, none, none,
-            )
+            if lobe:
+                kb.render_tile_lobe(
+                    geo, brdf, u1, u2, rot, mshape, mode,
+                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none,
+                )
+            else:
+                kb.render_tile(
+                    geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, True, mshape, mode,
+                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none,
+                )
             return out.reshape(r1 - r0, width, ncols)
 
         parts = self._compute(tile, self._tiles(), progress)
@@ -210,7 +228,7 @@ class Simulation:
     def _normalise(self, out):
         """(H, W) factor turning weighted sums into estimator values."""
         ftot = out[..., kb.OUT_FTOTAL]
-        if self.scene.estimator == "paper":
+        if self.scene.estimator in ("paper", "radiometric"):
             return np.full(ftot.shape, 1.0 / self.scene.rays_per_pixel)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(ftot > 0, 1.0 / ftot, np.nan)
@@ -355,7 +373,8 @@ class Simulation:
         u, v : (P, R) float64
             Monitor coordinates (monitor px) of every ray; NaN where it misses the monitor.
         weight : (P, R) float64
-            BRDF weight f of every ray that hits the monitor (0 for misses).
+            Weight of every ray that hits the monitor (0 for misses): the BRDF value f for
+            the cone estimators, ``f cos(theta_o) / pdf`` for ``radiometric``.
         directions : (P, R, 3) float64
             World unit directions of the rays.
         origin : (P, 3) float64
@@ -369,33 +388,43 @@ class Simulation:
             [bundle_geometry(scene, h)[[c]] for h, c in zip(hits_all, cols)], axis=0
         )
         samp = scene.sampling
+        lobe = self._lobe
         if scene.brdf.is_delta:
             u1 = u2 = np.zeros(0)
             local = np.array([[0.0, 0.0, 1.0]])
             rot = np.zeros((0, 2))
         else:
-            u1, u2 = samp.unit_points()
+            u1, u2 = samp.lobe_unit_points() if lobe else samp.unit_points()
             rot = (np.concatenate([samp.rotations(int(r), int(r) + 1, scene.camera.width)[[c]]
                                    for r, c in zip(rows, cols)])
                    if samp.mode == "random" else np.zeros((0, 2)))
-        n = u1.size + 1
+        n = u1.size if lobe else u1.size + 1
         ou, ov, of = (np.empty((len(rows), n)) for _ in range(3))
         out = np.empty((len(rows), kb.OUT_FIRST))
-        kb.render_tile(
-            geo, scene.brdf.kernel_params(), u1, u2, rot, samp.scheme_id, samp.theta_max, True,
-            np.array(scene.monitor.shape, np.int64), kb.MODE_TRANSPORT,
-            np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0), np.zeros(0),
-            np.zeros((0, 1, 1), np.float32), np.zeros((0, 4)), out, ou, ov, of,
-        )
+        args = (np.array(scene.monitor.shape, np.int64), kb.MODE_TRANSPORT,
+                np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0), np.zeros(0),
+                np.zeros((0, 1, 1), np.float32), np.zeros((0, 4)), out, ou, ov, of)
+        if lobe:
+            kb.render_tile_lobe(geo, scene.brdf.kernel_params(), u1, u2, rot, *args)
+        else:
+            kb.render_tile(geo, scene.brdf.kernel_params(), u1, u2, rot, samp.scheme_id,
+                           samp.theta_max, True, *args)
         dirs = np.empty((len(rows), n, 3))
         origin = np.empty((len(rows), 3))
         for p, (h, c) in enumerate(zip(hits_all, cols)):
-            e1, e2, e3 = (b[0, c] for b in cone_basis(h))
-            if scene.brdf.is_delta:
-                loc = local
-            else:
-                off = tuple(rot[p]) if rot.shape[0] else (0.0, 0.0)
-                loc = samp.local_directions(off)
-            dirs[p] = loc[:, :1] * e1 + loc[:, 1:2] * e2 + loc[:, 2:3] * e3
             origin[p] = h.point[0, c]
+            if lobe:
+                frame = (h.x_axis[0, c], h.y_axis[0, c], h.normal[0, c])
+                i_loc = np.array([h.to_camera[0, c] @ b for b in frame])
+                off = rot[p] if rot.shape[0] else (0.0, 0.0)
+                loc = scene.brdf.sample(np.mod(u1 + off[0], 1.0), np.mod(u2 + off[1], 1.0), i_loc)
+                e1, e2, e3 = frame
+            else:
+                e1, e2, e3 = (b[0, c] for b in cone_basis(h))
+                if scene.brdf.is_delta:
+                    loc = local
+                else:
+                    off = tuple(rot[p]) if rot.shape[0] else (0.0, 0.0)
+                    loc = samp.local_directions(off)
+            dirs[p] = loc[:, :1] * e1 + loc[:, 1:2] * e2 + loc[:, 2:3] * e3
         return ou, ov, of, dirs, origin

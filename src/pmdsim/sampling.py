@@ -9,6 +9,10 @@ Fibonacci lattice: u1 = (j + 1/2) / M, u2 = frac(j / golden ratio)), mapped to
 - ``solid_angle``: cos(theta) = 1 - u1 (1 - cos(theta_max)), phi = 2 pi u2 (uniform over the
   cone's solid angle).
 
+The ``radiometric`` estimator uses the same lattice with ``M = n_rays`` points
+(:meth:`ConeSampling.lobe_unit_points`, no principal ray) and maps it to the BRDF's lobe
+(Walter 2005 slopes: :mod:`pmdsim.brdf.microfacet`) instead of the cone.
+
 In mode ``stratified`` every pixel uses the same set; in mode ``random`` each pixel's set
 is shifted by a seeded random offset (r1, r2) modulo 1 (Cranley-Patterson rotation), so
 each sample is uniformly distributed and the error decorrelates between pixels. The
@@ -25,6 +29,13 @@ import numpy as np
 from .kernels import bundle as kb
 
 _GOLDEN = (1.0 + 5.0**0.5) / 2.0
+
+
+def fibonacci_lattice(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The m-point Fibonacci lattice (u1, u2) in the unit square, u1 = (j + 1/2) / m in (0, 1),
+    u2 = frac(j / golden ratio)."""
+    j = np.arange(m, dtype=np.float64)
+    return (j + 0.5) / max(m, 1), np.mod(j / _GOLDEN, 1.0)
 
 
 @dataclass(frozen=True)
@@ -51,11 +62,12 @@ class ConeSampling:
 
     def unit_points(self) -> tuple[np.ndarray, np.ndarray]:
         """(u1, u2), each (n_rays - 1,): the cone samples in the unit square."""
-        m = self.n_rays - 1
-        j = np.arange(m, dtype=np.float64)
-        u1 = (j + 0.5) / max(m, 1)
-        u2 = np.mod(j / _GOLDEN, 1.0)
-        return u1, u2
+        return fibonacci_lattice(self.n_rays - 1)
+
+    def lobe_unit_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """(u1, u2), each (n_rays,): the radiometric estimator's lobe samples in the unit
+        square (all ``n_rays`` rays come from the lobe; P is not added)."""
+        return fibonacci_lattice(self.n_rays)
 
     def rotations(self, row_start: int, row_stop: int, width: int) -> np.ndarray:
         """Per-pixel offsets (rows * width, 2) for mode ``random``; (0, 2) when stratified."""

@@ -12,6 +12,11 @@
 
 ``alpha_x``/``alpha_y`` act along the local x (tangential in a rotational frame) and y
 (radial) axes; each is sqrt(2) times the RMS micro-facet slope along that axis.
+
+Sampling: Walter (2005), Gaussian slopes reflected about (:mod:`pmdsim.brdf.microfacet`);
+the exponent of every normalisation is exactly the slope density of the sampled
+micro-normal, so the weights ``f cos_o / pdf`` are smooth and bounded (ward1992:
+``rho sqrt(cos_o / cos_i) cos^3(theta_h) (i.h)``).
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kernels import bundle as kb
+from . import microfacet
 
 NORMALIZATIONS = {
     "ward1992": kb.NORM_WARD1992,
@@ -64,6 +70,14 @@ class Ward:
             else:
                 f = self.rho_s * np.sum(h * h, axis=-1) / (np.pi * axy * h[..., 2] ** 4) * expo
         return np.where(ok, f, 0.0)
+
+    def sample(self, u1, u2, i_local):
+        """Walter (2005) sample directions (..., 3) for unit-square points (u1, u2)."""
+        return microfacet.sample_reflection(u1, u2, i_local, self.alpha_x, self.alpha_y)
+
+    def pdf(self, i_local, o_local):
+        """Density per solid angle of :meth:`sample` (...,)."""
+        return microfacet.reflection_pdf(i_local, o_local, self.alpha_x, self.alpha_y)
 
     def kernel_params(self):
         p = np.zeros(kb.B_SIZE)

@@ -14,7 +14,7 @@ from .camera import Camera
 from .monitor import Monitor
 from .surfaces import FlatRectangle, Surface, surface_from_config
 
-ESTIMATORS = ("paper", "weighted_mean")
+ESTIMATORS = ("paper", "weighted_mean", "radiometric")
 
 
 @dataclass(frozen=True)
@@ -22,7 +22,8 @@ class Scene:
     """Everything the tracer needs, in world millimetres.
 
     ``estimator``: ``paper`` = (1/N) sum f_p I_p (the paper), ``weighted_mean`` =
-    sum f_p I_p / sum f_p (see ``docs/physics.md``).
+    sum f_p I_p / sum f_p over the cone, ``radiometric`` = (1/N) sum f_p cos_p I_p / pdf_p
+    over N directions sampled from the lobe (see ``docs/physics.md``).
     """
 
     camera: Camera
