@@ -375,6 +375,23 @@ class PatternsConfig(_Model):
         return self
 
 
+class DiagnosticsConfig(_Model):
+    """Bounds for the convergence warnings of :func:`pmdsim.diagnostics.check`."""
+
+    min_energy_fraction: Annotated[float, Field(gt=0, le=1)] = Field(
+        0.95, description="warn when the cone (theta_max) holds less of the lobe's energy"
+    )
+    max_phase_error_mrad: PositiveFloat = Field(
+        1.0, description="warn when the Monte-Carlo standard error of the phase exceeds this"
+    )
+    min_ess_fraction: Annotated[float, Field(gt=0, le=1)] = Field(
+        0.1, description="warn when the effective sample size is below this fraction of N"
+    )
+    grid: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] = Field(
+        (24, 20), description="(columns, rows) of the coarse camera-pixel grid of the maps"
+    )
+
+
 class ComputeConfig(_Model):
     """How the work is split: camera tiles of ``tile_rows`` rows, run on Dask."""
 
@@ -447,6 +464,7 @@ class RunConfig(_Model):
     compute: ComputeConfig = ComputeConfig()
     output: OutputConfig = OutputConfig()
     decode: DecodeConfig = DecodeConfig()
+    diagnostics: DiagnosticsConfig = DiagnosticsConfig()
     variants: tuple[VariantConfig, ...] = ()
 
     @model_validator(mode="before")
