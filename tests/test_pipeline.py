@@ -111,8 +111,13 @@ def test_run_folder_contents(full_run):
     assert sorted(p.name for p in (out / "dots").iterdir()) == [
         "dot000_u0030_v0044.tif", "dot001_u0129_v0044.tif", "dot002_u0080_v0045.tif"]
     assert [p.name for p in (out / "images").iterdir()] == ["00_ramp.tif"]
+    # widths [8, 32] cannot be unwrapped over 160 monitor px: decoding is skipped (a note);
+    # the dots get their moments (dots.csv) and figures.
     assert sorted(p.name for p in (out / "figures").iterdir()) == [
-        "fringes.png", "modulation.png", "setup.png"]
+        "dot_contact_sheet.png", "dot_shapes.png", "fringes.png", "modulation.png", "setup.png"]
+    assert (out / "dots.csv").is_file() and not (out / "statistics.json").exists()
+    assert any("decoding skipped" in n and "patterns.fringes.widths_px" in n
+               for n in manifest["notes"])
     assert len(manifest["images"]) == 16 + 3 + 1
     assert all((out / p).is_file() for p in manifest["images"] + manifest["figures"])
     assert manifest["exposure"] == pytest.approx(result.exposure)
@@ -308,7 +313,8 @@ def test_fringes_off_dots_only(tmp_path):
     d = tiny_config_dict(fringes=False, dots={"size_px": 9, "positions_px": [[80, 45]]})
     result = pipeline.run_simulation(parse_config(d), tmp_path / "dots", figures=True)
     assert [p.name for p in result.image_paths] == ["dot000_u0080_v0045.tif"]
-    assert [p.name for p in result.figure_paths] == ["setup.png"]
+    assert [p.name for p in result.figure_paths] == ["setup.png", "dot_contact_sheet.png",
+                                                     "dot_shapes.png"]
     ds = pipeline.load_run(result.outdir)
     assert "fringes" not in ds and ds["dots"].shape == (1, 40, 48)
 

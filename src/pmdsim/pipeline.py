@@ -13,11 +13,24 @@ dots; monitor images) and writes, atomically (see :func:`pmdsim.io.atomic_run_di
       dots/dot000_u0060_v0060.tif
       images/00_<file stem>.tif
       figures/setup.png, fringes.png, modulation.png
+      statistics.json, summary.txt   the measurement chain (below), when fringes are decoded
+      figures/overview.png, phase.png, deviation.png, histograms.png,
+              modulation_ratio.png, masks.png
+      dots.csv, figures/dot_contact_sheet.png, dot_shapes.png   (with dots)
+
+The measurement chain (``decode.enabled``, default ``"auto"``): the fringe images of the
+surface and of its ideal specular reference (rendered once per run, shared by the variants)
+are decoded and compared (:mod:`pmdsim.chain`); the decoded phases, monitor coordinates,
+modulation, flags, the deviation maps, masks and statistics go into the dataset, and
+``statistics.json``/``summary.txt`` beside it. Dot images get their second moments
+(``dots.csv`` and ``dot_*`` variables). See ``docs/outputs.md``.
 
 With ``variants`` (a comparison of BRDFs, anisotropy frames or sampling on one set-up)
 each variant is a complete run folder ``<outdir>/<variant>/`` as above, and ``<outdir>``
 holds the manifest, ``config.json`` (variants included) and
-``figures/fringes_variants.png``; :func:`load_run` concatenates the variants along a
+``figures/fringes_variants.png`` (with decoding also ``figures/deviation_variants.png``,
+``statistics.json`` and ``summary.txt`` of all variants; with dots ``dots.csv`` and the dot
+figures of all variants); :func:`load_run` concatenates the variants along a
 ``variant`` dimension.
 
 Image files are integers scaled by one run-wide exposure factor (one per variant; see
@@ -43,6 +56,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import chain
 from . import io as pio
 from . import patterns as pat
 from .config import RunConfig
@@ -54,7 +68,7 @@ DATASET_NAME = "run.zarr"
 CONFIG_NAME = "config.json"
 #: Names a variant cannot have: they are files or folders of the run folder itself.
 RESERVED_NAMES = frozenset({DATASET_NAME, CONFIG_NAME, pio.MANIFEST, "figures", "fringes",
-                            "dots", "images"})
+                            "dots", "images", "statistics.json", "summary.txt", "dots.csv"})
 
 
 def _version() -> str:
@@ -91,6 +105,11 @@ class RunResult:
     config : RunConfig
     variants : tuple of RunResult
         One result per variant (folder ``outdir/<name>``); empty without variants.
+    notes : tuple of str
+        What was skipped and why (e.g. decoding, when the fringe widths do not allow it).
+    statistics : dict
+        The measurement chain's statistics (``statistics.json``); ``{variant: ...}`` for a
+        run with variants; empty when nothing was decoded.
     """
 
     outdir: Path
@@ -105,6 +124,8 @@ class RunResult:
     timings: dict = field(default_factory=dict)
     config: RunConfig | None = None
     variants: tuple["RunResult", ...] = ()
+    notes: tuple[str, ...] = ()
+    statistics: dict = field(default_factory=dict)
 
     @property
     def rays_per_second(self) -> float:
@@ -283,11 +304,12 @@ def build_dataset(cfg: RunConfig, geometry: Geometry, fringes: FringeResult | No
 
 
 def _encoding(ds) -> dict:
-    """One chunk per camera image for the image stacks."""
+    """One chunk per camera image for the image stacks (every variable with dimensions
+    (..., row, col) and at least one more)."""
     enc = {}
-    for name in ("fringes", "fringe_sums_real", "fringe_sums_imag", "dots", "images"):
-        if name in ds:
-            shape = ds[name].shape
+    for name, var in ds.data_vars.items():
+        if var.ndim >= 3 and var.dims[-2:] == ("row", "col"):
+            shape = var.shape
             enc[name] = {"chunks": (1,) * (len(shape) - 2) + tuple(shape[-2:])}
     return enc
 
@@ -323,7 +345,9 @@ def load_run(path: str | Path, variant: str | None = None):
     import xarray as xr
 
     parts = [load_run(path / n) for n in names]
-    shared = {"surface_mask", "monitor_mask", "specular_u", "specular_v"}  # the geometry
+    # The geometry and the specular reference are the same for every variant.
+    shared = {"surface_mask", "monitor_mask", "specular_u", "specular_v", "surface_to_monitor_mm"}
+    shared |= {v for v in parts[0].data_vars if str(v).startswith("reference_")}
     ds = xr.concat(parts, dim=xr.DataArray(np.array(names, dtype=object), dims="variant",
                                            name="variant"),
                    data_vars=[v for v in parts[0].data_vars if v not in shared],
@@ -340,7 +364,8 @@ def run_config(ds) -> RunConfig:
 
 # ----------------------------------------------------------------------------- the run
 def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | None = None,
-                   *, overwrite: bool = False, figures: bool | None = None) -> RunResult:
+                   *, overwrite: bool = False, figures: bool | None = None,
+                   decode: bool | None = None) -> RunResult:
     """Simulate ``cfg`` and write a complete run folder ``outdir``.
 
     With ``cfg.variants`` every variant (:meth:`RunConfig.expand`) becomes a complete run
@@ -361,6 +386,11 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         Replace an existing run folder (never a folder that is not a pmdsim run).
     figures : bool, optional
         Draw the figures; default ``cfg.output.figures``.
+    decode : bool, optional
+        Run the measurement chain (decode, deviation from the specular reference): True
+        requires it (an error when the fringes cannot be decoded), False turns it off;
+        default ``cfg.decode.enabled`` (``"auto"``: whenever the fringes allow it, otherwise
+        skipped with a note in ``RunResult.notes`` and the manifest).
 
     Returns
     -------
@@ -373,7 +403,8 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
     FileExistsError
         ``outdir`` exists (without ``overwrite``), or is not a run folder.
     FileNotFoundError, ValueError
-        A monitor image is missing or has the wrong size.
+        A monitor image is missing or has the wrong size; decoding was required but the
+        fringe widths do not allow it (the message names ``patterns.fringes.widths_px``).
     """
     t_start = time.perf_counter()
     figures = cfg.output.figures if figures is None else figures
@@ -387,11 +418,14 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
     # Resolve inputs before anything is written: bad input fails fast.
     dots = resolve_dots(cfg)
     image_files, levels = resolve_images(cfg)
+    decoding, notes = _chain_mode(cfg, decode)
     n_calls = (cfg.patterns.fringes is not None) + bool(dots) + (levels is not None)
     n_tiles = math.ceil(sims[0][2].shape[0] / sims[0][2].tile_rows)
     compare = bool(cfg.variants) and figures and cfg.patterns.fringes is not None
+    top_figures = bool(cfg.variants) and figures and (cfg.patterns.fringes is not None
+                                                      or bool(dots))
     steps = _Steps(progress, 1 + len(sims) * (n_calls * n_tiles + 2 + int(figures))
-                   + int(compare))
+                   + int(top_figures) + (n_tiles if decoding else 0))
     inputs = (dots, image_files, levels, n_tiles)
 
     with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp:
@@ -401,17 +435,29 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         geometry = sims[0][2].geometry()
         t_geometry = time.perf_counter() - t
         steps.advance()
+        reference = None
+        if decoding:
+            # The ideal specular reference does not depend on the BRDF, anisotropy frame or
+            # sampling of a variant: rendered and decoded once for all.
+            reference = _reference(cfg, sims[0][2], geometry, steps, n_tiles)
+            notes += list(reference.notes)
         if not cfg.variants:
-            result, _ = _run_member(cfg, sims[0][2], geometry, tmp, steps, figures, inputs)
+            result, _ = _run_member(cfg, sims[0][2], geometry, tmp, steps, figures, inputs,
+                                    reference=reference, standalone=True)
             timings = dict(result.timings, geometry=t_geometry,
                            total=time.perf_counter() - t_start)
+            if reference is not None:
+                timings["reference"] = reference.seconds
+            result = replace(result, notes=tuple(notes))
             final = Path(outdir).absolute()
             _write_manifest(tmp, cfg, result, timings)
             return _moved(result, tmp, final, timings=timings)
 
         subs, datasets = [], {}
         for name, c, sim in sims:
-            res, ds = _run_member(c, sim, geometry, tmp / name, steps, figures, inputs)
+            res, ds = _run_member(c, sim, geometry, tmp / name, steps, figures, inputs,
+                                  reference=reference, standalone=False)
+            res = replace(res, notes=tuple(notes))
             _write_manifest(tmp / name, c, res, dict(res.timings, geometry=t_geometry))
             subs.append(res)
             if compare:  # keep only what the comparison figure needs (finest width, k = 0)
@@ -423,17 +469,23 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         (tmp / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
         figure_paths: list[Path] = []
         t = time.perf_counter()
+        descriptions = {v.name: v.description for v in cfg.variants}
         if compare:
             from . import plot
 
             figure_paths.append(plot.plot_variant_fringes(
                 datasets, tmp / "figures" / "fringes_variants.png",
-                descriptions={v.name: v.description for v in cfg.variants}))
+                descriptions=descriptions))
+        figure_paths += _write_variant_outputs(cfg, tmp, [name for name, _ in members], subs,
+                                               figures, descriptions, sims[0][2])
+        if top_figures:
             steps.advance()
         timings = {k: sum(r.timings.get(k, 0.0) for r in subs)
-                   for k in ("render", "write", "figures")}
+                   for k in ("render", "write", "decode", "figures")}
         timings["figures"] += time.perf_counter() - t
         timings["geometry"] = t_geometry
+        if reference is not None:
+            timings["reference"] = reference.seconds
         timings["total"] = time.perf_counter() - t_start
         top = RunResult(
             outdir=tmp, dataset_path=None,
@@ -441,7 +493,8 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
             figure_paths=tuple(figure_paths) + tuple(p for r in subs for p in r.figure_paths),
             exposure=float("nan"), shape=subs[0].shape, surface_pixels=subs[0].surface_pixels,
             rays_per_pixel=subs[0].rays_per_pixel, rays_traced=sum(r.rays_traced for r in subs),
-            timings=timings, config=cfg, variants=tuple(subs))
+            timings=timings, config=cfg, variants=tuple(subs), notes=tuple(notes),
+            statistics={r.config.name: r.statistics for r in subs if r.statistics})
         pio.write_manifest(tmp, {
             "format": "pmdsim-run/1",
             "name": cfg.name,
@@ -451,6 +504,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
             "variants": [name for name, _ in members],
             "figures": [str(p.relative_to(tmp)) for p in figure_paths],
             "rays_traced": top.rays_traced,
+            "notes": list(notes),
             "timings_s": {k: round(v, 4) for k, v in timings.items()},
         })
 
@@ -488,14 +542,21 @@ def _write_manifest(folder: Path, cfg: RunConfig, result: RunResult, timings: di
         "surface_pixels": result.surface_pixels,
         "rays_per_pixel": result.rays_per_pixel,
         "rays_traced": result.rays_traced,
+        "notes": list(result.notes),
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
     })
 
 
 def _run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
-                steps: _Steps, figures: bool, inputs) -> tuple[RunResult, object]:
+                steps: _Steps, figures: bool, inputs, reference: "_Reference | None" = None,
+                standalone: bool = True) -> tuple[RunResult, object]:
     """Render one configuration (no variants) and write its images, dataset, config and
-    figures into ``folder`` (no manifest). Returns its result and its in-memory dataset."""
+    figures into ``folder`` (no manifest). Returns its result and its in-memory dataset.
+
+    With a ``reference`` the fringes are decoded and compared with it (statistics.json,
+    summary.txt, chain variables and figures). Dots get their moments (dots.csv); their
+    figures are drawn here only for a ``standalone`` run (a run with variants draws them
+    for all variants together)."""
     dots, image_files, levels, n_tiles = inputs
     folder.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
@@ -529,10 +590,34 @@ def _run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Pat
     steps.advance()
     ds = build_dataset(cfg, geometry, fringes, dots, dot_images, image_files, images,
                        exposure, sim.scene.rays_per_pixel)
+    timings["write"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    stats: dict = {}
+    if reference is not None and fringes is not None:
+        measured = chain.compare(
+            chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode),
+            reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
+            cfg.decode, len(fringes.shifts))
+        stats = chain.statistics(measured, cfg.name)
+        ds = chain.assign_to_dataset(ds, measured, stats)
+        del measured
+    dot_table = []
+    if dot_images is not None:
+        dot_table = chain.dot_table(dot_images, dots, cfg.name)
+        for name, var in chain.dot_dataset_variables(dot_table).items():
+            ds[name] = var
+        chain.write_dot_csv(folder / "dots.csv", dot_table)
+    timings["decode"] = time.perf_counter() - t
+
+    t = time.perf_counter()
     ds.to_zarr(folder / DATASET_NAME, mode="w-", consolidated=False, encoding=_encoding(ds))
     (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
+    if stats:
+        (folder / "statistics.json").write_text(json.dumps(stats, indent=2) + "\n")
+        (folder / "summary.txt").write_text(chain.summary_text(stats))
     steps.advance()
-    timings["write"] = time.perf_counter() - t
+    timings["write"] += time.perf_counter() - t
 
     figure_paths: list[Path] = []
     t = time.perf_counter()
@@ -540,6 +625,15 @@ def _run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Pat
         from . import plot  # matplotlib only when figures are made
 
         figure_paths = plot.run_figures(sim, ds, folder / "figures")
+        if stats or (dot_table and standalone):
+            from . import plot_chain
+
+            if stats:
+                figure_paths += plot_chain.chain_figures(ds, folder / "figures", cfg.name,
+                                                         _description(cfg))
+            if dot_table and standalone:
+                figure_paths += _dot_figures(folder / "figures", {cfg.name: dot_images},
+                                             {cfg.name: dot_table}, sim, {})
         steps.advance()
     timings["figures"] = time.perf_counter() - t
 
@@ -549,8 +643,130 @@ def _run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Pat
         figure_paths=tuple(figure_paths), exposure=exposure, shape=sim.shape,
         surface_pixels=surface_pixels, rays_per_pixel=sim.scene.rays_per_pixel,
         rays_traced=surface_pixels * sim.scene.rays_per_pixel * n_calls, timings=timings,
-        config=cfg)
+        config=cfg, statistics=stats)
     return result, ds
+
+
+# ----------------------------------------------------------------------------- the chain
+@dataclass(frozen=True, eq=False)
+class _Reference:
+    """The decoded ideal specular reference of a run (shared by its variants)."""
+
+    decoded: dict
+    distance_mm: np.ndarray
+    seconds: float
+    notes: tuple = ()
+
+
+def _chain_mode(cfg: RunConfig, decode: bool | None) -> tuple[bool, list[str]]:
+    """(run the measurement chain?, notes). Raises ValueError when decoding is required
+    (``decode.enabled = true`` or ``decode=True``) but impossible."""
+    enabled = cfg.decode.enabled if decode is None else decode
+    if enabled is False:
+        return False, []
+    problem = chain.decode_problem(cfg)
+    if problem is None:
+        return True, []
+    if enabled is True:
+        raise ValueError(f"decoding was requested (decode.enabled = true or --decode), but "
+                         f"{problem}")
+    if cfg.patterns.fringes is None:
+        return False, []  # nothing to decode, nothing to say
+    return False, [f"decoding skipped: {problem}"]
+
+
+def _reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, steps: _Steps,
+               n_tiles: int) -> _Reference:
+    """Render and decode the fringes of the ideal specular reference (mirror BRDF, one ray
+    per pixel, the same camera, surface and monitor model)."""
+    t = time.perf_counter()
+    fr_cfg = cfg.patterns.fringes
+    ref_sim = Simulation(sim.scene.specular(), sim.tile_rows, sim.scheduler, sim.num_workers)
+    base = steps.done
+    fr = ref_sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
+                                progress=steps.tiles())
+    steps.finish_render(base, n_tiles)
+    decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode)
+    del fr
+    distance = chain.surface_to_monitor_mm(sim, geometry)
+    notes = []
+    for d, res in decoded.items():
+        exact = geometry.specular_u if d == "x" else geometry.specular_v
+        q = (res.monitor_coord_px - exact)[res.valid]
+        rms = float(np.sqrt(np.mean(q**2))) if q.size else 0.0
+        if rms > 0.05:
+            notes.append(
+                f"the specular reference decodes {rms:.2f} monitor px RMS ({d.upper()}) away from "
+                "the exact specular points: on a 'nearest' monitor a mirror sees single pixels, "
+                "so every deviation contains that quantisation; monitor.pixel_model = "
+                "'continuous' shows the scattering alone (statistics.json: "
+                "reference_vs_exact_px)")
+            break
+    return _Reference(decoded, distance, time.perf_counter() - t, tuple(notes))
+
+
+def _description(cfg: RunConfig) -> str:
+    b = cfg.brdf
+    text = f"BRDF {b.model}"
+    if hasattr(b, "alphas"):
+        ax, ay = b.alphas
+        names = (("tangential", "radial") if cfg.anisotropy.frame == "rotational"
+                 else ("x", "y"))
+        text += f" alpha_{names[0]} {ax:g}, alpha_{names[1]} {ay:g}"
+    s = cfg.sampling
+    return (text + f"; {s.estimator} estimator, N = {s.n_rays}, theta_max {s.theta_max_deg:g} "
+            f"deg, {s.mode}; monitor pixel model {cfg.monitor.pixel_model}")
+
+
+def _dot_figures(folder: Path, images: dict, tables: dict, sim: Simulation,
+                 descriptions: dict) -> list[Path]:
+    from . import plot_chain
+
+    centre = None
+    an = sim.scene.anisotropy
+    if an.kind == "rotational":
+        centre = tuple(float(x) for x in sim.scene.camera.project(an.centre))
+    return [plot_chain.plot_dot_contact_sheet(images, tables, folder / "dot_contact_sheet.png",
+                                              descriptions),
+            plot_chain.plot_dot_shapes(images, tables, folder / "dot_shapes.png", centre,
+                                       descriptions)]
+
+
+def _write_variant_outputs(cfg: RunConfig, tmp: Path, names: list[str], subs, figures: bool,
+                           descriptions: dict, sim: Simulation) -> list[Path]:
+    """Top-level outputs of a run with variants: statistics.json and summary.txt of all
+    variants, dots.csv, and the comparison figures (deviation, dots). Reads the variants'
+    datasets back lazily from their folders."""
+    stats = {r.config.name: r.statistics for r in subs if r.statistics}
+    if stats:
+        (tmp / "statistics.json").write_text(json.dumps({"variants": stats}, indent=2) + "\n")
+        (tmp / "summary.txt").write_text("\n".join(chain.summary_text(s) for s in stats.values()))
+    has_dots = cfg.patterns.dots is not None
+    tables = {}
+    if has_dots:
+        import csv
+
+        rows = []
+        for n in names:
+            with open(tmp / n / "dots.csv", newline="") as fh:
+                part = list(csv.DictReader(fh))
+            tables[n] = [{k: (v if k == "variant" else (int(v) if k == "dot" else float(v)))
+                          for k, v in r.items()} for r in part]
+            rows += tables[n]
+        chain.write_dot_csv(tmp / "dots.csv", rows)
+    paths: list[Path] = []
+    if not figures or not (stats or has_dots):
+        return paths
+    from . import plot_chain
+
+    datasets = {n: load_run(tmp / n) for n in names}
+    if stats:
+        paths.append(plot_chain.plot_variant_deviation(
+            datasets, tmp / "figures" / "deviation_variants.png", descriptions))
+    if has_dots:
+        images = {n: datasets[n]["dots"] for n in names}  # lazy: one dot image at a time
+        paths += _dot_figures(tmp / "figures", images, tables, sim, descriptions)
+    return paths
 
 
 def _write_images(folder: Path, cfg: RunConfig, fringes, dots, dot_images, image_files,
