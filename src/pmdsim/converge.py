@@ -20,9 +20,14 @@ read off against the converged result.
 the decoded phase and in the modulation B / A: one render serves both and their rows are
 identical (they are listed for completeness).
 
+With ``diagnostics`` (default) the configured settings are also checked
+(:func:`pmdsim.diagnostics.diagnose` and :func:`~pmdsim.diagnostics.check` on the reduced
+camera, bounds from ``[diagnostics]``): the warnings name the setting that fixes them.
+
 Outputs (written atomically: into a temporary sibling folder renamed at the end):
 ``convergence.csv`` (one row per estimator, theta_max, N, direction, width),
-``convergence.png`` (log-x figure) and ``convergence.json`` (the settings and the config).
+``convergence.png`` (log-x figure) and ``convergence.json`` (the settings, the config, the
+diagnostics summary and the warnings).
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ import math
 import os
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -92,6 +97,8 @@ class ConvergenceResult:
     folder: Path
     table: Path
     figure: Path | None
+    warnings: list = field(default_factory=list)
+    diagnostics: dict = field(default_factory=dict)
 
 
 def _decode(images: np.ndarray):
@@ -119,7 +126,8 @@ def _check_folder(final: Path, overwrite: bool) -> None:
     if not final.exists() and not final.is_symlink():
         return
     if not overwrite:
-        raise FileExistsError(f"output folder {final} exists: choose another or pass overwrite=True")
+        raise FileExistsError(f"output folder {final} exists: choose another folder or pass "
+                              "--overwrite (overwrite=True) to replace it")
     if final.is_symlink() or not final.is_dir():
         raise FileExistsError(f"{final} exists and is not a folder: refusing to replace it")
     if not (final / MARKER).is_file() and any(final.iterdir()):
@@ -141,6 +149,7 @@ def run_convergence(
     figure: bool = True,
     overwrite: bool = False,
     progress: Callable[[str], None] | None = None,
+    diagnostics: bool = True,
 ) -> ConvergenceResult:
     """Run the convergence study of ``cfg`` and write table and figure into ``outdir``.
 
@@ -160,6 +169,8 @@ def run_convergence(
     widths, directions, shifts : fringes; default: the configured ones (or 50 px, x and y, 4).
     figure : draw ``convergence.png`` (matplotlib, Agg).
     progress : called with a short text after each render.
+    diagnostics : check the configured settings (energy fraction, effective sample size,
+        phase standard error) and return/write the warnings.
     """
     estimators = tuple(estimators)
     for e in estimators:
@@ -221,6 +232,15 @@ def run_convergence(
             say(f"radiometric N = {n}")
     converged = next((r[3] for r in reversed(runs) if r[1] is None), None)
 
+    warnings, diag_summary = [], {}
+    if diagnostics:
+        from . import diagnostics as dg
+
+        diag = dg.diagnose(sim_of(base), widths, directions, grid=small.diagnostics.grid)
+        warnings = dg.check(diag, bounds=small.diagnostics)
+        diag_summary = diag.summary
+        say("diagnostics")
+
     rows = []
     for ests, th, n, ph, mod, secs in runs:
         for di, d in enumerate(directions):
@@ -268,6 +288,9 @@ def run_convergence(
             "directions": list(directions), "shifts": shifts,
             "reference": "ideal mirror (Scene.specular())",
             "converged": "radiometric, N = %d" % n_values[-1] if converged is not None else None,
+            "diagnostics": diag_summary,
+            "warnings": [{"code": w.code, "message": w.message, "setting": w.setting,
+                          "suggested": w.suggested} for w in warnings],
             "config": cfg.model_dump(mode="json"),
         }
         (tmp / MARKER).write_text(json.dumps(meta, indent=2) + "\n")
@@ -289,7 +312,8 @@ def run_convergence(
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return ConvergenceResult(rows, final, final / "convergence.csv", fig_path)
+    return ConvergenceResult(rows, final, final / "convergence.csv", fig_path, warnings,
+                             diag_summary)
 
 
 def plot_convergence(rows: list, path: str | Path, n_config: int | None = None,
