@@ -2,6 +2,7 @@
 
     pmdsim simulate CONFIG -o OUTDIR [--overwrite] [--no-figures] [--decode/--no-decode]
     pmdsim decode IMAGES... -o OUT (--widths W1,W2,.. --shifts K --extent-px E | --from-run RUN)
+    pmdsim converge CONFIG -o OUTDIR [--n-values 25,50,..] [--theta 0.5,1,..] [--camera 160x128]
     pmdsim version
     pmdsim --help
 
@@ -240,6 +241,90 @@ def decode(
     table.add_row("decode time", f"{result.seconds['decode']:.3f} s")
     table.add_row("output", str(result.outdir))
     console.print(table)
+
+
+def _numbers(text: str | None, name: str, kind=float) -> list | None:
+    if text is None:
+        return None
+    try:
+        return [kind(x) for x in text.replace(" ", "").split(",") if x]
+    except ValueError:
+        raise ValueError(f"{name} must be comma-separated numbers, got {text!r}") from None
+
+
+@app.command()
+def converge(
+    config: Path = typer.Argument(..., help="Run configuration (TOML), e.g. "
+                                  "examples/paper_fig3.toml."),
+    output: Path = typer.Option(..., "-o", "--output", help="Output folder to create."),
+    n_values: str | None = typer.Option(None, "--n-values", help="Rays per pixel to try, "
+                                        "comma-separated (default 25,50,100,200,400,800,1600; "
+                                        "the config's N is added)."),
+    theta: str | None = typer.Option(None, "--theta", help="Cone half angles (deg) for the "
+                                     "cone estimators (default 0.5,1,2,4,8; the config's is "
+                                     "added)."),
+    estimators: str = typer.Option("paper,weighted_mean,radiometric", "--estimators",
+                                   help="Estimators to compare, comma-separated."),
+    camera: str = typer.Option("160x128", "--camera", help="Reduced camera size WxH, px "
+                               "(same field of view)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
+    no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+    no_diagnostics: bool = typer.Option(False, "--no-diagnostics",
+                                        help="Do not check the configured settings."),
+) -> None:
+    """Study the decoded phase deviation and modulation versus N, theta_max and estimator
+    (paper, weighted_mean, radiometric) against the converged answer; writes
+    OUT/convergence.csv, convergence.png, convergence.json and warns about the configured
+    settings (lobe energy outside theta_max, phase standard error, effective sample size)."""
+    import math
+
+    from .config import ConfigError, load_config
+    from .converge import DEFAULT_N, DEFAULT_THETA_DEG, run_convergence
+
+    console = _console()
+    try:
+        cfg = load_config(config)
+        ns = _numbers(n_values, "--n-values", int) or DEFAULT_N
+        thetas = _numbers(theta, "--theta") or DEFAULT_THETA_DEG
+        ests = tuple(e for e in estimators.replace(" ", "").split(",") if e)
+        try:
+            cw, ch = (int(x) for x in camera.lower().split("x"))
+        except ValueError:
+            raise ValueError(f"--camera must be WxH in px, e.g. 160x128, got {camera!r}") from None
+        t0 = time.perf_counter()
+        with console.status(f"convergence study of {cfg.name}") as status:
+            result = run_convergence(
+                cfg, output, n_values=ns, theta_values=thetas, estimators=ests,
+                camera_size=(cw, ch), figure=not no_figure, overwrite=overwrite,
+                progress=lambda msg: status.update(f"convergence study of {cfg.name}: {msg}"),
+                diagnostics=not no_diagnostics)
+    except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
+            NotADirectoryError, ValueError) as err:
+        _fail(str(err))
+    wall = time.perf_counter() - t0
+
+    rows = result.rows
+    n_max = max(r["n_rays"] for r in rows)
+    table = Table(title=f"pmdsim converge '{cfg.name}' ({wall:.1f} s)", title_justify="left")
+    for col in ("estimator", "theta_max", "N", "fringe", "phase RMS vs mirror (mrad)",
+                "vs converged (mrad)", "modulation"):
+        table.add_column(col, justify="right" if col not in ("estimator", "fringe") else "left")
+    picks = [r for r in rows
+             if (r["estimator"] == "paper" and r["n_rays"] == cfg.sampling.n_rays
+                 and math.isclose(r["theta_max_deg"], cfg.sampling.theta_max_deg))
+             or (r["estimator"] == "radiometric" and r["n_rays"] in (cfg.sampling.n_rays, n_max))]
+    for r in picks:
+        th = "" if math.isnan(r["theta_max_deg"]) else f"{r['theta_max_deg']:g} deg"
+        table.add_row(r["estimator"], th, str(r["n_rays"]), f"{r['direction']} {r['width_px']:g} px",
+                      f"{1e3 * r['phase_rms_rad']:.3g}",
+                      f"{1e3 * r['phase_rms_vs_converged_rad']:.3g}",
+                      f"{r['modulation_median']:.3f}")
+    console.print(table)
+    console.print(f"table  {result.table}")
+    if result.figure is not None:
+        console.print(f"figure {result.figure}")
+    for w in result.warnings:
+        _console(stderr=True).print(f"warning: {w.message}", style="yellow", markup=False)
 
 
 @app.command()
