@@ -42,10 +42,11 @@ def smith_g1(v_local, alpha_u: float, alpha_v: float) -> np.ndarray:
     v = np.asarray(v_local, np.float64)
     vz = v[..., 2]
     s = np.sqrt((v[..., 0] * alpha_u) ** 2 + (v[..., 1] * alpha_v) ** 2)
+    up = vz > 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.where(s > 0, vz / np.where(s > 0, s, 1.0), np.inf)
+        a = np.where(up & (s > 0), np.where(up, vz, 1.0) / np.where(s > 0, s, 1.0), np.inf)
         lam = np.where(a < 6.0, 0.5 * (np.exp(-a * a) / (a * np.sqrt(np.pi)) - erfc(a)), 0.0)
-    return np.where(vz > 0, 1.0 / (1.0 + lam), 0.0)
+    return np.where(up, 1.0 / (1.0 + lam), 0.0)
 
 
 @dataclass(frozen=True)
