@@ -255,3 +255,47 @@ def test_run_convergence_rejects_bad_input(tmp_path):
     with pytest.raises(ValueError, match="theta"):
         run_convergence(cfg, tmp_path / "c", theta_values=(95.0,))
     assert not list(tmp_path.iterdir())
+
+
+def test_cli_converge(tmp_path):
+    """``pmdsim converge CONFIG -o OUT`` writes the study and prints the warnings; bad
+    input exits with 2."""
+    from typer.testing import CliRunner
+
+    from pmdsim.cli import app
+
+    cfg_path = tmp_path / "scene.toml"
+    cfg = make_config(sampling={"n_rays": 16, "theta_max_deg": 1.0},
+                      patterns={"fringes": {"widths_px": [40.0], "shifts": 4}})
+    cfg_path.write_text(_toml(cfg.model_dump(mode="json", exclude_none=True)))
+    runner = CliRunner()
+    out = tmp_path / "conv"
+    res = runner.invoke(app, ["converge", str(cfg_path), "-o", str(out), "--n-values", "8,32",
+                              "--theta", "1,3", "--camera", "12x10"])
+    assert res.exit_code == 0, res.output
+    assert (out / "convergence.csv").is_file() and (out / "convergence.png").is_file()
+    assert "theta_max = 1 deg holds" in res.output
+    res = runner.invoke(app, ["converge", str(cfg_path), "-o", str(out)])
+    assert res.exit_code == 2 and "exists" in res.output
+    res = runner.invoke(app, ["converge", str(cfg_path), "-o", str(tmp_path / "x"), "--camera", "12"])
+    assert res.exit_code == 2 and "--camera" in res.output
+
+
+def _toml(data: dict, prefix: str = "") -> str:
+    """Minimal TOML writer for a config mapping (tables, arrays, numbers, strings, bools)."""
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        return repr(v)
+
+    scalars = [f"{k} = {val(v)}" for k, v in data.items()
+               if not isinstance(v, dict) and not (isinstance(v, (list, tuple)) and v and isinstance(v[0], dict))]
+    lines = ([f"[{prefix}]"] if prefix and scalars else []) + scalars
+    for k, v in data.items():
+        if isinstance(v, dict):
+            lines.append(_toml(v, f"{prefix}.{k}" if prefix else k))
+    return "\n".join(lines) + "\n"
