@@ -396,7 +396,8 @@ def assign_to_dataset(ds, chain: ChainResult, stats: dict):
 
 
 # ----------------------------------------------------------------------------- dots
-DOT_COLUMNS = ("variant", "dot", "dot_u_px", "dot_v_px", "centroid_col", "centroid_row",
+DOT_COLUMNS = ("variant", "dot", "dot_u_px", "dot_v_px", "dot_size_px", "centroid_col",
+               "centroid_row",
                "sigma_major_px", "sigma_minor_px", "elongation", "angle_deg", "peak",
                "total", "threshold")
 
@@ -417,6 +418,7 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
         m = analysis.image_moments(img, thr)
         rows.append({
             "variant": variant, "dot": q, "dot_u_px": float(dot.u), "dot_v_px": float(dot.v),
+            "dot_size_px": float(dot.size),
             "centroid_col": m.centroid[0], "centroid_row": m.centroid[1],
             "sigma_major_px": m.sigma_major, "sigma_minor_px": m.sigma_minor,
             "elongation": m.elongation, "angle_deg": float(np.degrees(m.angle)),

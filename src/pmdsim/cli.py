@@ -113,8 +113,12 @@ def simulate(
     table.add_row("rays traced", f"{result.rays_traced:,}")
     table.add_row("render time", f"{result.timings['render']:.2f} s "
                   f"({_si(result.rays_per_second)}rays/s)")
+    chain_time = ""
+    if "reference" in result.timings:
+        chain_time = (f"specular reference {result.timings['reference']:.2f} s, decoding and "
+                      f"deviation {result.timings.get('decode', 0.0):.2f} s, ")
     table.add_row("wall time", f"{wall:.2f} s (geometry {result.timings['geometry']:.2f} s, "
-                  f"writing {result.timings['write']:.2f} s, "
+                  f"{chain_time}writing {result.timings['write']:.2f} s, "
                   f"figures {result.timings['figures']:.2f} s)")
     table.add_row("run folder", str(result.outdir))
     if result.variants:
@@ -145,20 +149,20 @@ def _print_statistics(console: Console, result) -> None:
         {result.config.name: result.statistics} if result.statistics else {})
     if not per:
         return
-    table = Table(title="deviation from the ideal specular reference (RMS / P95 over the "
-                  "valid pixels)", title_justify="left")
-    for col in ("variant", "dir", "phase (mrad)", "coord (monitor px)", "coord (mm)",
-                "slope (urad)", "valid"):
-        table.add_column(col, justify="left" if col in ("variant", "dir") else "right")
+    table = Table(title="deviation from the ideal specular reference, RMS/P95 over the valid "
+                  "pixels (all statistics: statistics.json, summary.txt)", title_justify="left")
+    for col in ("variant", "dir", "phase mrad", "monitor px", "slope urad", "valid"):
+        table.add_column(col, justify="left" if col in ("variant", "dir") else "right",
+                         no_wrap=True)
 
     def pair(s):
-        return "nan" if s["rms"] is None else f"{s['rms']:.4g} / {s['p95']:.4g}"
+        return "nan" if s["rms"] is None else f"{s['rms']:.3g}/{s['p95']:.3g}"
 
     for name, st in per.items():
         for d, s in st["directions"].items():
             table.add_row(name, d.upper(), pair(s["phase_mrad"]), pair(s["coord_px"]),
-                          pair(s["coord_mm"]), pair(s["slope_urad"]),
-                          f"{100 * s['coord_px']['valid_fraction']:.2f} %")
+                          pair(s["slope_urad"]),
+                          f"{100 * s['coord_px']['valid_fraction']:.1f} %")
     console.print(table)
 
 

@@ -235,9 +235,9 @@ def _histogram(ax, data: dict, colours: dict, stats: dict, bins: int = 121, lim=
                 f"RMS {_g(s.get('rms'))}, P95 {_g(s.get('p95'))}, n = {a.size:,}")
     ax.axvline(0, color="0.5", linewidth=0.6)
     ax.set_xlim(-lim, lim)
-    ax.text(0.99, 0.99, f"values beyond +-{lim:g}\nin the end bins", transform=ax.transAxes,
-            ha="right", va="top", fontsize=6, color="0.4")
-    ax.legend(fontsize=6.5, loc="upper left")
+    ax.set_ylim(0, ax.get_ylim()[1] * (1.35 if ax.get_yscale() == "linear" else 30))
+    ax.legend(fontsize=6.5, loc="upper left", title=f"(|values| > {lim:g} in the end bins)",
+              title_fontsize=6)
     ax.tick_params(labelsize=7)
 
 
@@ -444,7 +444,8 @@ def _wrap(text: str, width: int) -> str:
 
 # ----------------------------------------------------------------------------- dots
 def _grid_layout(table: list[dict]):
-    """(n_rows, n_cols, {dot: (row, col)}) arranging the dots like on the monitor."""
+    """(n_rows, n_cols, {dot: (row, col)}) arranging the dots like on the monitor (a regular
+    grid of their distinct u and v; a near-square grid in dot order when they are scattered)."""
     us = sorted({r["dot_u_px"] for r in table})
     vs = sorted({r["dot_v_px"] for r in table})
     if len(us) * len(vs) == len(table) or len(us) * len(vs) <= 4 * len(table):
@@ -490,7 +491,12 @@ def plot_dot_contact_sheet(images: dict, tables: dict, path,
     descriptions = descriptions or {}
     names = list(images)
     size = dot_crop_size(tables)
-    nr, nc, where = _grid_layout(tables[names[0]])
+    # Rows and columns of dots that no variant sees (off the camera's view of the monitor)
+    # are left out of the sheet, and counted in the title.
+    seen = {r["dot"] for t in tables.values() for r in t if np.isfinite(r["elongation"])}
+    layout_rows = [r for r in tables[names[0]] if r["dot"] in seen] or tables[names[0]]
+    nr, nc, where = _grid_layout(layout_rows)
+    unseen = len(tables[names[0]]) - len(seen)
     cell = 0.75 if nc * len(names) <= 12 else 0.55
     fig = _figure((len(names) * (nc * cell + 0.9) + 0.3, nr * cell + 1.7))
     subs = fig.subfigures(1, len(names), squeeze=False)[0] if len(names) > 1 else [fig]
@@ -503,6 +509,8 @@ def plot_dot_contact_sheet(images: dict, tables: dict, path,
             ax.set_axis_off()
         im = None
         for r in table:
+            if r["dot"] not in where:
+                continue
             i, j = where[r["dot"]]
             ax = axes[i, j]
             ax.set_axis_on()
@@ -523,16 +531,22 @@ def plot_dot_contact_sheet(images: dict, tables: dict, path,
                 ax.set_xlabel(f"u {r['dot_u_px']:g}", fontsize=6)
             if j == 0:
                 ax.set_ylabel(f"v {r['dot_v_px']:g}", fontsize=6)
-        title = (f"{n}: {size} x {size} camera px crops at each centroid (camera orientation; "
-                 "yellow: elongation)")
+        title = n
         if descriptions.get(n):
-            title += "\n" + _wrap(descriptions[n], 60)
+            title += ": " + descriptions[n]
+        title = _wrap(title, int(12 * nc))
         sub.suptitle(title, fontsize=8)
         if im is not None:
             sub.colorbar(im, ax=axes.ravel().tolist(), shrink=0.7, pad=0.02).set_label(
                 f"camera value (0 .. brightest dot {peak:.3g})", fontsize=7)
-    fig.suptitle("dot scan: camera images of the reflected 15 x 15 px dot, arranged as on the "
-                 "monitor (u right, v down)" if nr * nc > 1 else "dot scan", fontsize=9)
+    size_px = tables[names[0]][0].get("dot_size_px") if tables[names[0]] else None
+    dot = f"{size_px:g} x {size_px:g} monitor px " if size_px else ""
+    fig.suptitle(_wrap(f"dot scan: camera images of the reflected {dot}dot, arranged as the "
+                       f"dots on the monitor (u right, v down); crops of {size} x {size} camera "
+                       "px around each centroid, in camera orientation; yellow: elongation"
+                       + (f"; {unseen} dots that the camera does not see are left out"
+                          if unseen else ""),
+                       int(fig.get_figwidth() * 13)), fontsize=9)
     return _save(fig, path)
 
 
