@@ -313,13 +313,10 @@ class Simulation:
             for wi in range(nw):
                 col = base[d] + wi * per_width
                 if linear:
-                    c = out[..., col] * norm
-                    s = out[..., col + 1] * norm
-                    sums[di, wi].real = c
-                    sums[di, wi].imag = s
                     shifted_images(
-                        c.reshape(-1), s.reshape(-1), f_hit.reshape(-1), np.cos(deltas),
-                        np.sin(deltas), black, white, images[di, wi].reshape(len(deltas), -1),
+                        out.reshape(h * w_, -1), col, norm.reshape(-1), f_hit.reshape(-1),
+                        np.cos(deltas), np.sin(deltas), black, white,
+                        sums[di, wi].reshape(-1), images[di, wi].reshape(len(deltas), -1),
                     )
                 elif not continuous:
                     for k in range(len(deltas)):

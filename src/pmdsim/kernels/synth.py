@@ -10,14 +10,30 @@ from ._jit import parallel_jit
 
 
 @parallel_jit
-def shifted_images(c, s, f_hit, cos_d, sin_d, black, white, out):
-    """out[k] = black f_hit + (white - black)(0.5 f_hit + 0.5 (c cos_d[k] - s sin_d[k])).
+def shifted_images(sums_raw, col, norm, f_hit, cos_d, sin_d, black, white, sums, out):
+    """Normalised complex sums and the K shifted camera images of one fringe width.
 
-    c, s, f_hit : (P,) float64 normalised sums; out : (K, P) float32.
+    Parameters
+    ----------
+    sums_raw : (P, n_columns) float64
+        The kernel's output rows; columns ``col`` and ``col + 1`` hold C and S.
+    norm : (P,) float64
+        Estimator normalisation per pixel (1/N or 1/sum f).
+    f_hit : (P,) float64
+        Normalised sum of the weights of rays that hit the monitor.
+    cos_d, sin_d : (K,) float64
+        cos and sin of the phase shifts.
+    sums : (P,) complex128
+        Written: norm * (C + iS).
+    out : (K, P) float32
+        Written: black f_hit + (white - black)(0.5 f_hit + 0.5 (C cos_d - S sin_d)) norm.
     """
-    n = c.shape[0]
+    n = sums_raw.shape[0]
     span = white - black
     for p in prange(n):
+        c = sums_raw[p, col] * norm[p]
+        s = sums_raw[p, col + 1] * norm[p]
+        sums[p] = complex(c, s)
         base = black * f_hit[p] + span * 0.5 * f_hit[p]
         for k in range(cos_d.shape[0]):
-            out[k, p] = base + span * 0.5 * (c[p] * cos_d[k] - s[p] * sin_d[k])
+            out[k, p] = base + span * 0.5 * (c * cos_d[k] - s * sin_d[k])
