@@ -202,3 +202,14 @@ def test_config_error_is_a_value_error():
     with pytest.raises(ValueError):
         parse_config({})
     assert isinstance(make_config(), RunConfig)
+
+
+@pytest.mark.parametrize("name", ["..", ".hidden", "a/b", "figures", "run.zarr", "x."])
+def test_variant_names_must_be_safe_folder_names(name):
+    from conftest import base_dict
+
+    data = base_dict()
+    data["variants"] = [{"name": name}]
+    with pytest.raises(ConfigError) as err:
+        parse_config(data)
+    assert "variants.0.name" in str(err.value)
