@@ -35,8 +35,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import os
-import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +42,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from . import io as pio
 from .analysis import wrap
 from .config import RunConfig
 from .decode import phase_shift
@@ -122,20 +121,6 @@ def _stats(dev: np.ndarray, valid: np.ndarray):
             float(np.percentile(np.abs(d), 95)))
 
 
-def _check_folder(final: Path, overwrite: bool) -> None:
-    if not final.exists() and not final.is_symlink():
-        return
-    if not overwrite:
-        raise FileExistsError(f"output folder {final} exists: choose another folder or pass "
-                              "--overwrite (overwrite=True) to replace it")
-    if final.is_symlink() or not final.is_dir():
-        raise FileExistsError(f"{final} exists and is not a folder: refusing to replace it")
-    if not (final / MARKER).is_file() and any(final.iterdir()):
-        raise FileExistsError(
-            f"{final} is not empty and not a convergence folder (no {MARKER}): refusing to "
-            "replace it; choose another output folder")
-
-
 def run_convergence(
     cfg: RunConfig,
     outdir: str | Path,
@@ -192,7 +177,7 @@ def run_convergence(
     shifts = int(shifts or (fr.shifts if fr else 4))
 
     final = Path(outdir).absolute()
-    _check_folder(final, overwrite)
+    pio.check_output_dir(final, overwrite, MARKER)
     small = reduced_config(cfg, camera_size)
     base = Scene.from_config(small)
     comp = small.compute
@@ -264,12 +249,7 @@ def run_convergence(
                         "phase_rms_vs_converged_rad": vs, "seconds": secs,
                     })
 
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = final.with_name(f"{final.name}.tmp-{os.getpid()}")
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir()
-    try:
+    with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
         with open(tmp / "convergence.csv", "w", newline="") as fh:
             wr = csv.DictWriter(fh, fieldnames=COLUMNS)
             wr.writeheader()
@@ -294,24 +274,6 @@ def run_convergence(
             "config": cfg.model_dump(mode="json"),
         }
         (tmp / MARKER).write_text(json.dumps(meta, indent=2) + "\n")
-        _check_folder(final, overwrite)
-        old = None
-        if final.exists():
-            old = final.with_name(f"{final.name}.old-{os.getpid()}")
-            if old.exists():
-                shutil.rmtree(old)
-            os.replace(final, old)
-        try:
-            os.replace(tmp, final)
-        except BaseException:
-            if old is not None:
-                os.replace(old, final)
-            raise
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return ConvergenceResult(rows, final, final / "convergence.csv", fig_path, warnings,
                              diag_summary)
 

@@ -158,14 +158,16 @@ def read_image(path: str | Path) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- run folders
-def is_run_dir(path: str | Path) -> bool:
-    """True if ``path`` is a folder with a pmdsim manifest (a complete run)."""
-    return (Path(path) / MANIFEST).is_file()
+def is_run_dir(path: str | Path, marker: str = MANIFEST) -> bool:
+    """True if ``path`` is a folder with a pmdsim manifest (a complete run); ``marker`` names
+    the manifest file of other kinds of output folders (e.g. a convergence study)."""
+    return (Path(path) / marker).is_file()
 
 
-def check_output_dir(final: str | Path, overwrite: bool = False) -> None:
+def check_output_dir(final: str | Path, overwrite: bool = False, marker: str = MANIFEST) -> None:
     """Raise :class:`FileExistsError` unless ``final`` may be (re)created as a run folder:
-    it does not exist, or ``overwrite`` is true and it is an empty folder or a run folder."""
+    it does not exist, or ``overwrite`` is true and it is an empty folder or a folder with
+    the manifest ``marker``."""
     final = Path(final)
     if not final.exists() and not final.is_symlink():
         return
@@ -176,15 +178,16 @@ def check_output_dir(final: str | Path, overwrite: bool = False) -> None:
         )
     if final.is_symlink() or not final.is_dir():
         raise FileExistsError(f"{final} exists and is not a folder: refusing to replace it")
-    if not is_run_dir(final) and any(final.iterdir()):
+    if not is_run_dir(final, marker) and any(final.iterdir()):
+        kind = "pmdsim run folder" if marker == MANIFEST else "pmdsim output folder"
         raise FileExistsError(
-            f"{final} is not empty and not a pmdsim run folder (no {MANIFEST}): refusing to "
+            f"{final} is not empty and not a {kind} (no {marker}): refusing to "
             "replace it even with overwrite; choose another output folder"
         )
 
 
 @contextlib.contextmanager
-def atomic_run_dir(outdir: str | Path, overwrite: bool = False) -> Iterator[Path]:
+def atomic_run_dir(outdir: str | Path, overwrite: bool = False, marker: str = MANIFEST) -> Iterator[Path]:
     """Context manager yielding a fresh temporary folder that becomes ``outdir`` on success.
 
     The temporary folder is the sibling ``<outdir>.tmp-<pid>``. On normal exit it is
@@ -199,7 +202,7 @@ def atomic_run_dir(outdir: str | Path, overwrite: bool = False) -> Iterator[Path
         ``outdir`` exists and ``overwrite`` is false, or it is not a pmdsim run folder.
     """
     final = Path(outdir).absolute()
-    check_output_dir(final, overwrite)  # fail before doing any work
+    check_output_dir(final, overwrite, marker)  # fail before doing any work
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = final.with_name(f"{final.name}.tmp-{os.getpid()}")
     if tmp.exists():
@@ -207,7 +210,7 @@ def atomic_run_dir(outdir: str | Path, overwrite: bool = False) -> Iterator[Path
     tmp.mkdir()
     try:
         yield tmp
-        check_output_dir(final, overwrite)  # it may have appeared meanwhile
+        check_output_dir(final, overwrite, marker)  # it may have appeared meanwhile
         old = None
         if final.exists():
             old = final.with_name(f"{final.name}.old-{os.getpid()}")
