@@ -583,21 +583,6 @@ def test_existing_estimators_match_the_frozen_kernel(normalization, sampling):
                 assert np.array_equal(a, b, equal_nan=True), f"mode {kmode} differs"
 
 
-def test_phase2_copies_are_the_same_code():
-    """render_tile writes phase 2 out (speed, bit identity); the lobe kernel calls
-    ``_phase2``: both must stay the same text, so a new mode is added to both."""
-    import inspect
-    import textwrap
-
-    def block(fn, indent):
-        src = inspect.getsource(fn.py_func)
-        start = src.index("if mode == MODE_TABLES:")
-        start = src.rindex("\n", 0, start) + 1
-        return textwrap.dedent(src[start:]).strip()
-
-    assert block(kb.render_tile, 8) == block(kb._phase2, 4)
-
-
 # --------------------------------------------------------------------------- frozen kernel
 # The cone kernel as it was before the radiometric estimator (git 67978b0, docstrings
 # removed, layout constants read from kb). Do not edit: it is the reference of the test above.

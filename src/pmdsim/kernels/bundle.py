@@ -31,11 +31,9 @@ and weights each ray by ``w = f cos(theta_o) / pdf(o)`` in closed form, so that
 same geometry rows (in any orthonormal basis: it expresses them in the BRDF frame per
 pixel).
 
-Phase 2 is :func:`_phase2` in the lobe kernel and the same code written out in
-:func:`render_tile`: calling the inlined function there made the cone path 10-15 % slower
-(Numba reference-counts the ~15 array arguments per pixel). ``tests/test_radiometric.py``
-checks that the two copies are the same text and that ``render_tile`` still matches a
-frozen copy of the original kernel (bit for bit, except the reordered table sums).
+Both kernels share phase 2 (:func:`_phase2`). ``tests/test_radiometric.py`` checks that
+``render_tile`` still matches a frozen copy of the original kernel (bit for bit, except the
+reordered table sums).
 
 Fringe tables are summed by :func:`_interleaved_sums`: the profiles of one monitor pixel
 side by side, one scalar pass over the rays, compiled without FP reassociation so that
@@ -682,57 +680,10 @@ def render_tile(
             ftot, fhit = _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         out[p, OUT_FTOTAL] = ftot
         out[p, OUT_FHIT] = fhit
-        if mode == MODE_TABLES:
-            _interleaved_sums(n, iubuf, fbuf, table_ut, out[p], OUT_FIRST)
-            _interleaved_sums(n, ivbuf, fbuf, table_vt, out[p], OUT_FIRST + table_u.shape[0])
-        elif mode == MODE_HARMONIC:
-            nu = k_u.shape[0]
-            for q in range(nu):
-                k = k_u[q]
-                acc_c = 0.0
-                acc_s = 0.0
-                for j in range(n):
-                    s_, c_ = sincos(k * ubuf[j])
-                    acc_c += fbuf[j] * c_
-                    acc_s += fbuf[j] * s_
-                out[p, OUT_FIRST + 2 * q] = acc_c
-                out[p, OUT_FIRST + 2 * q + 1] = acc_s
-            for q in range(k_v.shape[0]):
-                k = k_v[q]
-                acc_c = 0.0
-                acc_s = 0.0
-                for j in range(n):
-                    s_, c_ = sincos(k * vbuf[j])
-                    acc_c += fbuf[j] * c_
-                    acc_s += fbuf[j] * s_
-                out[p, OUT_FIRST + 2 * nu + 2 * q] = acc_c
-                out[p, OUT_FIRST + 2 * nu + 2 * q + 1] = acc_s
-        elif mode == MODE_IMAGES:
-            for q in range(nout):
-                img = images[q]
-                acc = 0.0
-                for j in range(n):
-                    acc += fbuf[j] * img[ivbuf[j], iubuf[j]]
-                out[p, OUT_FIRST + q] = acc
-        elif mode == MODE_DOTS:
-            for q in range(nout):
-                u0 = dots[q, 0]
-                v0 = dots[q, 1]
-                hu = dots[q, 2]
-                hv = dots[q, 3]
-                acc = 0.0
-                for j in range(n):
-                    du = iubuf[j] - u0
-                    dv = ivbuf[j] - v0
-                    inside = (du >= -hu) & (du < hu) & (dv >= -hv) & (dv < hv)
-                    acc += fbuf[j] if inside else 0.0
-                out[p, OUT_FIRST + q] = acc
-        else:
-            for j in range(n):
-                hit = fbuf[j] > 0.0
-                out_u[p, j] = ubuf[j] if hit else np.nan
-                out_v[p, j] = vbuf[j] if hit else np.nan
-                out_f[p, j] = fbuf[j]
+        _phase2(
+            p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_ut, table_vt,
+            k_u, k_v, images, dots, out, out_u, out_v, out_f,
+        )
 
 
 @fastjit
