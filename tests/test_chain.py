@@ -350,11 +350,15 @@ def test_decoding_required_but_impossible_is_a_clear_error(tmp_path):
     with pytest.raises(ValueError, match=r"patterns\.fringes\.widths_px.*add a width"):
         pipeline.run_simulation(parse_config(d), tmp_path / "run")
     assert not (tmp_path / "run").exists()
-    # --no-decode / decode=False: no chain, no note.
+    # --no-decode / decode=False: no chain, no note (statistics.json holds only the run
+    # diagnostics; without them there is none).
     d = tiny_run_dict()
     d["output"] = {"figures": False}
     res = pipeline.run_simulation(parse_config(d), tmp_path / "off", decode=False)
-    assert not res.statistics and not (tmp_path / "off" / "statistics.json").exists()
+    assert set(res.statistics) <= {"name", "diagnostics"} and not res.notes
+    res = pipeline.run_simulation(parse_config(d), tmp_path / "bare", decode=False,
+                                  diagnostics=False)
+    assert not res.statistics and not (tmp_path / "bare" / "statistics.json").exists()
     assert "coord_deviation_px" not in pipeline.load_run(tmp_path / "off")
 
 

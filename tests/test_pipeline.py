@@ -115,7 +115,10 @@ def test_run_folder_contents(full_run):
     # the dots get their moments (dots.csv) and figures.
     assert sorted(p.name for p in (out / "figures").iterdir()) == [
         "dot_contact_sheet.png", "dot_shapes.png", "fringes.png", "modulation.png", "setup.png"]
-    assert (out / "dots.csv").is_file() and not (out / "statistics.json").exists()
+    assert (out / "dots.csv").is_file()
+    # nothing decoded: statistics.json holds the run diagnostics alone
+    stats = json.loads((out / "statistics.json").read_text())
+    assert "directions" not in stats and stats["diagnostics"]["estimator"] == "paper"
     assert any("decoding skipped" in n and "patterns.fringes.widths_px" in n
                for n in manifest["notes"])
     assert len(manifest["images"]) == 16 + 3 + 1
@@ -130,15 +133,15 @@ def test_progress_reaches_total(full_run):
     done = [d for d, _ in calls]
     totals = {t for _, t in calls}
     assert len(totals) == 1 and done == sorted(done)
-    # geometry + 3 render calls x 3 tiles + images + dataset + figures
-    assert done[-1] == totals.pop() == 1 + 3 * 3 + 3
+    # geometry + 3 render calls x 3 tiles + images + diagnostics + dataset + figures
+    assert done[-1] == totals.pop() == 1 + 3 * 3 + 4
 
 
 def test_dataset_matches_simulation(full_run, full_cfg):
     result, _ = full_run
     ds = pipeline.load_run(result.outdir)
     assert dict(ds.sizes) == {"row": 40, "col": 48, "direction": 2, "width": 2, "shift": 4,
-                              "dot": 3, "image": 1}
+                              "dot": 3, "image": 1, "diag_row": 20, "diag_col": 24}
     assert ds["fringes"].dims == ("direction", "width", "shift", "row", "col")
     assert ds["fringes"].dtype == np.float32
     assert list(ds["width"].values) == [8.0, 32.0]
@@ -370,3 +373,118 @@ def test_cli_config_typo_exit_code_2(tmp_path):
                             str(tmp_path / "out")])
     assert result.exit_code == 2 and "missing.toml" in text
 
+
+
+# ----------------------------------------------------------------------------- diagnostics
+def _toml_with(widths: str = "[8.0]", extra: str = "") -> str:
+    return TOML.format(pitch_key="pixel_pitch_mm").replace("widths_px = [8.0]",
+                                                           f"widths_px = {widths}") + extra
+
+
+def test_cli_simulate_prints_diagnostics_warnings(tmp_path):
+    """The paper's 1 deg cone on the Fig. 3 lobe (alpha_x = 0.025): simulate warns after the
+    summary table, in yellow, naming the setting that fixes each warning, and stores the maps,
+    the summary and the warnings in the run."""
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(_toml_with())
+    out = tmp_path / "out"
+    result, text = _invoke(["simulate", str(cfg), "-o", str(out), "--no-figures"])
+    assert result.exit_code == 0, text
+    assert "warning: theta_max = 1 deg holds 37 % of the lobe energy" in text
+    assert "theta_max >= 4 deg keeps 95 %" in text
+    assert "[setting: sampling.theta_max_deg = 4]" in text
+    assert "raise sampling.n_rays to ~" in text  # phase standard error (delta method) > 1 mrad
+    assert text.index("warning:") > text.index("run folder")  # after the summary table
+    assert "lobe energy inside theta_max 37.5 %" in text  # summary-table row
+
+    stats = json.loads((out / "statistics.json").read_text())["diagnostics"]
+    assert stats["phase_se_method"] == "delta" and stats["grid"] == {"columns": 24, "rows": 20}
+    assert stats["energy"]["fraction_median"] == pytest.approx(0.375, abs=0.003)
+    assert stats["energy"]["theta_needed_deg_max"] == pytest.approx(3.97, abs=0.03)
+    codes = {w["code"]: w for w in stats["warnings"]}
+    assert codes["energy_fraction"]["setting"] == "sampling.theta_max_deg"
+    assert codes["energy_fraction"]["suggested"] == 4.0
+    assert codes["phase_error"]["setting"] == "sampling.n_rays"
+    summary = (out / "summary.txt").read_text()
+    assert "pmdsim run diagnostics" in summary and "[setting: sampling.theta_max_deg = 4]" in summary
+    manifest = json.loads((out / pio.MANIFEST).read_text())
+    assert len(manifest["warnings"]) == len(stats["warnings"])
+
+    ds = pipeline.load_run(out)
+    assert ds["diag_energy_fraction"].dims == ("diag_row", "diag_col")
+    assert ds["diag_phase_se"].dims == ("direction", "width", "diag_row", "diag_col")
+    assert ds["diag_effective_sample_size"].attrs["units"] == "rays"
+    frac = ds["diag_energy_fraction"].values
+    assert np.nanmedian(frac) == pytest.approx(stats["energy"]["fraction_median"])
+    assert np.isnan(frac).any() and np.isfinite(frac).any()  # the camera sees past the plate
+    assert int(ds["diag_col"][-1]) == 47 and int(ds["diag_row"][-1]) == 39
+
+
+def test_cli_simulate_warnings_follow_the_diagnostics_bounds(tmp_path):
+    """The same scene warns with the default [diagnostics] bounds and is quiet with relaxed
+    ones; the bounds' grid sets the diagnostics grid."""
+    out = tmp_path / "strict"
+    strict = tmp_path / "strict.toml"
+    strict.write_text(_toml_with("[64.0]"))
+    result, text = _invoke(["simulate", str(strict), "-o", str(out), "--no-figures"])
+    assert result.exit_code == 0, text
+    assert "warning: theta_max = 1 deg" in text and "sampling.theta_max_deg" in text
+    assert "raise sampling.n_rays" in text
+
+    relaxed = tmp_path / "relaxed.toml"
+    relaxed.write_text(_toml_with("[64.0]", "\n[diagnostics]\nmin_energy_fraction = 0.3\n"
+                                  "max_phase_error_mrad = 1000.0\nmin_ess_fraction = 0.2\n"
+                                  "grid = [6, 5]\n"))
+    out = tmp_path / "relaxed"
+    result, text = _invoke(["simulate", str(relaxed), "-o", str(out), "--no-figures"])
+    assert result.exit_code == 0, text
+    assert "warning:" not in text and "diagnostics" in text
+    stats = json.loads((out / "statistics.json").read_text())["diagnostics"]
+    assert stats["warnings"] == [] and stats["grid"] == {"columns": 6, "rows": 5}
+    assert stats["bounds"]["max_phase_error_mrad"] == 1000.0
+    assert "no warnings" in (out / "summary.txt").read_text()
+    ds = pipeline.load_run(out)
+    assert ds.sizes["diag_row"] == 5 and ds.sizes["diag_col"] == 6
+
+
+def test_cli_simulate_no_diagnostics(tmp_path):
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(_toml_with())
+    out = tmp_path / "out"
+    result, text = _invoke(["simulate", str(cfg), "-o", str(out), "--no-figures",
+                            "--no-diagnostics"])
+    assert result.exit_code == 0, text
+    assert "warning:" not in text and "lobe energy" not in text
+    assert not (out / "statistics.json").exists()  # nothing decoded, no diagnostics
+    assert not [v for v in pipeline.load_run(out).data_vars if str(v).startswith("diag_")]
+    assert json.loads((out / pio.MANIFEST).read_text())["warnings"] == []
+
+
+def test_diagnostics_of_variants(tmp_path):
+    """Per variant: none for the mirror, no energy fraction for the radiometric estimator
+    (it has no cone); load_run fills the mirror's maps with NaN; the CLI names the variant."""
+    d = tiny_config_dict()
+    d["variants"] = [
+        {"name": "mirror", "brdf": {"model": "mirror"}},
+        {"name": "radiometric", "sampling": {"n_rays": 16, "estimator": "radiometric"}},
+        {"name": "paper"},
+    ]
+    d["diagnostics"] = {"grid": [8, 6]}
+    result = pipeline.run_simulation(parse_config(d), tmp_path / "cmp")
+    subs = {r.config.name: r for r in result.variants}
+    assert subs["mirror"].warnings == () and "diagnostics" not in subs["mirror"].statistics
+    rad = subs["radiometric"].statistics["diagnostics"]
+    assert "energy" not in rad and rad["ess_median"] > 12
+    assert not [w for w in subs["radiometric"].warnings if w.code == "energy_fraction"]
+    assert [w.code for w in subs["paper"].warnings][0] == "energy_fraction"
+    top = json.loads((result.outdir / "statistics.json").read_text())["variants"]
+    assert set(top) == {"radiometric", "paper"}
+    assert "pmdsim run diagnostics: paper" in (result.outdir / "summary.txt").read_text()
+    ds = pipeline.load_run(result.outdir)
+    assert ds["diag_effective_sample_size"].dims == ("variant", "diag_row", "diag_col")
+    assert np.isnan(ds["diag_effective_sample_size"].sel(variant="mirror").values).all()
+    assert np.isnan(ds["diag_energy_fraction"].sel(variant="radiometric").values).all()
+    paper = ds["diag_energy_fraction"].sel(variant="paper").values
+    assert 0.3 < np.nanmedian(paper) < 0.45
+    manifest = json.loads((result.outdir / pio.MANIFEST).read_text())
+    assert manifest["warnings"]["mirror"] == [] and manifest["warnings"]["paper"]

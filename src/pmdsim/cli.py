@@ -1,6 +1,7 @@
 """The ``pmdsim`` command line (Typer + Rich).
 
     pmdsim simulate CONFIG -o OUTDIR [--overwrite] [--no-figures] [--decode/--no-decode]
+                                     [--no-diagnostics]
     pmdsim decode IMAGES... -o OUT (--widths W1,W2,.. --shifts K --extent-px E | --from-run RUN)
     pmdsim converge CONFIG -o OUTDIR [--n-values 25,50,..] [--theta 0.5,1,..] [--camera 160x128]
     pmdsim version
@@ -70,13 +71,19 @@ def simulate(
         help="Decode the fringes and compare them with the ideal specular reference "
         "(deviation maps, statistics). Default: the configuration's decode.enabled ('auto': "
         "whenever the fringe widths allow it). --decode makes it an error when they do not."),
+    no_diagnostics: bool = typer.Option(
+        False, "--no-diagnostics",
+        help="Do not compute the run diagnostics (lobe energy inside theta_max, effective "
+        "sample size, phase standard error) and their warnings."),
 ) -> None:
     """Render the configured patterns and write a run folder (images, run.zarr, figures);
     by default also decode the fringes and measure their deviation from the ideal specular
-    reference (statistics.json, summary.txt, deviation figures)."""
+    reference (statistics.json, summary.txt, deviation figures), and check the sampling
+    (diagnostics: warnings, each naming the setting that fixes it; bounds in the
+    configuration's diagnostics section)."""
     from .config import ConfigError, load_config
     from .io import check_output_dir
-    from .pipeline import run_simulation
+    from .pipeline import run_simulation, warning_text
 
     console = _console()
     try:
@@ -97,7 +104,8 @@ def simulate(
                 bar.update(task, completed=done, total=total)
 
             result = run_simulation(cfg, output, progress, overwrite=overwrite,
-                                    figures=figures, decode=decode)
+                                    figures=figures, decode=decode,
+                                    diagnostics=not no_diagnostics)
     except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
             NotADirectoryError, ValueError) as err:
         _fail(str(err))
@@ -117,8 +125,11 @@ def simulate(
     if "reference" in result.timings:
         chain_time = (f"specular reference {result.timings['reference']:.2f} s, decoding and "
                       f"deviation {result.timings.get('decode', 0.0):.2f} s, ")
+    diag_time = ""
+    if result.timings.get("diagnostics", 0.0) > 0.005:
+        diag_time = f"diagnostics {result.timings['diagnostics']:.2f} s, "
     table.add_row("wall time", f"{wall:.2f} s (geometry {result.timings['geometry']:.2f} s, "
-                  f"{chain_time}writing {result.timings['write']:.2f} s, "
+                  f"{chain_time}{diag_time}writing {result.timings['write']:.2f} s, "
                   f"figures {result.timings['figures']:.2f} s)")
     table.add_row("run folder", str(result.outdir))
     if result.variants:
@@ -137,16 +148,49 @@ def simulate(
     else:
         for p in result.figure_paths:
             table.add_row("figure", str(p))
+    for label, text in _diagnostics_rows(result):
+        table.add_row(label, text)
     console.print(table)
     _print_statistics(console, result)
+    for sub in result.variants or (result,):
+        for w in sub.warnings:  # diagnostics, each with the setting that fixes it
+            prefix = f"{sub.config.name}: " if result.variants else ""
+            text = warning_text(w.message, w.setting, w.suggested)
+            _console(stderr=True).print(f"warning: {prefix}{text}", style="yellow",
+                                        markup=False)
     for note in result.notes:
         _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
+
+
+def _diagnostics_rows(result) -> list[tuple[str, str]]:
+    """One summary-table row per run (variant) with diagnostics: lobe energy inside
+    theta_max, effective sample size, largest P95 phase standard error."""
+    rows = []
+    members = result.variants or (result,)
+    for sub in members:
+        d = sub.statistics.get("diagnostics")
+        if not d:
+            continue
+        parts = []
+        e = d.get("energy", {})
+        if e.get("fraction_median") is not None:
+            parts.append(f"lobe energy inside theta_max {100 * e['fraction_median']:.1f} %")
+        if d.get("ess_median") is not None:
+            parts.append(f"effective sample size {d['ess_median']:.1f} of {d['n_rays']}")
+        p95 = [v["p95"] for v in d.get("phase_se_rad", {}).values() if v["p95"] is not None]
+        if p95:
+            parts.append(f"phase std. error <= {1e3 * max(p95):.3g} mrad (P95, "
+                         f"{d['phase_se_method']} method)")
+        label = f"diagnostics {sub.config.name}" if result.variants else "diagnostics"
+        rows.append((label, ", ".join(parts) + " (statistics.json)"))
+    return rows
 
 
 def _print_statistics(console: Console, result) -> None:
     """Deviation statistics per variant and direction (RMS and P95 over the valid pixels)."""
     per = result.statistics if result.variants else (
         {result.config.name: result.statistics} if result.statistics else {})
+    per = {name: st for name, st in per.items() if "directions" in st}  # decoded ones
     if not per:
         return
     table = Table(title="deviation from the ideal specular reference, RMS/P95 over the valid "

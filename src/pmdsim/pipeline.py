@@ -13,7 +13,8 @@ dots; monitor images) and writes, atomically (see :func:`pmdsim.io.atomic_run_di
       dots/dot000_u0060_v0060.tif
       images/00_<file stem>.tif
       figures/setup.png, fringes.png, modulation.png
-      statistics.json, summary.txt   the measurement chain (below), when fringes are decoded
+      statistics.json, summary.txt   the measurement chain (below), when fringes are decoded,
+                                     and the run diagnostics (below), when the BRDF has a lobe
       figures/overview.png, phase.png, deviation.png, histograms.png,
               modulation_ratio.png, masks.png
       dots.csv, figures/dot_contact_sheet.png, dot_shapes.png   (with dots)
@@ -24,6 +25,14 @@ are decoded and compared (:mod:`pmdsim.chain`); the decoded phases, monitor coor
 modulation, flags, the deviation maps, masks and statistics go into the dataset, and
 ``statistics.json``/``summary.txt`` beside it. Dot images get their second moments
 (``dots.csv`` and ``dot_*`` variables). See ``docs/outputs.md``.
+
+Run diagnostics (``diagnostics=True``, default; not for the mirror): on the coarse camera-pixel
+grid of ``[diagnostics]`` (:mod:`pmdsim.diagnostics`) the fraction of the lobe's energy inside
+``theta_max`` (cone estimators), the effective sample size of the weights and, with fringes,
+the delta-method standard error of the phase of every fringe (one pass over the grid pixels'
+rays); the maps go into the dataset (``diag_*`` on ``diag_row``/``diag_col``), the summary and
+the :func:`pmdsim.diagnostics.check` warnings (bounds from ``[diagnostics]``) into
+``statistics.json``/``summary.txt``, the manifest and ``RunResult.warnings``.
 
 With ``variants`` (a comparison of BRDFs, anisotropy frames or sampling on one set-up)
 each variant is a complete run folder ``<outdir>/<variant>/`` as above, and ``<outdir>``
@@ -108,8 +117,12 @@ class RunResult:
     notes : tuple of str
         What was skipped and why (e.g. decoding, when the fringe widths do not allow it).
     statistics : dict
-        The measurement chain's statistics (``statistics.json``); ``{variant: ...}`` for a
-        run with variants; empty when nothing was decoded.
+        The content of ``statistics.json``: the measurement chain's statistics (when
+        decoded) and the run diagnostics under ``"diagnostics"`` (when computed);
+        ``{variant: ...}`` for a run with variants; empty when there is neither.
+    warnings : tuple of pmdsim.diagnostics.DiagnosticWarning
+        The diagnostics' warnings for this run (each names the setting that fixes it);
+        empty for a run with variants (see each variant's).
     """
 
     outdir: Path
@@ -126,6 +139,7 @@ class RunResult:
     variants: tuple["RunResult", ...] = ()
     notes: tuple[str, ...] = ()
     statistics: dict = field(default_factory=dict)
+    warnings: tuple = ()
 
     @property
     def rays_per_second(self) -> float:
@@ -348,9 +362,17 @@ def load_run(path: str | Path, variant: str | None = None):
     # The geometry and the specular reference are the same for every variant.
     shared = {"surface_mask", "monitor_mask", "specular_u", "specular_v", "surface_to_monitor_mm"}
     shared |= {v for v in parts[0].data_vars if str(v).startswith("reference_")}
+    # A variable some variants lack (the diagnostics of a mirror variant) is NaN for them.
+    templates: dict = {}
+    for p in parts:
+        for v in p.data_vars:
+            templates.setdefault(v, p[v])
+    parts = [p.assign({v: xr.full_like(t, np.nan, dtype=np.float64)
+                       for v, t in templates.items() if v not in p.data_vars}) for p in parts]
+    per_variant = [v for v in templates if v not in shared]
     ds = xr.concat(parts, dim=xr.DataArray(np.array(names, dtype=object), dims="variant",
                                            name="variant"),
-                   data_vars=[v for v in parts[0].data_vars if v not in shared],
+                   data_vars=per_variant,
                    coords="minimal", compat="override", combine_attrs="drop_conflicts",
                    join="exact")
     ds.attrs["config_json"] = (path / CONFIG_NAME).read_text()
@@ -365,7 +387,7 @@ def run_config(ds) -> RunConfig:
 # ----------------------------------------------------------------------------- the run
 def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | None = None,
                    *, overwrite: bool = False, figures: bool | None = None,
-                   decode: bool | None = None) -> RunResult:
+                   decode: bool | None = None, diagnostics: bool = True) -> RunResult:
     """Simulate ``cfg`` and write a complete run folder ``outdir``.
 
     With ``cfg.variants`` every variant (:meth:`RunConfig.expand`) becomes a complete run
@@ -391,6 +413,12 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         requires it (an error when the fringes cannot be decoded), False turns it off;
         default ``cfg.decode.enabled`` (``"auto"``: whenever the fringes allow it, otherwise
         skipped with a note in ``RunResult.notes`` and the manifest).
+    diagnostics : bool
+        Compute the run diagnostics of every configuration with a lobe (not the mirror):
+        lobe energy inside theta_max (cone estimators), effective sample size, phase
+        standard error (delta method) on the ``[diagnostics]`` grid; maps ``diag_*`` in the
+        dataset, summary and warnings in statistics.json, summary.txt, the manifest and
+        ``RunResult.warnings`` (bounds from ``[diagnostics]``).
 
     Returns
     -------
@@ -424,8 +452,9 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
     compare = bool(cfg.variants) and figures and cfg.patterns.fringes is not None
     top_figures = bool(cfg.variants) and figures and (cfg.patterns.fringes is not None
                                                       or bool(dots))
+    n_diagnosed = sum(not s.scene.brdf.is_delta for _, _, s in sims) if diagnostics else 0
     steps = _Steps(progress, 1 + len(sims) * (n_calls * n_tiles + 2 + int(figures))
-                   + int(top_figures) + (n_tiles if decoding else 0))
+                   + int(top_figures) + (n_tiles if decoding else 0) + n_diagnosed)
     inputs = (dots, image_files, levels, n_tiles)
 
     with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp:
@@ -443,7 +472,8 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
             notes += list(reference.notes)
         if not cfg.variants:
             result, _ = _run_member(cfg, sims[0][2], geometry, tmp, steps, figures, inputs,
-                                    reference=reference, standalone=True)
+                                    reference=reference, standalone=True,
+                                    diagnostics=diagnostics)
             timings = dict(result.timings, geometry=t_geometry,
                            total=time.perf_counter() - t_start)
             if reference is not None:
@@ -456,7 +486,8 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         subs, datasets = [], {}
         for name, c, sim in sims:
             res, ds = _run_member(c, sim, geometry, tmp / name, steps, figures, inputs,
-                                  reference=reference, standalone=False)
+                                  reference=reference, standalone=False,
+                                  diagnostics=diagnostics)
             res = replace(res, notes=tuple(notes))
             _write_manifest(tmp / name, c, res, dict(res.timings, geometry=t_geometry))
             subs.append(res)
@@ -481,7 +512,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         if top_figures:
             steps.advance()
         timings = {k: sum(r.timings.get(k, 0.0) for r in subs)
-                   for k in ("render", "write", "decode", "figures")}
+                   for k in ("render", "write", "decode", "diagnostics", "figures")}
         timings["figures"] += time.perf_counter() - t
         timings["geometry"] = t_geometry
         if reference is not None:
@@ -505,6 +536,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
             "figures": [str(p.relative_to(tmp)) for p in figure_paths],
             "rays_traced": top.rays_traced,
             "notes": list(notes),
+            "warnings": {r.config.name: [w.message for w in r.warnings] for r in subs},
             "timings_s": {k: round(v, 4) for k, v in timings.items()},
         })
 
@@ -543,20 +575,22 @@ def _write_manifest(folder: Path, cfg: RunConfig, result: RunResult, timings: di
         "rays_per_pixel": result.rays_per_pixel,
         "rays_traced": result.rays_traced,
         "notes": list(result.notes),
+        "warnings": [w.message for w in result.warnings],
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
     })
 
 
 def _run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
                 steps: _Steps, figures: bool, inputs, reference: "_Reference | None" = None,
-                standalone: bool = True) -> tuple[RunResult, object]:
+                standalone: bool = True, diagnostics: bool = True) -> tuple[RunResult, object]:
     """Render one configuration (no variants) and write its images, dataset, config and
     figures into ``folder`` (no manifest). Returns its result and its in-memory dataset.
 
     With a ``reference`` the fringes are decoded and compared with it (statistics.json,
     summary.txt, chain variables and figures). Dots get their moments (dots.csv); their
     figures are drawn here only for a ``standalone`` run (a run with variants draws them
-    for all variants together)."""
+    for all variants together). With ``diagnostics`` (and a lobe) the run diagnostics go
+    into the dataset, statistics.json and summary.txt, and their warnings into the result."""
     dots, image_files, levels, n_tiles = inputs
     folder.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
@@ -611,11 +645,24 @@ def _run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Pat
     timings["decode"] = time.perf_counter() - t
 
     t = time.perf_counter()
+    statistics = dict(stats)  # statistics.json: the chain's (when decoded) + diagnostics
+    diagnosed = _diagnose(cfg, sim, geometry) if diagnostics else None
+    if diagnosed is not None:
+        ds = ds.assign_coords(diagnosed.coords)
+        for name, var in diagnosed.variables.items():
+            ds[name] = var
+        statistics.setdefault("name", cfg.name)
+        statistics["diagnostics"] = diagnosed.summary
+        ds.attrs["statistics_json"] = json.dumps(statistics)
+        steps.advance()
+    timings["diagnostics"] = time.perf_counter() - t
+
+    t = time.perf_counter()
     ds.to_zarr(folder / DATASET_NAME, mode="w-", consolidated=False, encoding=_encoding(ds))
     (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
-    if stats:
-        (folder / "statistics.json").write_text(json.dumps(stats, indent=2) + "\n")
-        (folder / "summary.txt").write_text(chain.summary_text(stats))
+    if statistics:
+        (folder / "statistics.json").write_text(json.dumps(statistics, indent=2) + "\n")
+        (folder / "summary.txt").write_text(_summary_text(statistics))
     steps.advance()
     timings["write"] += time.perf_counter() - t
 
@@ -643,8 +690,194 @@ def _run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Pat
         figure_paths=tuple(figure_paths), exposure=exposure, shape=sim.shape,
         surface_pixels=surface_pixels, rays_per_pixel=sim.scene.rays_per_pixel,
         rays_traced=surface_pixels * sim.scene.rays_per_pixel * n_calls, timings=timings,
-        config=cfg, statistics=stats)
+        config=cfg, statistics=statistics,
+        warnings=() if diagnosed is None else diagnosed.warnings)
     return result, ds
+
+
+# ----------------------------------------------------------------------------- diagnostics
+#: Quadrature points per grid pixel for the lobe-energy fraction of a run (``diagnose``'s
+#: default is 16 384). On the Fig. 3 scene 4096 points give the median fraction to 2e-4 and
+#: the 95 % cone angle to 0.01 deg of a 65 536-point quadrature, in a quarter of the time.
+DIAGNOSTICS_ENERGY_SAMPLES = 4096
+
+
+class _KnownGeometry:
+    """A :class:`Simulation` whose :meth:`geometry` is the one the run has already traced
+    (:func:`pmdsim.diagnostics.diagnose` asks for the surface mask); everything else is the
+    simulation's own."""
+
+    def __init__(self, sim: Simulation, geometry: Geometry):
+        self._sim = sim
+        self._geometry = geometry
+
+    def geometry(self) -> Geometry:
+        return self._geometry
+
+    def __getattr__(self, name):
+        return getattr(self._sim, name)
+
+
+@dataclass(frozen=True, eq=False)
+class _Diagnosed:
+    """The run diagnostics of one configuration: ``summary`` (statistics.json
+    ``"diagnostics"``), the :class:`~pmdsim.diagnostics.DiagnosticWarning` s, and the
+    dataset ``coords`` and ``variables`` ``{name: (dims, data, attrs)}``."""
+
+    summary: dict
+    warnings: tuple
+    coords: dict
+    variables: dict
+
+
+def _json_safe(obj):
+    """NaN/inf -> None and NumPy scalars -> Python numbers, recursively (strict JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
+def _diagnose(cfg: RunConfig, sim: Simulation, geometry: Geometry) -> _Diagnosed | None:
+    """Energy fraction inside theta_max (cone estimators), effective sample size and the
+    delta-method phase standard error of every fringe (with fringes) on the coarse pixel
+    grid of ``[diagnostics]``, and the :func:`~pmdsim.diagnostics.check` warnings for its
+    bounds. None for the mirror (no lobe)."""
+    if sim.scene.brdf.is_delta:
+        return None
+    from dataclasses import asdict
+
+    from . import diagnostics as dg
+
+    fr = cfg.patterns.fringes
+    cone = cfg.sampling.estimator in dg.CONE_ESTIMATORS
+    widths = fr.widths_px if fr is not None else (50.0,)
+    directions = fr.directions if fr is not None else ("x",)
+    # The radiometric estimator has no cone: its energy fraction is not used (a token
+    # quadrature keeps diagnose() cheap) and is dropped below.
+    # target_fraction = the bound, so that check() can name the cone angle that meets it
+    diag = dg.diagnose(_KnownGeometry(sim, geometry), widths, directions,
+                       grid=cfg.diagnostics.grid,
+                       target_fraction=cfg.diagnostics.min_energy_fraction,
+                       phase_method="delta",
+                       n_samples=DIAGNOSTICS_ENERGY_SAMPLES if cone else 16)
+    summary = dict(diag.summary)
+    if not cone:
+        diag = replace(diag, energy=None)
+        summary.pop("energy", None)
+    if fr is None:  # no fringes: no phase to judge
+        diag = replace(diag, phase_se=None)
+        for key in ("phase_se_method", "phase_se_rad", "modulation_median"):
+            summary.pop(key, None)
+    warnings = tuple(dg.check(diag, bounds=cfg.diagnostics))
+    grid = diag.grid
+    summary["grid"] = {"columns": int(grid.cols.size), "rows": int(grid.rows.size)}
+    if diag.energy is not None:
+        summary["energy"]["quadrature_points"] = DIAGNOSTICS_ENERGY_SAMPLES
+    summary["bounds"] = cfg.diagnostics.model_dump(mode="json")
+    summary["warnings"] = [asdict(w) for w in warnings]
+    summary = _json_safe(summary)
+
+    coords = {
+        "diag_row": ("diag_row", grid.rows.astype(np.int64), {
+            "units": "camera px", "description": "camera row of the diagnostics grid pixels"}),
+        "diag_col": ("diag_col", grid.cols.astype(np.int64), {
+            "units": "camera px", "description": "camera column of the diagnostics grid pixels"}),
+    }
+    where = "; on the coarse grid diag_row x diag_col, NaN: no surface"
+    dims = ("diag_row", "diag_col")
+    variables: dict = {}
+    if diag.energy is not None:
+        e = diag.energy
+        variables["diag_energy_fraction"] = (dims, e.fraction, {
+            "units": "1", "description": "fraction of the lobe's reflected energy "
+            f"(integral of f cos theta_o) inside the sampling cone theta <= {e.theta_max_deg:g} "
+            "deg about P" + where})
+        variables["diag_theta_needed_deg"] = (dims, e.theta_needed_deg, {
+            "units": "deg", "description": f"smallest cone half angle about P holding "
+            f"{100 * e.target:g} % of the lobe's reflected energy" + where})
+    if diag.rays is not None:
+        variables["diag_effective_sample_size"] = (dims, diag.rays.ess, {
+            "units": "rays", "description": "effective sample size (sum w)^2 / sum w^2 of the "
+            f"weights of the monitor-hitting rays, of N = {diag.n_rays}" + where})
+    if diag.phase_se is not None:
+        variables["diag_phase_se"] = (("direction", "width") + dims, diag.phase_se, {
+            "units": "rad", "description": "Monte-Carlo standard error of the decoded phase, "
+            "delta method: std of the per-ray terms / (sqrt(N) |mean|), the error of N "
+            "independent rays (the lattice sample sets usually do better)" + where})
+    return _Diagnosed(summary, warnings, coords, variables)
+
+
+def _fmt(x, spec: str = ".3g") -> str:
+    return "nan" if x is None else format(x, spec)
+
+
+def warning_text(message: str, setting: str, suggested=None) -> str:
+    """A diagnostics warning as printed: its message, followed by the setting that fixes
+    it (``[setting: sampling.theta_max_deg = 4]``) unless the message names it already."""
+    if not setting or setting in message:
+        return message
+    if suggested is None:
+        return f"{message} [setting: {setting}]"
+    value = format(suggested, "g") if isinstance(suggested, float) else str(suggested)
+    return f"{message} [setting: {setting} = {value}]"
+
+
+def diagnostics_text(name: str, d: dict) -> str:
+    """A short human-readable account of the ``"diagnostics"`` of statistics.json."""
+    g = d.get("grid", {})
+    lines = [f"pmdsim run diagnostics: {name}",
+             f"{d['estimator']} estimator, N = {d['n_rays']}"
+             + (f", theta_max {d['theta_max_deg']:g} deg" if "energy" in d else "")
+             + f"; {g.get('columns', '?')} x {g.get('rows', '?')} camera-pixel grid", ""]
+    e = d.get("energy")
+    if e and "fraction_median" in e:
+        pc = lambda x: _fmt(None if x is None else 100 * x, ".1f")  # noqa: E731
+        lines.append(f"lobe energy inside theta_max: median {pc(e['fraction_median'])} %, "
+                     f"min {pc(e['fraction_min'])} %; {100 * e['target']:g} % needs "
+                     f"theta_max {_fmt(e['theta_needed_deg_max'], '.2f')} deg (largest over the grid)")
+    if "ess_median" in d:
+        lines.append(f"effective sample size: median {_fmt(d['ess_median'], '.1f')}, "
+                     f"min {_fmt(d['ess_min'], '.1f')} of {d['n_rays']} rays")
+    if "phase_se_rad" in d:
+        lines.append(f"phase standard error ({d['phase_se_method']} method: N independent rays, "
+                     "an upper bound for the lattice), mrad, median / P95; fringe modulation:")
+        for key, v in d["phase_se_rad"].items():
+            direction, width = key.split("/")
+            med = None if v["median"] is None else 1e3 * v["median"]
+            p95 = None if v["p95"] is None else 1e3 * v["p95"]
+            mod = d.get("modulation_median", {}).get(key)
+            lines.append(f"  {direction.upper()} {width:>6} px  {_fmt(med):>8} / {_fmt(p95):<8}"
+                         f"  modulation {_fmt(mod)}")
+    warnings = d.get("warnings", [])
+    b = d.get("bounds", {})
+    lines.append("")
+    if warnings:
+        lines += [f"warning: {warning_text(w['message'], w['setting'], w['suggested'])}"
+                  for w in warnings]
+    else:
+        lines.append("no warnings (bounds: energy fraction >= "
+                     f"{b.get('min_energy_fraction')}, phase error <= "
+                     f"{b.get('max_phase_error_mrad')} mrad, ESS >= "
+                     f"{b.get('min_ess_fraction')} N)")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _summary_text(statistics: dict) -> str:
+    """summary.txt of one run: the chain's table (when decoded), then the diagnostics."""
+    parts = []
+    if "directions" in statistics:
+        parts.append(chain.summary_text(statistics))
+    if "diagnostics" in statistics:
+        parts.append(diagnostics_text(statistics.get("name", ""), statistics["diagnostics"]))
+    return "\n".join(parts)
 
 
 # ----------------------------------------------------------------------------- the chain
@@ -735,12 +968,13 @@ def _dot_figures(folder: Path, images: dict, tables: dict, sim: Simulation,
 def _write_variant_outputs(cfg: RunConfig, tmp: Path, names: list[str], subs, figures: bool,
                            descriptions: dict, sim: Simulation) -> list[Path]:
     """Top-level outputs of a run with variants: statistics.json and summary.txt of all
-    variants, dots.csv, and the comparison figures (deviation, dots). Reads the variants'
+    variants (deviation statistics and diagnostics), dots.csv, and the comparison figures (deviation, dots). Reads the variants'
     datasets back lazily from their folders."""
     stats = {r.config.name: r.statistics for r in subs if r.statistics}
     if stats:
         (tmp / "statistics.json").write_text(json.dumps({"variants": stats}, indent=2) + "\n")
-        (tmp / "summary.txt").write_text("\n".join(chain.summary_text(s) for s in stats.values()))
+        (tmp / "summary.txt").write_text("\n".join(_summary_text(s) for s in stats.values()))
+    decoded = any("directions" in s for s in stats.values())
     has_dots = cfg.patterns.dots is not None
     tables = {}
     if has_dots:
@@ -755,12 +989,12 @@ def _write_variant_outputs(cfg: RunConfig, tmp: Path, names: list[str], subs, fi
             rows += tables[n]
         chain.write_dot_csv(tmp / "dots.csv", rows)
     paths: list[Path] = []
-    if not figures or not (stats or has_dots):
+    if not figures or not (decoded or has_dots):
         return paths
     from . import plot_chain
 
     datasets = {n: load_run(tmp / n) for n in names}
-    if stats:
+    if decoded:
         paths.append(plot_chain.plot_variant_deviation(
             datasets, tmp / "figures" / "deviation_variants.png", descriptions))
     if has_dots:
