@@ -393,12 +393,12 @@ def test_cli_simulate_prints_diagnostics_warnings(tmp_path):
     assert "warning: theta_max = 1 deg holds 37 % of the lobe energy" in text
     assert "theta_max >= 4 deg keeps 95 %" in text
     assert "[setting: sampling.theta_max_deg = 4]" in text
-    assert "raise sampling.n_rays to ~" in text  # phase standard error (delta method) > 1 mrad
+    assert "raise sampling.n_rays to ~" in text  # phase standard error (seeds method) > 1 mrad
     assert text.index("warning:") > text.index("run folder")  # after the summary table
     assert "lobe energy inside theta_max 37.5 %" in text  # summary-table row
 
     stats = json.loads((out / "statistics.json").read_text())["diagnostics"]
-    assert stats["phase_se_method"] == "delta" and stats["grid"] == {"columns": 24, "rows": 20}
+    assert stats["phase_se_method"] == "seeds" and stats["grid"] == {"columns": 24, "rows": 20}
     assert stats["energy"]["fraction_median"] == pytest.approx(0.375, abs=0.003)
     assert stats["energy"]["theta_needed_deg_max"] == pytest.approx(3.97, abs=0.03)
     codes = {w["code"]: w for w in stats["warnings"]}

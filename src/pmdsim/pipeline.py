@@ -29,7 +29,7 @@ modulation, flags, the deviation maps, masks and statistics go into the dataset,
 Run diagnostics (``diagnostics=True``, default; not for the mirror): on the coarse camera-pixel
 grid of ``[diagnostics]`` (:mod:`pmdsim.diagnostics`) the fraction of the lobe's energy inside
 ``theta_max`` (cone estimators), the effective sample size of the weights and, with fringes,
-the delta-method standard error of the phase of every fringe (one pass over the grid pixels'
+the standard error of the phase of every fringe (``[diagnostics] phase_method``) (one pass over the grid pixels'
 rays); the maps go into the dataset (``diag_*`` on ``diag_row``/``diag_col``), the summary and
 the :func:`pmdsim.diagnostics.check` warnings (bounds from ``[diagnostics]``) into
 ``statistics.json``/``summary.txt``, the manifest and ``RunResult.warnings``.
@@ -416,7 +416,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
     diagnostics : bool
         Compute the run diagnostics of every configuration with a lobe (not the mirror):
         lobe energy inside theta_max (cone estimators), effective sample size, phase
-        standard error (delta method) on the ``[diagnostics]`` grid; maps ``diag_*`` in the
+        standard error (``[diagnostics] phase_method``) on the ``[diagnostics]`` grid; maps ``diag_*`` in the
         dataset, summary and warnings in statistics.json, summary.txt, the manifest and
         ``RunResult.warnings`` (bounds from ``[diagnostics]``).
 
@@ -747,7 +747,7 @@ def _json_safe(obj):
 
 def _diagnose(cfg: RunConfig, sim: Simulation, geometry: Geometry) -> _Diagnosed | None:
     """Energy fraction inside theta_max (cone estimators), effective sample size and the
-    delta-method phase standard error of every fringe (with fringes) on the coarse pixel
+    phase standard error (``[diagnostics] phase_method``) of every fringe (with fringes) on the coarse pixel
     grid of ``[diagnostics]``, and the :func:`~pmdsim.diagnostics.check` warnings for its
     bounds. None for the mirror (no lobe)."""
     if sim.scene.brdf.is_delta:
@@ -766,7 +766,7 @@ def _diagnose(cfg: RunConfig, sim: Simulation, geometry: Geometry) -> _Diagnosed
     diag = dg.diagnose(_KnownGeometry(sim, geometry), widths, directions,
                        grid=cfg.diagnostics.grid,
                        target_fraction=cfg.diagnostics.min_energy_fraction,
-                       phase_method="delta",
+                       phase_method=cfg.diagnostics.phase_method,
                        n_samples=DIAGNOSTICS_ENERGY_SAMPLES if cone else 16)
     summary = dict(diag.summary)
     if not cone:
@@ -810,8 +810,10 @@ def _diagnose(cfg: RunConfig, sim: Simulation, geometry: Geometry) -> _Diagnosed
     if diag.phase_se is not None:
         variables["diag_phase_se"] = (("direction", "width") + dims, diag.phase_se, {
             "units": "rad", "description": "Monte-Carlo standard error of the decoded phase, "
-            "delta method: std of the per-ray terms / (sqrt(N) |mean|), the error of N "
-            "independent rays (the lattice sample sets usually do better)" + where})
+            + ("spread over independent rotations of the sample set (seeds)"
+               if diag.phase_se_method == "seeds" else
+               "delta method: std of the per-ray terms / (sqrt(N) |mean|), the error of N "
+               "independent rays (an upper bound for the lattice sample sets)") + where})
     return _Diagnosed(summary, warnings, coords, variables)
 
 

@@ -39,7 +39,7 @@ from .patterns import DIRECTIONS, Dot, phase_shifts
 from .scene import Scene
 from .kernels import primary as kprim
 from .kernels.synth import shifted_images
-from .trace import bundle_geometry, cone_basis, trace_primary
+from .trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
 
@@ -380,10 +380,8 @@ class Simulation:
         scene = self.scene
         rows = np.atleast_1d(np.asarray(rows, int))
         cols = np.atleast_1d(np.asarray(cols, int))
-        hits_all = [trace_primary(scene, int(r), int(r) + 1) for r in rows]
-        geo = np.concatenate(
-            [bundle_geometry(scene, h)[[c]] for h, c in zip(hits_all, cols)], axis=0
-        )
+        hits = trace_pixels(scene, rows, cols)
+        geo = bundle_geometry(scene, hits)
         samp = scene.sampling
         lobe = self._lobe
         if scene.brdf.is_delta:
@@ -408,16 +406,17 @@ class Simulation:
                            samp.theta_max, True, *args)
         dirs = np.empty((len(rows), n, 3))
         origin = np.empty((len(rows), 3))
-        for p, (h, c) in enumerate(zip(hits_all, cols)):
-            origin[p] = h.point[0, c]
+        cone = cone_basis(hits)
+        for p in range(len(rows)):
+            origin[p] = hits.point[0, p]
             if lobe:
-                frame = (h.x_axis[0, c], h.y_axis[0, c], h.normal[0, c])
-                i_loc = np.array([h.to_camera[0, c] @ b for b in frame])
+                frame = (hits.x_axis[0, p], hits.y_axis[0, p], hits.normal[0, p])
+                i_loc = np.array([hits.to_camera[0, p] @ b for b in frame])
                 off = rot[p] if rot.shape[0] else (0.0, 0.0)
                 loc = scene.brdf.sample(np.mod(u1 + off[0], 1.0), np.mod(u2 + off[1], 1.0), i_loc)
                 e1, e2, e3 = frame
             else:
-                e1, e2, e3 = (b[0, c] for b in cone_basis(h))
+                e1, e2, e3 = (b[0, p] for b in cone)
                 if scene.brdf.is_delta:
                     loc = local
                 else:

@@ -41,6 +41,19 @@ def trace_primary(scene, row_start: int = 0, row_stop: int | None = None) -> Pri
     cam = scene.camera
     row_stop = cam.height if row_stop is None else row_stop
     rows, cols = np.mgrid[row_start:row_stop, 0 : cam.width]
+    return _trace(scene, rows, cols, row_start, row_stop)
+
+
+def trace_pixels(scene, rows, cols) -> PrimaryHits:
+    """Trace the vision rays of the camera pixels (rows[k], cols[k]); arrays are (1, P[, 3])
+    (one 'row' of the selected pixels; ``row_start``/``row_stop`` are -1)."""
+    rows = np.atleast_1d(np.asarray(rows, np.int64))[None, :]
+    cols = np.atleast_1d(np.asarray(cols, np.int64))[None, :]
+    return _trace(scene, rows, cols, -1, -1)
+
+
+def _trace(scene, rows, cols, row_start, row_stop) -> PrimaryHits:
+    cam = scene.camera
     dirs = cam.ray_directions(rows, cols)
     origins = np.broadcast_to(cam.position, dirs.shape)
     _, point, normal, hit = scene.surface.intersect(origins, dirs)
