@@ -68,16 +68,17 @@ import numpy as np
 from . import chain
 from . import io as pio
 from . import patterns as pat
-from .config import RunConfig
+from .config import RESERVED_VARIANT_NAMES, RunConfig
 from .render import FringeResult, Geometry, Simulation
 
 ProgressFn = Callable[[int, int], None]
 
 DATASET_NAME = "run.zarr"
 CONFIG_NAME = "config.json"
-#: Names a variant cannot have: they are files or folders of the run folder itself.
-RESERVED_NAMES = frozenset({DATASET_NAME, CONFIG_NAME, pio.MANIFEST, "figures", "fringes",
-                            "dots", "images", "statistics.json", "summary.txt", "dots.csv"})
+#: Names a variant cannot have: they are files or folders of the run folder itself
+#: (validated by the config already; kept here for configs built around the validators).
+RESERVED_NAMES = RESERVED_VARIANT_NAMES
+
 
 
 def _version() -> str:
