@@ -140,6 +140,23 @@ def _smith_g1_beckmann(vx, vy, vz, ax, ay):
 
 
 @fastjit(inline="always")
+def _store_ray(j, w, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf):
+    """Store ray j of phase 1: its monitor coordinates, nearest monitor pixel and weight if it
+    hits the monitor's emitting side inside the pixel grid (dn < 0, t > 0), else weight 0 at
+    pixel (0, 0) so that phase-2 gathers stay in range. Returns the stored weight."""
+    inside = (dn < 0.0) & (t > 0.0) & (u >= -0.5) & (u < umax) & (v >= -0.5) & (v < vmax)
+    wh = w if inside else 0.0
+    uc = u if inside else 0.0
+    vc = v if inside else 0.0
+    ubuf[j] = uc
+    vbuf[j] = vc
+    iubuf[j] = np.int64(np.floor(uc + 0.5))
+    ivbuf[j] = np.int64(np.floor(vc + 0.5))
+    fbuf[j] = wh
+    return wh
+
+
+@fastjit(inline="always")
 def _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
     """Monitor hits and weights of one pixel's bundle; returns (sum f, sum f over hits).
 
@@ -213,17 +230,8 @@ def _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
                 hh = hx * hx + hy * hy + hz2
                 f = k0 * e * hh * (dn * inv) * (dn * inv)
             f = f if oz > 0.0 else 0.0
-            inside = (dn < 0.0) & (t > 0.0) & (u >= -0.5) & (u < umax) & (v >= -0.5) & (v < vmax)
-            fh = f if inside else 0.0
             ftot += f
-            fhit += fh
-            uc = u if inside else 0.0
-            vc = v if inside else 0.0
-            ubuf[j] = uc
-            vbuf[j] = vc
-            iubuf[j] = np.int64(np.floor(uc + 0.5))
-            ivbuf[j] = np.int64(np.floor(vc + 0.5))
-            fbuf[j] = fh
+            fhit += _store_ray(j, f, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     else:  # ideal mirror: weight 1 per ray (the caller passes the principal ray only)
         for j in range(n):
             aj = a[j]
@@ -233,17 +241,8 @@ def _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
             t = T / dn
             u = U0 + t * (aj * B1 + bj * B2 + cj * B3)
             v = V0 + t * (aj * C1 + bj * C2 + cj * C3)
-            inside = (dn < 0.0) & (t > 0.0) & (u >= -0.5) & (u < umax) & (v >= -0.5) & (v < vmax)
-            fh = 1.0 if inside else 0.0
             ftot += 1.0
-            fhit += fh
-            uc = u if inside else 0.0
-            vc = v if inside else 0.0
-            ubuf[j] = uc
-            vbuf[j] = vc
-            iubuf[j] = np.int64(np.floor(uc + 0.5))
-            ivbuf[j] = np.int64(np.floor(vc + 0.5))
-            fbuf[j] = fh
+            fhit += _store_ray(j, 1.0, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     return ftot, fhit
 
 
@@ -315,17 +314,8 @@ def _phase1_beckmann(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf
         if smith:
             f *= _smith_g1_beckmann(hx - X0, hy - Y0, oz, ax, ay)
         f = f if oz > 0.0 else 0.0
-        inside = (dn < 0.0) & (t > 0.0) & (u >= -0.5) & (u < umax) & (v >= -0.5) & (v < vmax)
-        fh = f if inside else 0.0
         ftot += f
-        fhit += fh
-        uc = u if inside else 0.0
-        vc = v if inside else 0.0
-        ubuf[j] = uc
-        vbuf[j] = vc
-        iubuf[j] = np.int64(np.floor(uc + 0.5))
-        ivbuf[j] = np.int64(np.floor(vc + 0.5))
-        fbuf[j] = fh
+        fhit += _store_ray(j, f, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     return ftot, fhit
 
 
@@ -418,17 +408,8 @@ def _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, 
             else:
                 w = k0 * oz / (im * mzj)
             w = w if oz > 0.0 else 0.0
-            inside = (dn < 0.0) & (t > 0.0) & (u >= -0.5) & (u < umax) & (v >= -0.5) & (v < vmax)
-            wh = w if inside else 0.0
             ftot += w
-            fhit += wh
-            uc = u if inside else 0.0
-            vc = v if inside else 0.0
-            ubuf[j] = uc
-            vbuf[j] = vc
-            iubuf[j] = np.int64(np.floor(uc + 0.5))
-            ivbuf[j] = np.int64(np.floor(vc + 0.5))
-            fbuf[j] = wh
+            fhit += _store_ray(j, w, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     else:  # Beckmann: w = rho G1(i) G1(o) (i.m) / (cos_i cos theta_m)
         smith = brdf[B_SMITH] != 0.0
         k0 = rho / iz
@@ -451,17 +432,8 @@ def _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, 
             if smith:
                 w *= _smith_g1_beckmann(ox, oy, oz, ax, ay)
             w = w if oz > 0.0 else 0.0
-            inside = (dn < 0.0) & (t > 0.0) & (u >= -0.5) & (u < umax) & (v >= -0.5) & (v < vmax)
-            wh = w if inside else 0.0
             ftot += w
-            fhit += wh
-            uc = u if inside else 0.0
-            vc = v if inside else 0.0
-            ubuf[j] = uc
-            vbuf[j] = vc
-            iubuf[j] = np.int64(np.floor(uc + 0.5))
-            ivbuf[j] = np.int64(np.floor(vc + 0.5))
-            fbuf[j] = wh
+            fhit += _store_ray(j, w, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     return ftot, fhit
 
 
