@@ -149,6 +149,24 @@ def phase_shift(frames, cos_d, sin_d, phase, amplitude, offset, modulation):
 # --------------------------------------------------------------------------- unwrapping rows
 
 
+@fastjit(fastmath=_FASTMATH, inline="always")
+def _all_finite(phase, c):
+    """True if the wrapped phases of every width are finite at column c."""
+    for j in range(phase.shape[0]):
+        if not np.isfinite(phase[j, c]):
+            return False
+    return True
+
+
+@fastjit(fastmath=_FASTMATH, inline="always")
+def _store_pixel(c, big_phi, u, worst, f, abs_phase, coord, residual, flags):
+    """Write one unwrapped pixel: absolute phase, monitor coordinate, residual, flags."""
+    abs_phase[c] = big_phi
+    coord[c] = u
+    residual[c] = worst
+    flags[c] = f
+
+
 @fastjit(fastmath=_FASTMATH)
 def _chain_row(phase, coef, chain_w, window_lo, rewrap_period, extent, max_residual,
                abs_phase, coord, residual, flags):
@@ -170,15 +188,8 @@ def _chain_row(phase, coef, chain_w, window_lo, rewrap_period, extent, max_resid
     width = phase.shape[1]
     hi = extent - 0.5
     for c in range(width):
-        finite = True
-        for j in range(n):
-            if not np.isfinite(phase[j, c]):
-                finite = False
-        if not finite:
-            abs_phase[c] = np.nan
-            coord[c] = np.nan
-            residual[c] = np.nan
-            flags[c] = FLAG_NAN_INPUT
+        if not _all_finite(phase, c):
+            _store_pixel(c, np.nan, np.nan, np.nan, FLAG_NAN_INPUT, abs_phase, coord, residual, flags)
             continue
         # coarsest element: absolute after wrapping into the window
         p = 0.0
@@ -206,15 +217,12 @@ def _chain_row(phase, coef, chain_w, window_lo, rewrap_period, extent, max_resid
             big_phi -= _TWO_PI * (rewrap_period / lam) * np.floor(
                 (big_phi * lam * _INV_TWO_PI - window_lo) / rewrap_period)
         u = big_phi * lam * _INV_TWO_PI
-        abs_phase[c] = big_phi
-        coord[c] = u
-        residual[c] = worst
         f = np.uint8(0)
         if worst > max_residual:
             f |= FLAG_ORDER_RESIDUAL
         if not (u >= -0.5 and u < hi):
             f |= FLAG_OUT_OF_RANGE
-        flags[c] = f
+        _store_pixel(c, big_phi, u, worst, f, abs_phase, coord, residual, flags)
     return
 
 
@@ -238,15 +246,8 @@ def _coprime_row(phase, order, widths, step_factor, step_inverse, step_period, u
     w_fine = widths[fine]
     total_period = step_period[n - 1] * step_factor[n - 1] if n > 1 else w_fine
     for c in range(width):
-        finite = True
-        for j in range(n):
-            if not np.isfinite(phase[j, c]):
-                finite = False
-        if not finite:
-            abs_phase[c] = np.nan
-            coord[c] = np.nan
-            residual[c] = np.nan
-            flags[c] = FLAG_NAN_INPUT
+        if not _all_finite(phase, c):
+            _store_pixel(c, np.nan, np.nan, np.nan, FLAG_NAN_INPUT, abs_phase, coord, residual, flags)
             continue
         u_raw = phase[fine, c] * w_fine * _INV_TWO_PI
         u = u_raw - w_fine * np.floor(u_raw / w_fine)
@@ -269,15 +270,12 @@ def _coprime_row(phase, order, widths, step_factor, step_inverse, step_period, u
         m_fine = np.floor((u - u_raw) / w_fine + 0.5)
         big_phi = phase[fine, c] + _TWO_PI * m_fine
         u = big_phi * w_fine * _INV_TWO_PI
-        abs_phase[c] = big_phi
-        coord[c] = u
-        residual[c] = worst
         f = np.uint8(0)
         if worst > max_residual:
             f |= FLAG_ORDER_RESIDUAL
         if not (u >= -0.5 and u < hi):
             f |= FLAG_OUT_OF_RANGE
-        flags[c] = f
+        _store_pixel(c, big_phi, u, worst, f, abs_phase, coord, residual, flags)
     return
 
 

@@ -95,6 +95,16 @@ def _project_tangent(dx, dy, dz, nx, ny, nz):
     return x, y, z
 
 
+@fastjit(inline="always")
+def _fixed_frame(frame, nx, ny, nz):
+    """(x, y) of the fixed BRDF frame: x = the frame's x direction in the tangent plane,
+    y = n x x."""
+    xx, xy, xz = _project_tangent(
+        frame[FRAME_DIR], frame[FRAME_DIR + 1], frame[FRAME_DIR + 2], nx, ny, nz
+    )
+    return xx, xy, xz, ny * xz - nz * xy, nz * xx - nx * xz, nx * xy - ny * xx
+
+
 @fastjit
 def geometry_tile(cam, surf, frame, mon, row0, row1, width, geo, spec):
     """Fill ``geo`` ((row1-row0)*width, G_SIZE) and ``spec`` (same rows, 2): the bundle
@@ -169,19 +179,9 @@ def geometry_tile(cam, surf, frame, mon, row0, row1, width, geo, spec):
                     xy = yz * nx - yx * nz
                     xz = yx * ny - yy * nx
                 else:
-                    xx, xy, xz = _project_tangent(
-                        frame[FRAME_DIR], frame[FRAME_DIR + 1], frame[FRAME_DIR + 2], nx, ny, nz
-                    )
-                    yx = ny * xz - nz * xy
-                    yy = nz * xx - nx * xz
-                    yz = nx * xy - ny * xx
+                    xx, xy, xz, yx, yy, yz = _fixed_frame(frame, nx, ny, nz)
             else:
-                xx, xy, xz = _project_tangent(
-                    frame[FRAME_DIR], frame[FRAME_DIR + 1], frame[FRAME_DIR + 2], nx, ny, nz
-                )
-                yx = ny * xz - nz * xy
-                yy = nz * xx - nx * xz
-                yz = nx * xy - ny * xx
+                xx, xy, xz, yx, yy, yz = _fixed_frame(frame, nx, ny, nz)
             # principal direction and cone basis
             ppx = 2.0 * cos_i * nx - ix
             ppy = 2.0 * cos_i * ny - iy
