@@ -60,10 +60,16 @@ CASES = {
 }
 
 
-def warmup_configs() -> dict:
-    """{case: RunConfig} of the tiny warm-up runs."""
-    return {name: parse_config(dict(_BASE, name=f"warmup-{name}", **extra), f"warmup {name}")
-            for name, extra in CASES.items()}
+def warmup_configs(image: str | None = None) -> dict:
+    """{case: RunConfig} of the tiny warm-up runs; ``image``: a 1920 x 1080 monitor image
+    file shown in the first case (the monitor-image path)."""
+    out = {}
+    for k, (name, extra) in enumerate(CASES.items()):
+        d = dict(_BASE, name=f"warmup-{name}", **extra)
+        if k == 0 and image is not None:
+            d["patterns"] = dict(d["patterns"], images={"files": [image]})
+        out[name] = parse_config(d, f"warmup {name}")
+    return out
 
 
 def warmup(progress=None) -> dict:
@@ -71,8 +77,13 @@ def warmup(progress=None) -> dict:
     from .simulate import run_simulation
 
     out = {}
+    import numpy as np
+    from PIL import Image
+
     with tempfile.TemporaryDirectory(prefix="pmdsim-warmup-") as tmp:
-        for k, (name, cfg) in enumerate(warmup_configs().items()):
+        image = Path(tmp) / "grey.png"
+        Image.fromarray(np.full((1080, 1920), 128, np.uint8)).save(image)
+        for k, (name, cfg) in enumerate(warmup_configs(str(image)).items()):
             t = time.perf_counter()
             run_simulation(cfg, Path(tmp) / name, figures=False)
             out[name] = time.perf_counter() - t
