@@ -61,7 +61,8 @@ def _assert_identical(a: dict, b: dict) -> None:
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory):
     out = tmp_path_factory.mktemp("sweep") / "full"
-    res = run_sweep(parse_config(_config(SWEEP)), out, scheduler="threads", num_workers=2)
+    res = run_sweep(parse_config(_config(SWEEP)), out, scheduler="threads", num_workers=2,
+                    figures=False)
     assert res.computed == tuple(range(6)) and res.skipped == ()
     return out
 
@@ -175,7 +176,8 @@ def test_interrupted_sweep_resumes_only_unfinished_points(tmp_path, uninterrupte
                 os.kill(os.getpid(), signal.SIGKILL)
 
         cfg = parse_config(json.loads(open({str(cfg_path)!r}).read()))
-        run_sweep(cfg, {str(out)!r}, scheduler="synchronous", progress=progress)
+        run_sweep(cfg, {str(out)!r}, scheduler="synchronous", progress=progress,
+                  figures=False)
         """)
     env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
@@ -183,11 +185,12 @@ def test_interrupted_sweep_resumes_only_unfinished_points(tmp_path, uninterrupte
     assert proc.returncode == -9, proc.stderr.decode()[-2000:]
     done = done_mask(out / "sweep.zarr")
     assert done.sum() == 2
-    res = run_sweep(parse_config(_config(SWEEP)), out, scheduler="threads", num_workers=2)
+    res = run_sweep(parse_config(_config(SWEEP)), out, scheduler="threads", num_workers=2,
+                    figures=False)
     unfinished = {int(i) for i in load_sweep(out)["point_index"].values[~done]}
     assert set(res.computed) == unfinished and len(res.skipped) == 2
     _assert_identical(_arrays(out), _arrays(uninterrupted))
-    again = run_sweep(parse_config(_config(SWEEP)), out)
+    again = run_sweep(parse_config(_config(SWEEP)), out, figures=False)
     assert again.computed == () and len(again.skipped) == 6
 
 
@@ -197,7 +200,7 @@ def test_threads_and_distributed_processes_agree(tmp_path, uninterrupted):
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
-        res = run_sweep(parse_config(_config(SWEEP)), out, client=client)
+        res = run_sweep(parse_config(_config(SWEEP)), out, client=client, figures=False)
         workers = set(client.run(os.getpid).values())
     assert res.computed == tuple(range(6)) and len(workers) == 2 and os.getpid() not in workers
     _assert_identical(_arrays(out), _arrays(uninterrupted))
@@ -212,3 +215,39 @@ def test_a_different_sweep_in_the_same_folder_is_refused(tmp_path, uninterrupted
     with pytest.raises(FileExistsError, match="different sweep"):
         run_sweep(parse_config(_config(other)), out)
     assert done_mask(out / "sweep.zarr").all()
+
+
+def test_cli_sweep_writes_store_table_and_figures_and_refuses_bad_fields(tmp_path):
+    import tomllib  # noqa: F401  (the CLI reads TOML)
+
+    from typer.testing import CliRunner
+
+    from pmdsim.cli import app
+
+    def toml(sweep_params: str) -> Path:
+        cfg = _config({})
+        lines = []
+        for section in ("camera", "monitor", "surface", "brdf", "sampling"):
+            lines.append(f"[{section}]")
+            lines += [f"{k} = {json.dumps(v)}" for k, v in cfg[section].items()]
+        lines += ["[patterns.fringes]", "widths_px = [50.0, 400.0, 3200.0]",
+                  "[sweep]", "decimation = 0", "[sweep.parameters]", sweep_params]
+        path = tmp_path / f"cfg{len(list(tmp_path.iterdir()))}.toml"
+        path.write_text("\n".join(lines) + "\n")
+        return path
+
+    runner = CliRunner()
+    bad = runner.invoke(app, ["sweep", str(toml('"brdf.alpha_q" = [0.01]')), "-o",
+                              str(tmp_path / "bad")])
+    assert bad.exit_code == 2 and "'alpha_q' is not a field of brdf" in bad.output
+    assert not (tmp_path / "bad").exists()
+    ok = runner.invoke(app, ["sweep", str(toml('"brdf.alpha_x" = [0.004, 0.01]')), "-o",
+                             str(tmp_path / "ok"), "--scheduler", "synchronous"])
+    assert ok.exit_code == 0, ok.output
+    assert "computed 2 points, 0 were already done" in ok.output
+    for f in ("sweep.zarr/zarr.json", "points.csv", "config.json", "figures/phase_rms.png",
+              "figures/slope_rms.png", "figures/modulation_ratio.png"):
+        assert (tmp_path / "ok" / f).is_file(), f
+    rows = (tmp_path / "ok" / "points.csv").read_text().splitlines()
+    assert len(rows) == 3 and rows[0].startswith("point,brdf.alpha_x,done,x_phase_rms_mrad")
+    assert "phase_deviation" not in load_sweep(tmp_path / "ok")  # decimation 0: no maps

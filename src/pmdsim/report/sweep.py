@@ -165,15 +165,11 @@ def plot_modulation_ratio(ds, path, x: str | None = None, hue: str | None = None
     return _save(fig, path)
 
 
-def sweep_figures(path, folder=None) -> list[Path]:
-    """The default figures of a sweep folder (or store): RMS phase and slope deviation and
-    the modulation ratio against the swept parameters, into ``<sweep folder>/figures``."""
-    from ..run.sweep import load_sweep
-
-    ds = load_sweep(path)
-    path = Path(path)
-    root = path.parent if path.name.endswith(".zarr") else path
-    folder = Path(folder) if folder is not None else root / "figures"
+def sweep_figures(ds, folder) -> list[Path]:
+    """The default figures of a sweep (its store as a Dataset, see
+    :func:`pmdsim.run.sweep.load_sweep`): RMS phase and slope deviation and the modulation
+    ratio against the swept parameters, into ``folder``."""
+    folder = Path(folder)
     return [
         plot_statistic(ds, folder / "phase_rms.png", "phase_mrad", "rms"),
         plot_statistic(ds, folder / "slope_rms.png", "slope_urad", "rms"),

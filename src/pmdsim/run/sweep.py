@@ -57,7 +57,8 @@ ProgressFn = Callable[[int, int], None]
 @dataclass(frozen=True)
 class SweepResult:
     """What :func:`run_sweep` did: the store, the points it computed now (flat indices), the
-    points it found done, and the wall time."""
+    points it found done, the wall time and the files written beside the store
+    (``points.csv``, figures)."""
 
     outdir: Path
     store: Path
@@ -65,6 +66,7 @@ class SweepResult:
     skipped: tuple[int, ...]
     total: int
     seconds: float
+    files: tuple = ()
 
 
 # ----------------------------------------------------------------------------- the store
@@ -239,7 +241,8 @@ def _distributed(tasks, client, progress):
 
 def run_sweep(cfg: RunConfig | str | Path, outdir: str | Path, *, scheduler: str = "threads",
               client=None, num_workers: int | None = None,
-              progress: ProgressFn | None = None, overwrite: bool = False) -> SweepResult:
+              progress: ProgressFn | None = None, overwrite: bool = False,
+              figures: bool = True) -> SweepResult:
     """Compute every unfinished point of the sweep of ``cfg`` into ``<outdir>/sweep.zarr``.
 
     Parameters
@@ -262,6 +265,10 @@ def run_sweep(cfg: RunConfig | str | Path, outdir: str | Path, *, scheduler: str
         Called after each point.
     overwrite : bool
         Start again when ``outdir`` holds a different sweep.
+    figures : bool
+        Draw ``figures/phase_rms.png``, ``slope_rms.png`` and ``modulation_ratio.png``
+        (:func:`pmdsim.report.sweep.sweep_figures`) at the end; ``points.csv`` is always
+        written.
 
     Raises
     ------
@@ -314,8 +321,14 @@ def run_sweep(cfg: RunConfig | str | Path, outdir: str | Path, *, scheduler: str
             computed = _distributed(tasks, c, progress)
     else:
         computed = _local(tasks, keys, scheduler, num_workers, progress)
+    ds = load_sweep(store)
+    files = [write_points_csv(ds, outdir / "points.csv")]
+    if figures:
+        from ..report.sweep import sweep_figures
+
+        files += sweep_figures(ds, outdir / "figures")
     return SweepResult(outdir, store, tuple(sorted(computed)), skipped, len(plan.points),
-                       time.perf_counter() - t0)
+                       time.perf_counter() - t0, tuple(files))
 
 
 def load_sweep(path: str | Path):

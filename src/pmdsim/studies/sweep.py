@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..chain import QUANTITIES, STATISTICS, decode_problem
+from ..measure.chain import QUANTITIES, STATISTICS, decode_problem
 from ..config import ConfigError, RunConfig, SweepConfig, SweepRange, parse_config
 
 #: Variables of a point: name -> (dimensions after the sweep's own, dtype, attributes).
@@ -288,7 +288,7 @@ def reference_key(cfg: RunConfig) -> str:
 
 
 def _reference(cfg: RunConfig, sim, geometry):
-    from .. import chain
+    from ..measure import chain
     from ..render import Simulation
 
     key = reference_key(cfg)
@@ -331,7 +331,7 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
     """
     import warnings
 
-    from .. import chain
+    from ..measure import chain
     from ..render import Simulation
 
     sim = Simulation.from_config(cfg)
