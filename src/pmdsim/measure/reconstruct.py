@@ -41,6 +41,7 @@ __all__ = [
     "slopes_in_frame",
     "prior_frame",
     "PriorFrame",
+    "slope_deviation_3d",
 ]
 
 
@@ -173,16 +174,15 @@ def _spline_maps(u, v, valid):
 
 
 def _support_ok(valid, col, row):
+    """Nodes whose fractional pixel lies in a cell of 2 x 2 valid pixels (the invalid
+    pixels around were filled smoothly, so the spline's wider support may use them)."""
     h, w = valid.shape
     c0 = np.floor(col).astype(np.int64)
     r0 = np.floor(row).astype(np.int64)
-    inside = (c0 >= 1) & (c0 <= w - 3) & (r0 >= 1) & (r0 <= h - 3)
-    # a node is good when the 4 x 4 pixels of its spline support are all valid:
-    # erode the valid mask by the support (pixels c0-1..c0+2, r0-1..r0+2)
-    good = ndimage.minimum_filter(valid.astype(np.uint8), size=4, origin=(-1, -1), mode="constant", cval=0)
-    out = np.zeros(col.shape, bool)
-    out[inside] = good[r0[inside] - 1, c0[inside] - 1] > 0
-    return out
+    inside = (c0 >= 0) & (c0 <= w - 2) & (r0 >= 0) & (r0 <= h - 2)
+    c0 = np.where(inside, c0, 0)
+    r0 = np.where(inside, r0, 0)
+    return inside & valid[r0, c0] & valid[r0 + 1, c0] & valid[r0, c0 + 1] & valid[r0 + 1, c0 + 1]
 
 
 def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, grid=None,
@@ -276,3 +276,24 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     height = np.where(node_ok, z, np.nan)
     return Reconstruction(xs, ys, node_ok, height, sx, sy, np.where(mask, nominal, np.nan), it,
                           tuple(history), converged)
+
+
+def slope_deviation_3d(points, camera_position, monitor, u_ref, v_ref, u, v):
+    """Signed surface tilt (rad) that moves the decoded monitor point from the reference
+    (u_ref, v_ref) to (u, v), from the full 3-D geometry at the surface ``points`` (..., 3).
+
+    The angle between the bisector normals of S -> camera with S -> M_ref and with S -> M,
+    signed by the larger monitor-coordinate change. Replaces the scalar coord / (2 d), which
+    holds in the plane of incidence but is cos(theta_i) too small across it (a tilt delta
+    across the plane turns the reflected ray by 2 delta cos(theta_i)). For one fringe
+    direction pass the other coordinate unchanged (``v = v_ref`` for X fringes).
+    """
+    m_ref = monitor.pixel_to_world(u_ref, v_ref)
+    m = monitor.pixel_to_world(u, v)
+    n0 = bisector_normals(points, camera_position, m_ref)
+    n1 = bisector_normals(points, camera_position, m)
+    ang = np.arctan2(np.linalg.norm(np.cross(n0, n1), axis=-1), np.sum(n0 * n1, axis=-1))
+    du = np.asarray(u, np.float64) - u_ref
+    dv = np.asarray(v, np.float64) - v_ref
+    sign = np.where(np.abs(du) >= np.abs(dv), np.sign(du), np.sign(dv))
+    return sign * ang
