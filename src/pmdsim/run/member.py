@@ -70,7 +70,9 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         measured = chain.compare(
             chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode),
             reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
-            cfg.decode, len(fringes.shifts))
+            cfg.decode, len(fringes.shifts),
+            slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
+                reference.points_mm, sim.scene.camera.position, sim.scene.monitor))
         stats = chain.statistics(measured, cfg.name)
         ds = assign_to_dataset(ds, measured, stats)
         del measured

@@ -22,6 +22,7 @@ class Reference:
     distance_mm: np.ndarray
     seconds: float
     notes: tuple = ()
+    points_mm: np.ndarray | None = None  # surface point per pixel, for the 3-D slope conversion
 
 
 
@@ -56,7 +57,8 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     steps.finish_render(base, n_tiles)
     decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode)
     del fr
-    distance = chain.surface_to_monitor_mm(sim, geometry)
+    points = np.full(sim.shape + (3,), np.nan)
+    distance = chain.surface_to_monitor_mm(sim, geometry, points_out=points)
     notes = []
     for d, res in decoded.items():
         exact = geometry.specular_u if d == "x" else geometry.specular_v
@@ -70,4 +72,4 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
                 "'continuous' shows the scattering alone (statistics.json: "
                 "reference_vs_exact_px)")
             break
-    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes))
+    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes), points)
