@@ -135,6 +135,27 @@ class MonitorConfig(_Model):
         description="nearest: each monitor pixel a flat square emitter (the pattern value at "
         "the pixel centre); continuous: analytic fringes evaluated at the exact hit point",
     )
+    # --- display physics (scene/display.py, docs/system.md) ---------------------------
+    response_lut: str | None = Field(
+        None, description="CSV file of (drive in [0, 1], relative luminance) rows replacing "
+        "gamma; path relative to the config file")
+    bit_depth: Annotated[int, Field(ge=1, le=16)] | None = Field(
+        None, description="quantise the drive value to this many bits before the response "
+        "(8 or 10 on real displays); none = unquantised")
+    precompensate_gamma: bool = Field(
+        False, description="show the pattern through the inverse response, so that the "
+        "luminance (not the drive) is sinusoidal")
+    falloff_exponent: Annotated[float, Field(ge=0)] = Field(
+        0.0, description="luminance ~ cos(theta)^m of the emission angle (0 = Lambertian)")
+    falloff_table: tuple[tuple[Annotated[float, Field(ge=0, lt=90)], Annotated[float, Field(ge=0)]], ...] = Field(
+        (), description="(angle_deg, relative luminance) rows, interpolated; multiplies the "
+        "cos^m falloff")
+    cover_glass_thickness_mm: Annotated[float, Field(ge=0)] = 0.0
+    cover_glass_index: Annotated[float, Field(ge=1)] = 1.5
+    flatness_coefficients_mm: tuple[tuple[float, ...], ...] = Field(
+        (), description="c[i][j]: the emitting surface lies h = sum c[i][j] x^i y^j mm in "
+        "front of the nominal plane (towards the viewer), x, y in mm from the centre along "
+        "the pixel columns / rows; up to 4 x 4")
 
     _up = field_validator("up")(_nonzero_vector)
 
@@ -142,6 +163,14 @@ class MonitorConfig(_Model):
     def _check(self) -> "MonitorConfig":
         if self.white_level <= self.black_level:
             raise ValueError("white_level must be greater than black_level")
+        c = self.flatness_coefficients_mm
+        if c and (len(c) > 4 or any(len(r) != len(c) for r in c)):
+            raise ValueError("flatness_coefficients_mm must be a square matrix of at most 4 x 4")
+        if self.response_lut is not None and self.gamma != 1.0:
+            raise ValueError("give gamma or response_lut, not both")
+        angles = [a for a, _ in self.falloff_table]
+        if any(b <= a for a, b in zip(angles, angles[1:])):
+            raise ValueError("falloff_table angles must increase")
         n = np.subtract(self.look_at_mm, self.centre_mm)
         if np.linalg.norm(n) < 1e-9:
             raise ValueError("look_at_mm must differ from centre_mm")
@@ -635,6 +664,9 @@ def load_config(path: str | Path) -> RunConfig:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    mon = data.get("monitor")
+    if isinstance(mon, dict) and isinstance(mon.get("response_lut"), str):
+        mon["response_lut"] = str((path.parent / mon["response_lut"]).resolve())
     images = data.get("patterns", {}).get("images")
     if isinstance(images, dict) and isinstance(images.get("files"), list):
         images["files"] = [str((path.parent / f).resolve()) for f in images["files"]]
