@@ -41,10 +41,11 @@ class Scene:
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "Scene":
         s = cfg.sampling
+        surface = surface_from_config(cfg.surface)
         return cls(
-            camera=Camera.from_config(cfg.camera),
+            camera=Camera.from_config(cfg.camera).focused_on(surface),
             monitor=Monitor.from_config(cfg.monitor),
-            surface=surface_from_config(cfg.surface),
+            surface=surface,
             anisotropy=AnisotropyFrame.from_config(cfg.anisotropy),
             brdf=brdf_from_config(cfg.brdf),
             sampling=ConeSampling(
