@@ -13,9 +13,12 @@ the pixel centre (``subpixels = 1``) or the centres of an n x n grid over the pi
 (stratified footprint); each point is undistorted (Newton iteration) into the chief ray's
 direction ``(x', y', 1)``. A pinhole sends the chief ray. A thin lens (aperture diameter
 ``D = focal_length_mm / f_number``, plane in focus at ``Z_c = s_f``) sends, for every sensor
-point, rays from aperture points ``A`` (a Fibonacci lattice of ``aperture_samples`` points
-with a per-pixel random Cranley-Patterson shift from ``default_rng([aperture_seed, row])``,
-mapped to the disk by Shirley-Chiu's concentric map) through the in-focus point
+point, rays from aperture points ``A`` (antithetic pairs ``A, -A``: a Fibonacci lattice of
+``aperture_samples / 2`` points with a per-pixel random Cranley-Patterson shift from
+``default_rng([aperture_seed, row])``, mapped to the disk by Shirley-Chiu's concentric map,
+and their mirror images through the lens centre, so that a blur that is linear in ``A``
+has its centroid exactly at the chief ray; an odd count adds the centre) through the
+in-focus point
 ``F = s_f (x', y', 1)``: all rays of a sensor point meet again at ``F``.
 """
 
@@ -207,14 +210,17 @@ class Camera:
         if self.aperture_mm is None:
             return np.zeros((width, 1, 2))
         m = self.aperture_samples
-        j = np.arange(m, dtype=np.float64)
-        u1 = (j + 0.5) / m
+        half = m // 2
+        j = np.arange(max(half, 1), dtype=np.float64)
+        u1 = (j + 0.5) / max(half, 1)
         u2 = np.mod(j / _GOLDEN, 1.0)
         off = np.random.default_rng([self.aperture_seed, int(row)]).random((width, 2))
         s1 = np.mod(u1[None] + off[:, :1], 1.0)
         s2 = np.mod(u2[None] + off[:, 1:], 1.0)
         x, y = concentric_disk(s1, s2)
-        return 0.5 * self.aperture_mm * np.stack([x, y], axis=-1)
+        pts = np.stack([x, y], axis=-1)[:, :half]
+        parts = [pts, -pts] + ([np.zeros((width, 1, 2))] if m % 2 else [])
+        return 0.5 * self.aperture_mm * np.concatenate(parts, axis=1)
 
     def vision_rays(self, rows, cols):
         """Origins and unit directions (P, S, 3) of every pixel's S vision rays (sub-pixels

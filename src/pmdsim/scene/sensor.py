@@ -97,6 +97,11 @@ class Sensor:
         fill = DEFAULT_FILL if self.target_fill is None else self.target_fill
         return float(fill * self.full_well_electrons)
 
+    @property
+    def saturation_dn(self) -> float:
+        """Grey value at which the pixel saturates: the full well or the ADC maximum."""
+        return float(min(self.max_dn, np.rint(self.gain * self.full_well_electrons + self.offset_dn)))
+
     def noise_dn(self, mean_electrons) -> np.ndarray:
         """Temporal noise (std, DN) at ``mean_electrons`` (EMVA, no clipping, fixed
         patterns excluded)."""
@@ -156,3 +161,8 @@ class Sensor:
         dn[nan] = np.nan
         sat[nan] = False
         return Capture(dn, sat, e_per_x)
+
+
+def capture_dn(sensor: Sensor, values, stream: int) -> np.ndarray:
+    """Digital numbers (float32) of a stack of camera values (NaN where no surface)."""
+    return sensor.capture(values, stream=stream).dn.astype(np.float32)

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -34,7 +34,7 @@ from ..config import MirrorConfig, RunConfig
 from ..measure.chain import decode_fringes, surface_to_monitor_mm
 from ..measure.deviation import deviation_stats, slope_deviation
 from ..render import Simulation
-from ..scene.sensor import Sensor
+from ..scene.sensor import Sensor, capture_dn
 
 QUANTITIES = ("mrad", "px", "mm", "urad")
 
@@ -133,21 +133,13 @@ def decode_config(cfg: RunConfig, stream: int = 0) -> Decoded:
     fr = cfg.patterns.fringes
     res = sim.render_fringes(fr.widths_px, fr.directions, fr.shifts)
     sensor = Sensor.from_config(cfg.sensor)
-    images = res.images
-    saturated = None
+    level = None
     if sensor.enabled:
-        cap = sensor.capture(images, stream=stream)
-        images = cap.dn.astype(np.float32)
-        saturated = cap.saturated
-    res = type(res)(res.directions, res.widths, res.shifts, images, res.sums, res.f_total, res.f_hit)
-    dec = decode_fringes(res, cfg.monitor.resolution, cfg.decode)
-    coord, valid = {}, {}
-    for di, d in enumerate(res.directions):
-        coord[d] = np.asarray(dec[d].monitor_coord_px, np.float64)
-        ok = np.asarray(dec[d].valid, bool)
-        if saturated is not None:
-            ok &= ~saturated[di].any(axis=(0, 1))
-        valid[d] = ok
+        res = replace(res, images=capture_dn(sensor, res.images, stream))
+        level = sensor.saturation_dn
+    dec = decode_fringes(res, cfg.monitor.resolution, cfg.decode, level)
+    coord = {d: np.asarray(r.monitor_coord_px, np.float64) for d, r in dec.items()}
+    valid = {d: np.asarray(r.valid, bool) for d, r in dec.items()}
     return Decoded(coord, valid, time.perf_counter() - t0)
 
 
