@@ -173,7 +173,133 @@ class FlatSurfaceConfig(_Model):
         return self
 
 
-SurfaceConfig = Annotated[FlatSurfaceConfig, Field(discriminator="type")]
+class ApertureConfig(_Model):
+    """The clear aperture of a curved surface, in its local (x, y) (mm, about ``centre_mm``).
+
+    ``circular``: ``radius_mm``; ``annular``: ``radius_mm`` and ``inner_radius_mm``;
+    ``rectangular``: ``size_mm`` (along local x, along local y). ``centre_mm`` off the
+    vertex gives an off-axis segment of the parent surface.
+    """
+
+    shape: Literal["circular", "annular", "rectangular"] = "circular"
+    radius_mm: PositiveFloat | None = None
+    inner_radius_mm: Annotated[float, Field(ge=0)] = 0.0
+    size_mm: tuple[PositiveFloat, PositiveFloat] | None = None
+    centre_mm: tuple[float, float] = (0.0, 0.0)
+
+    @model_validator(mode="after")
+    def _check(self) -> "ApertureConfig":
+        if self.shape in ("circular", "annular") and self.radius_mm is None:
+            raise ValueError(f"aperture.radius_mm is required for shape = {self.shape!r}")
+        if self.shape == "annular" and not (0 < self.inner_radius_mm < self.radius_mm):
+            raise ValueError("aperture.inner_radius_mm must be > 0 and < radius_mm for an annulus")
+        if self.shape == "rectangular" and self.size_mm is None:
+            raise ValueError("aperture.size_mm = [width, height] is required for shape = 'rectangular'")
+        return self
+
+
+class _SagSurfaceBase(_Model):
+    """Pose and aperture of a sag surface: vertex at ``centre_mm``, local z = ``normal``
+    (the side the camera looks from), local x = ``x_axis`` (projected). ``radius_mm`` > 0
+    puts the centre of curvature on the +normal side (concave towards the camera);
+    None = flat base. See docs/surfaces.md."""
+
+    centre_mm: Vec3 = (0.0, 0.0, 0.0)
+    normal: Vec3 = (0.0, 0.0, 1.0)
+    x_axis: Vec3 = (1.0, 0.0, 0.0)
+    aperture: ApertureConfig
+
+    _directions = field_validator("normal", "x_axis")(_nonzero_vector)
+
+    @field_validator("radius_mm", check_fields=False)
+    @classmethod
+    def _radius(cls, v):
+        if v is not None and (not np.isfinite(v) or v == 0):
+            raise ValueError("must be a non-zero finite radius of curvature in mm (None or omit for a flat base)")
+        return v
+
+    @model_validator(mode="after")
+    def _check_pose(self):
+        _unit("normal", self.normal)
+        _unit("x_axis", self.x_axis)
+        n = np.asarray(self.normal) / np.linalg.norm(self.normal)
+        x = np.asarray(self.x_axis) / np.linalg.norm(self.x_axis)
+        if abs(n @ x) > 1 - 1e-9:
+            raise ValueError("x_axis must not be parallel to normal")
+        return self
+
+
+class SphereSurfaceConfig(_SagSurfaceBase):
+    """A sphere of radius of curvature ``radius_mm``."""
+
+    type: Literal["sphere"]
+    radius_mm: float
+
+
+class ConicSurfaceConfig(_SagSurfaceBase):
+    """A conic: radius of curvature at the vertex and conic constant k (0 sphere, -1
+    paraboloid, < -1 hyperboloid, (-1, 0) prolate and > 0 oblate ellipsoid)."""
+
+    type: Literal["conic"]
+    radius_mm: float | None = None
+    conic: float = 0.0
+
+
+class AsphereSurfaceConfig(_SagSurfaceBase):
+    """Even asphere: the conic plus ``coefficients`` A4, A6, A8, ... of r^4, r^6, r^8, ...
+    (mm^-3, mm^-5, ...)."""
+
+    type: Literal["asphere"]
+    radius_mm: float | None = None
+    conic: float = 0.0
+    coefficients: tuple[float, ...] = ()
+
+
+class XYPolynomialSurfaceConfig(_SagSurfaceBase):
+    """Freeform: the base conic plus sum c (x/s)^i (y/s)^j over ``terms`` = [[i, j, c_mm], ...],
+    s = ``norm_radius_mm``."""
+
+    type: Literal["xy_polynomial"]
+    radius_mm: float | None = None
+    conic: float = 0.0
+    norm_radius_mm: PositiveFloat = 1.0
+    terms: tuple[tuple[Annotated[int, Field(ge=0, le=20)], Annotated[int, Field(ge=0, le=20)], float], ...] = ()
+
+
+class ZernikeSurfaceConfig(_SagSurfaceBase):
+    """Freeform: the base conic plus sum c_j Z_j(x/s, y/s) with Noll's ordering and
+    normalisation (RMS 1 on the unit disc), ``coefficients`` = [[j, c_mm], ...],
+    s = ``norm_radius_mm``."""
+
+    type: Literal["zernike"]
+    radius_mm: float | None = None
+    conic: float = 0.0
+    norm_radius_mm: PositiveFloat
+    coefficients: tuple[tuple[Annotated[int, Field(ge=1, le=231)], float], ...] = ()
+
+
+class HeightMapSurfaceConfig(_SagSurfaceBase):
+    """A measured topography: heights on a regular grid from ``file`` (.npy, .csv, or a
+    32-bit float .tif/.tiff), rows along local y, columns along local x, ``spacing_mm`` =
+    (dx, dy), ``origin_mm`` = local (x, y) of element [0, 0] (default: the grid centred on
+    the vertex), heights in ``height_unit``, added to the base conic; interpolated with a
+    bicubic B-spline (continuous normals). The aperture defaults to the grid."""
+
+    type: Literal["height_map"]
+    file: str
+    spacing_mm: tuple[PositiveFloat, PositiveFloat]
+    origin_mm: tuple[float, float] | None = None
+    height_unit: Literal["mm", "um", "nm"] = "mm"
+    radius_mm: float | None = None
+    conic: float = 0.0
+    aperture: ApertureConfig | None = None
+
+
+SurfaceConfig = Annotated[
+    FlatSurfaceConfig | SphereSurfaceConfig | ConicSurfaceConfig | AsphereSurfaceConfig
+    | XYPolynomialSurfaceConfig | ZernikeSurfaceConfig | HeightMapSurfaceConfig,
+    Field(discriminator="type"),
+]
 
 
 class AnisotropyConfig(_Model):
@@ -376,7 +502,7 @@ class PatternsConfig(_Model):
 
 
 class DiagnosticsConfig(_Model):
-    """Bounds for the convergence warnings of :func:`pmdsim.diagnostics.check`."""
+    """Bounds for the convergence warnings of :func:`pmdsim.studies.diagnostics.check`."""
 
     min_energy_fraction: Annotated[float, Field(gt=0, le=1)] = Field(
         0.95, description="warn when the cone (theta_max) holds less of the lobe's energy"
@@ -416,7 +542,7 @@ class OutputConfig(_Model):
 class DecodeConfig(_Model):
     """The measurement chain of ``pmdsim simulate``: decode the fringe images (phase
     shifting + temporal unwrapping, :mod:`pmdsim.decode`) of the surface and of its ideal
-    specular reference, and compare them (:mod:`pmdsim.chain`).
+    specular reference, and compare them (:mod:`pmdsim.measure.chain`).
 
     ``enabled``: ``"auto"`` (default) decodes whenever the fringes allow it (K >= 3 shifts,
     widths that fit ``method`` over the monitor extent) and otherwise skips decoding with a
@@ -589,6 +715,9 @@ def load_config(path: str | Path) -> RunConfig:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    surf = data.get("surface")
+    if isinstance(surf, dict) and surf.get("type") == "height_map" and isinstance(surf.get("file"), str):
+        surf["file"] = str((path.parent / surf["file"]).resolve())
     images = data.get("patterns", {}).get("images")
     if isinstance(images, dict) and isinstance(images.get("files"), list):
         images["files"] = [str((path.parent / f).resolve()) for f in images["files"]]
