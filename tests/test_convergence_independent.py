@@ -20,9 +20,9 @@ import naive
 import naive_stats as ns
 from conftest import base_dict, make_config
 from pmdsim.config import parse_config
-from pmdsim.converge import _stats, reduced_config, run_convergence
+from pmdsim.studies.convergence import _stats, convergence_study, reduced_config
 from pmdsim.render import Simulation
-from pmdsim.sampling import ConeSampling
+from pmdsim.scene.sampling import ConeSampling
 from pmdsim.scene import Scene
 
 
@@ -77,11 +77,10 @@ def _normal_incidence_config(alpha=0.013, widths=(20.0, 160.0)):
 
 
 @pytest.fixture(scope="module")
-def study(tmp_path_factory):
+def study():
     cfg = _normal_incidence_config()
-    out = tmp_path_factory.mktemp("conv") / "study"
-    res = run_convergence(cfg, out, n_values=(16, 256), theta_values=(1.0,),
-                          camera_size=(20, 16), figure=False, diagnostics=False)
+    res = convergence_study(cfg, n_values=(16, 256), theta_values=(1.0,), camera_size=(20, 16),
+                            diagnostics=False)
     return cfg, res
 
 
@@ -174,7 +173,7 @@ def test_radiometric_modulation_follows_the_small_slope_law(study):
     assert 0.3 < np.nanmedian(np.exp(-(k * d_px * alpha) ** 2)) < 0.7
 
 
-def test_ward1992_phase_bias_follows_its_first_order_closed_form(tmp_path):
+def test_ward1992_phase_bias_follows_its_first_order_closed_form():
     """Ward 1992 moves the reflected energy's centroid towards the normal by
     2 tan(theta_i) alpha^2 in the plane of incidence (docs/physics.md); on a monitor at
     distance d facing the ray that is a shift of 2 tan(theta_i) alpha^2 d, so the converged
@@ -195,8 +194,8 @@ def test_ward1992_phase_bias_follows_its_first_order_closed_form(tmp_path):
     d["sampling"] = {"n_rays": 64, "theta_max_deg": 1.0}
     d["patterns"] = {"fringes": {"widths_px": [40.0], "shifts": 4, "directions": ["y"]}}
     cfg = parse_config(d)
-    res = run_convergence(cfg, tmp_path / "bias", n_values=(1024,), estimators=("radiometric",),
-                          camera_size=(20, 16), figure=False, diagnostics=False)
+    res = convergence_study(cfg, n_values=(1024,), estimators=("radiometric",),
+                            camera_size=(20, 16), diagnostics=False)
     row = [r for r in res.rows if r["n_rays"] == 1024][0]
     small = reduced_config(cfg, (20, 16))
     prim = naive.primary(small)

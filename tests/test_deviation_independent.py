@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 import naive_stats as ns
-from pmdsim import chain
-from pmdsim import decode as dec
-from pmdsim.analysis import compare_direction, deviation_stats, image_moments, wrap
+from pmdsim.measure import chain
+from pmdsim.measure import decode as dec
+from pmdsim.measure.deviation import compare_direction, deviation_stats, image_moments, wrap
 
 
 # =========================================================================== deviation_stats
@@ -59,8 +59,6 @@ def test_stats_match_slow_loops_on_a_masked_map():
     assert s.valid_fraction == pytest.approx(sel.size / considered.sum(), rel=1e-15)
 
 
-@pytest.mark.xfail(strict=True, reason="analysis.deviation_stats drops valid-but-NaN pixels from "
-                   "the default considered mask (fixed once the layout lands)")
 def test_default_considered_counts_every_finite_or_valid_pixel():
     """``considered`` omitted: the pixels that could be measured are those with a finite
     deviation or marked valid, so a valid pixel whose deviation is NaN counts as masked.
@@ -235,7 +233,9 @@ def test_chain_dataset_variables_carry_the_same_numbers():
     """The dataset's mm map, slope map and statistics table hold the values recomputed from
     the inputs (guards against a table built from the wrong quantity or statistic order)."""
     c, coord, ref_coord, exact, distance, pitch, res = _chain_case()
-    v = chain.dataset_variables(res)
+    from pmdsim.run.dataset import dataset_variables
+
+    v = dataset_variables(res)
     ok = res.directions["x"].deviation.valid
     mm = v["coord_deviation_mm"][1][0]
     np.testing.assert_allclose(mm[ok], ((coord - ref_coord) * pitch)[ok], rtol=1e-14)

@@ -15,9 +15,9 @@ import pytest
 
 import naive_stats as ns
 from conftest import make_config
-from pmdsim import diagnostics as dg
+from pmdsim.studies import diagnostics as dg
 from pmdsim.render import Simulation
-from pmdsim.sampling import ConeSampling
+from pmdsim.scene.sampling import ConeSampling
 
 
 # =========================================================================== hand-made inputs

@@ -16,7 +16,7 @@ from scipy.special import erfc
 
 import naive
 from conftest import base_dict, make_config
-from pmdsim import chain
+from pmdsim.measure import chain
 from pmdsim.config import parse_config
 from pmdsim.render import Simulation
 from pmdsim.scene import Monitor
