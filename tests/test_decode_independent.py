@@ -18,28 +18,10 @@ import math
 import numpy as np
 import pytest
 
-from pmdsim.measure.deviation import wrap
+from naive_decode import gamma_cosine_coefficients as _cosine_coefficients
+from naive_decode import gamma_phase_error as _derived_error
 from pmdsim.measure.decode import phase_shift
-
-
-def _cosine_coefficients(gamma: float, n: int = 1 << 14) -> np.ndarray:
-    """a_m of ((1 + cos x) / 2)^gamma = sum_m a_m cos(m x)."""
-    x = 2 * np.pi * np.arange(n) / n
-    c = np.fft.rfft(((1 + np.cos(x)) / 2) ** gamma).real / n
-    a = 2 * c
-    a[0] = c[0]
-    return a
-
-
-def _derived_error(phi: np.ndarray, gamma: float, k: int, n_harmonics: int = 512) -> np.ndarray:
-    a = _cosine_coefficients(gamma)[:n_harmonics]   # a_m ~ m^-5.4: 512^-5.4 ~ 1e-15
-    z = np.zeros(phi.shape, complex)
-    for m in range(1, a.size):
-        if m % k == 1 % k:
-            z += a[m] * np.exp(1j * (m - 1) * phi)
-        if m % k == (k - 1) % k:
-            z += a[m] * np.exp(-1j * (m + 1) * phi)
-    return np.angle(z)
+from pmdsim.measure.deviation import wrap
 
 
 @pytest.mark.parametrize("k", [3, 4, 5, 8])
