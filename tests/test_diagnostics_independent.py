@@ -326,3 +326,154 @@ def test_fig3_energy_numbers_are_derived_by_quadrature():
         assert math.degrees(need[k]) == pytest.approx(thq, abs=0.01)
     assert round(100 * frac, 1) == 37.5          # docs/physics.md: "holds 37.5 %"
     assert round(theta, 2) == 3.97               # docs/physics.md: "95 % needs 3.97 deg"
+
+
+# =========================================================================== edges and wiring
+def test_check_boundaries_are_strict():
+    """Exactly at a bound nothing is reported: P95 phase error = 1 mrad (target 1 mrad),
+    median energy fraction = the minimum, median modulation = 2 / sqrt(ESS). Guards against
+    '>' / '<' turned into '>=' / '<=' (a warning for a run that meets its bound)."""
+    se = np.full((1, 1, 3, 7), 1e-3)
+    kw = dict(directions=("x",), widths=(40.0,), n_rays=100)
+    assert dg.check(_diag(se, **kw), max_phase_error_mrad=1.0) == []
+    grid = _grid()
+    e = dg.EnergyFraction(1.0, 0.95, np.full(grid.grid_shape, 0.375),
+                          np.full(grid.grid_shape, 3.9), np.ones(grid.grid_shape), grid)
+    assert dg.check(_diag(se, energy=e, **kw), min_energy_fraction=0.375) == []
+    mod = np.full((1, 1, 3, 7), 0.2)          # ESS 100: floor 2 / 10 = 0.2 exactly
+    assert dg.check(_diag(se * 0.1, ess=np.full((3, 7), 100.0), modulation=mod, **kw)) == []
+
+
+def test_energy_summary_statistics():
+    """EnergyFraction.summary: median and min of the fraction, max and median of the angle,
+    over the pixels that see the surface (NaN elsewhere). Guards against min/max or
+    median/mean swaps, NaN pixels included."""
+    grid = _grid()
+    frac = np.linspace(0.2, 0.9, 21).reshape(3, 7) ** 2
+    need = np.linspace(1.0, 5.0, 21).reshape(3, 7) ** 2
+    frac[0, 0] = need[0, 0] = np.nan
+    e = dg.EnergyFraction(1.0, 0.95, frac, need, np.ones(grid.grid_shape), grid)
+    s = e.summary()
+    ok = np.isfinite(frac)
+    assert s["fraction_median"] == pytest.approx(ns.percentile_linear(frac[ok], 50), rel=1e-12)
+    assert s["fraction_min"] == pytest.approx(min(frac[ok]), rel=1e-12)
+    assert s["theta_needed_deg_max"] == pytest.approx(max(need[ok]), rel=1e-12)
+    assert s["theta_needed_deg_median"] == pytest.approx(ns.percentile_linear(need[ok], 50),
+                                                         rel=1e-12)
+    empty = dg.EnergyFraction(1.0, 0.95, np.full((3, 7), np.nan), need, need, grid)
+    assert set(empty.summary()) == {"theta_max_deg", "target"}
+
+
+def test_full_map_on_a_line_and_beyond_the_nodes():
+    """A grid of one row: every camera pixel takes the value of the nearest grid column (no
+    interpolation along a line); a grid whose nodes do not reach the image corners
+    extrapolates a linear field exactly. Guards against the degenerate branch taken for
+    2-D grids or the other axis, |.| dropped from the distances, bounds errors."""
+    g = dg.PixelGrid(np.array([5]), np.array([0, 10, 20]), (12, 21))
+    full = dg.full_map(np.array([[1.0, 2.0, 3.0]]), g)
+    cols = np.arange(21)
+    expected = np.array([1.0, 2.0, 3.0])[np.abs(cols[:, None] - [0, 10, 20]).argmin(1)]
+    np.testing.assert_array_equal(full, np.broadcast_to(expected, (12, 21)))
+    g = dg.PixelGrid(np.array([0, 4, 9, 11]), np.array([7]), (12, 21))
+    full = dg.full_map(np.array([[1.0], [2.0], [3.0], [4.0]]), g)
+    np.testing.assert_array_equal(full[:, 0], [1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 4])  # ties: first
+    g = dg.PixelGrid(np.array([5, 10]), np.array([5, 15]), (20, 20))
+    rr, cc = np.meshgrid(g.rows, g.cols, indexing="ij")
+    full = dg.full_map(3.0 * rr - 2.0 * cc + 1.0, g)
+    r, c = np.mgrid[0:20, 0:20]
+    np.testing.assert_allclose(full, 3.0 * r - 2.0 * c + 1.0, atol=1e-12)
+
+
+def test_nice_up_of_nothing_is_zero():
+    """0, negative and non-finite ray counts give 0 (no suggestion), not an error."""
+    assert [dg._nice_up(x) for x in (0.0, -5.0, float("inf"), float("nan"))] == [0, 0, 0, 0]
+
+
+def test_phase_error_of_empty_and_single_ray_bundles():
+    """No ray on the monitor: NaN error and modulation (not inf, not 0); one ray: the error is
+    unknown, reported as inf. Guards against '> 0' turned into '>= 0', n > 1 into n >= 1."""
+    u = np.array([[np.nan, np.nan, np.nan], [10.0, 11.0, 12.0]])
+    w = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    se, mod = dg.phase_error_from_rays(u, u, w, (20.0,), ("x",), nearest=False)
+    assert np.isnan(se[0, 0, 0]) and np.isnan(mod[0, 0, 0])
+    assert np.isfinite(se[0, 0, 1]) and mod[0, 0, 1] == pytest.approx(
+        abs(np.exp(2j * np.pi * u[1] / 20).mean()), rel=1e-12)
+    assert np.isnan(dg.ray_phases(u, u, w, (20.0,), ("x",), nearest=False)[0, 0, 0])
+    se1, _ = dg.phase_error_from_rays(u[1:, :1], u[1:, :1], w[1:, :1], (20.0,), ("x",), False)
+    assert se1[0, 0, 0] == np.inf
+
+
+def test_lobe_energy_skips_rows_without_incidence():
+    """Rows of i_local that are NaN or grazing (i_z = 0) give NaN, the others their values
+    (guards against '> 0' turned into '>= 0' and a chunk loop that drops rows)."""
+    from pmdsim.brdf import Ward
+
+    t = math.radians(20.0)
+    good = [-math.sin(t), 0.0, math.cos(t)]
+    i = np.array([good, [np.nan] * 3, [1.0, 0.0, 0.0]] + [good] * 18)
+    frac, need, albedo = dg.lobe_energy(Ward(0.05, 0.05), i, math.radians(4.0), n_samples=512,
+                                        chunk=4)
+    bad = np.array([False, True, True] + [False] * 18)
+    assert np.all(np.isnan(frac[bad])) and np.all(np.isnan(albedo[bad]))
+    assert np.all(np.isfinite(frac[~bad])) and np.all(np.isfinite(need[~bad]))
+    np.testing.assert_allclose(frac[~bad], frac[0, 0], rtol=1e-12)
+
+
+def test_diagnose_wiring_summary_and_masks():
+    """diagnose on a grid that includes pixels off the plate: default width 50 px, the
+    delta method's error is ray_statistics' (the same arrays), ESS / error / modulation are
+    those of the transported rays at the grid pixels (nearest monitor: floor(c + 0.5)) and
+    NaN off the plate, and the summary holds their median, minimum and P95. Guards against
+    the summary's percentiles swapped, the nearest flag inverted, masks not applied."""
+    sim = Simulation.from_config(make_config(sampling={"n_rays": 24, "theta_max_deg": 2.0}))
+    diag = dg.diagnose(sim, grid=(5, 4), phase_method="delta", n_samples=512)
+    assert diag.widths == (50.0,) and diag.directions == ("x", "y")
+    g = diag.grid
+    assert np.array_equal(diag.phase_se, diag.rays.phase_se, equal_nan=True)
+    valid, _ = dg.incidence(sim.scene, g.pixel_rows, g.pixel_cols)
+    assert valid.any() and not valid.all()
+    u, v, w, _, _ = sim.transport(g.pixel_rows, g.pixel_cols)
+    se, mod = dg.phase_error_from_rays(u, v, w, (50.0,), ("x", "y"), nearest=True)
+    ess = dg.ess_from_weights(w)
+    shape = g.grid_shape
+    np.testing.assert_allclose(diag.rays.ess[valid.reshape(shape)], ess[valid], rtol=1e-12)
+    assert np.all(np.isnan(diag.rays.ess[~valid.reshape(shape)]))
+    np.testing.assert_allclose(diag.rays.phase_se.reshape(2, 1, -1)[..., valid],
+                               se[..., valid], rtol=1e-12)
+    np.testing.assert_allclose(diag.rays.modulation.reshape(2, 1, -1)[..., valid],
+                               mod[..., valid], rtol=1e-12)
+    assert np.all(np.isnan(diag.rays.modulation.reshape(2, 1, -1)[..., ~valid]))
+    s = diag.summary
+    e_ok = ess[valid]
+    assert s["ess_median"] == pytest.approx(ns.percentile_linear(e_ok, 50), rel=1e-12)
+    assert s["ess_min"] == pytest.approx(min(e_ok), rel=1e-12)
+    sx = se[0, 0][valid]
+    assert s["phase_se_rad"]["x/50"]["median"] == pytest.approx(ns.percentile_linear(sx, 50))
+    assert s["phase_se_rad"]["x/50"]["p95"] == pytest.approx(ns.percentile_linear(sx, 95))
+    assert s["modulation_median"]["y/50"] == pytest.approx(
+        ns.percentile_linear(mod[1, 0][valid], 50))
+    assert s["n_rays"] == 24 and s["theta_max_deg"] == pytest.approx(2.0)
+
+
+def test_incidence_by_hand_and_two_seeds_are_enough():
+    """incidence: i in the BRDF frame equals the hand-traced direction to the camera
+    (``naive.primary``), NaN off the plate; phase_error_seeds accepts 2 seeds and refuses 1.
+    Guards against i = +dir, masks inverted, an off-by-one on the seed count."""
+    import naive
+
+    cfg = make_config()
+    sim = Simulation.from_config(cfg)
+    prim = naive.primary(cfg)
+    rows, cols = np.array([0, 16, 20, 31]), np.array([0, 20, 25, 39])
+    valid, i_local = dg.incidence(sim.scene, rows, cols)
+    np.testing.assert_array_equal(valid, prim["valid"][rows, cols])
+    for k in np.flatnonzero(valid):
+        r, c = rows[k], cols[k]
+        frame = (prim["x_axis"][r, c], prim["y_axis"][r, c], prim["normal"][r, c])
+        np.testing.assert_allclose(i_local[k], [prim["to_camera"][r, c] @ b for b in frame],
+                                   atol=1e-12)
+    assert np.all(np.isnan(i_local[~valid]))
+    grid = dg.PixelGrid(np.array([16]), np.array([20]), sim.shape)
+    assert np.isfinite(dg.phase_error_seeds(sim, grid, n_seeds=2)).all()
+    with pytest.raises(ValueError, match="n_seeds"):
+        dg.phase_error_seeds(sim, grid, n_seeds=1)
