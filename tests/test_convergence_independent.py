@@ -209,3 +209,60 @@ def test_ward1992_phase_bias_follows_its_first_order_closed_form():
     assert row["phase_rms_rad"] == pytest.approx(expected, rel=0.10)
     assert abs(row["phase_mean_rad"]) == pytest.approx(expected, rel=0.10)
     assert row["phase_p95_rad"] > row["phase_rms_rad"]
+
+
+# =========================================================================== settings and wiring
+def test_study_settings_meta_and_timings(study):
+    """The configured N (48) and theta_max (2 deg) join the sweeps, sorted; the converged
+    answer is named by the largest N; every row's time is a duration (0 <= s < 10 min)."""
+    cfg, res = study
+    m = res.meta
+    assert m["n_values"] == [16, 48, 256] and m["theta_values_deg"] == [1.0, 2.0]
+    assert m["converged"] == "radiometric, N = 256" and m["camera_size"] == [20, 16]
+    assert m["widths_px"] == [20.0, 160.0] and m["directions"] == ["x", "y"] and m["shifts"] == 4
+    # rows: 2 thetas x 3 N x 2 cone estimators + 3 radiometric, x 2 directions x 2 widths
+    assert len(res.rows) == (2 * 3 * 2 + 3) * 4
+    assert all(0.0 <= r["seconds"] < 600.0 for r in res.rows)
+
+
+def test_bad_sweeps_are_refused_at_their_bounds():
+    """N = 0, theta_max = 0 or 90 deg, no estimator: a clear error before any rendering.
+    Guards against '<' / '<=' / '>=' slips on the bounds (N = 1 and 89.9 deg are fine)."""
+    cfg = make_config()
+    for kw, field in (({"n_values": (0,)}, "n_values"), ({"theta_values": (0.0,)}, "theta"),
+                      ({"theta_values": (90.0,)}, "theta"), ({"estimators": ()}, "estimator")):
+        with pytest.raises(ValueError, match=field):
+            convergence_study(cfg, camera_size=(4, 4), diagnostics=False, **kw)
+    res = convergence_study(cfg, n_values=(1,), theta_values=(89.9,), estimators=("paper",),
+                            camera_size=(4, 4), diagnostics=False)
+    assert {r["n_rays"] for r in res.rows} == {1, 48}
+    assert {r["theta_max_deg"] for r in res.rows} == {2.0, 89.9}
+
+
+def test_reduced_camera_keeps_at_least_one_pixel_per_axis():
+    """A 400 x 20 px camera reduced to 10 x 10: scale 1/40, so 10 x 1 px (not 10 x 0)."""
+    cfg = make_config(camera={"resolution": [400, 20], "focal_length_px": 800.0})
+    assert reduced_config(cfg, (10, 10)).camera.resolution == (10, 1)
+
+
+def test_study_checks_the_configured_settings_by_default():
+    """Without ``diagnostics=False`` the study diagnoses the configured settings on the
+    reduced camera with the [diagnostics] grid, phase method and bounds: the same warnings
+    as diagnose + check called directly (the base lobe in a 1 deg cone: energy fraction).
+    Guards against the configured phase method being ignored (it was, before issue 9)."""
+    from pmdsim.studies import diagnostics as dg
+
+    cfg = make_config(sampling={"n_rays": 16, "theta_max_deg": 1.0},
+                      diagnostics={"grid": [4, 3], "phase_method": "delta"})
+    res = convergence_study(cfg, n_values=(16,), estimators=("radiometric",),
+                            camera_size=(16, 12))
+    small = reduced_config(cfg, (16, 12))
+    sim = Simulation(Scene.from_config(small))
+    diag = dg.diagnose(sim, (50.0,), ("x", "y"), grid=(4, 3), phase_method="delta")
+    expected = dg.check(diag, bounds=small.diagnostics)
+    assert [w.code for w in res.warnings] == [w.code for w in expected]
+    assert "energy_fraction" in [w.code for w in res.warnings]
+    assert res.diagnostics["energy"] == pytest.approx(diag.summary["energy"])
+    assert res.diagnostics["phase_se_method"] == "delta"
+    for key, val in diag.summary["phase_se_rad"].items():
+        assert res.diagnostics["phase_se_rad"][key] == pytest.approx(val)
