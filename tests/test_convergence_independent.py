@@ -266,3 +266,22 @@ def test_study_checks_the_configured_settings_by_default():
     assert res.diagnostics["phase_se_method"] == "delta"
     for key, val in diag.summary["phase_se_rad"].items():
         assert res.diagnostics["phase_se_rad"][key] == pytest.approx(val)
+
+
+def test_cli_help_states_the_study_defaults():
+    """``pmdsim converge --help`` names the default sweeps and camera; they must be the ones
+    the study uses (guards against a default changed without its documentation)."""
+    import inspect
+    import re
+
+    from pmdsim import cli
+    from pmdsim.studies.convergence import DEFAULT_N, DEFAULT_THETA_DEG
+
+    p = inspect.signature(cli.converge).parameters
+    n_help = re.search(r"default ([\d,.]+)", p["n_values"].default.help).group(1)
+    th_help = re.search(r"default ([\d,.]+)", p["theta"].default.help).group(1)
+    assert tuple(int(x) for x in n_help.split(",")) == DEFAULT_N
+    assert tuple(float(x) for x in th_help.split(",")) == DEFAULT_THETA_DEG
+    w, h = (int(x) for x in p["camera"].default.default.split("x"))
+    assert (w, h) == inspect.signature(convergence_study).parameters["camera_size"].default
+    assert (w, h) == inspect.signature(reduced_config).parameters["camera_size"].default

@@ -385,3 +385,52 @@ def test_rendered_dot_moments_follow_the_lobe():
     assert abs(math.cos(m.angle)) < 0.02                       # major axis along the rows
     expected_centroid = np.array([c, r]) + ji @ np.array([u0 - u[r, c], v0 - v[r, c]])
     assert m.centroid == pytest.approx(tuple(expected_centroid), abs=0.1)
+
+
+def test_moment_angle_range_over_all_orientations():
+    """Spots at orientations every 7.5 deg round the half circle: the angle is reported in
+    (-90, 90] deg and equals the true orientation modulo 180 deg (guards against the range
+    folding done with the wrong bound or sign; eigenvector signs are arbitrary, so both
+    branches are exercised)."""
+    for deg in np.arange(-172.5, 180.0, 7.5):
+        img = ns.gaussian_spot((41, 41), (20.2, 19.7), 5.0, 2.0, math.radians(deg))
+        m = image_moments(img)
+        assert -math.pi / 2 < m.angle <= math.pi / 2
+        diff = (math.degrees(m.angle) - deg) % 180.0
+        assert min(diff, 180.0 - diff) < 0.01, deg
+
+
+def test_chain_flag_counts_finest_width_and_coarse_width_rounding():
+    """statistics(): decode flags of the considered pixels counted per flag, the finest width
+    is the smallest; the error message's suggested width rounds up to two significant digits
+    (57 -> 57, 200 -> 200, 1234 -> 1300, 12345 -> 13000). Guards against '&' / '|' on flag
+    bits, max instead of min, a step of 10 x digits instead of 10^digits."""
+    _, _, _, _, _, _, res = _chain_case()
+    s = chain.statistics(res, "case")
+    counts = s["directions"]["x"]["pixels"]["decode_flags_of_considered"]
+    assert counts["ORDER_RESIDUAL"] == 1 and counts["NAN_INPUT"] == 0
+    assert counts["LOW_AMPLITUDE"] == 0 and counts["OUT_OF_RANGE"] == 0
+    assert s["finest_width_px"] == 24.0 and s["widths_px"] == [24.0, 192.0]
+    assert [chain._coarse_width(x) for x in (57, 200, 1234, 12345)] == [57, 200, 1300, 13000]
+
+
+def test_dot_table_of_a_dark_image():
+    """A dot image with no light (zeros, or NaN where nothing was traced): threshold 0,
+    total 0, NaN moments; never a negative threshold."""
+    from pmdsim.patterns import Dot
+
+    imgs = np.stack([np.zeros((5, 6)), np.full((5, 6), np.nan), -np.ones((5, 6))])
+    rows = chain.dot_table(imgs, [Dot(1.0, 2.0, 3.0)] * 3)
+    for r in rows:
+        assert r["threshold"] == 0.0 and r["total"] == 0.0 and math.isnan(r["sigma_major_px"])
+
+
+def test_library_defaults_match_the_configuration_defaults():
+    """A library call behaves like a configured run by default: compare_direction's
+    min_modulation_ratio is DecodeConfig's. Guards against a default changed in one place."""
+    import inspect
+
+    from pmdsim.config import DecodeConfig
+
+    sig = inspect.signature(compare_direction)
+    assert sig.parameters["min_modulation_ratio"].default == DecodeConfig().min_modulation_ratio

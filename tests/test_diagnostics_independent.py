@@ -477,3 +477,25 @@ def test_incidence_by_hand_and_two_seeds_are_enough():
     assert np.isfinite(dg.phase_error_seeds(sim, grid, n_seeds=2)).all()
     with pytest.raises(ValueError, match="n_seeds"):
         dg.phase_error_seeds(sim, grid, n_seeds=1)
+
+
+def test_library_defaults_match_the_configuration_defaults():
+    """check()'s bounds and diagnose()'s grid, phase method and energy target default to
+    DiagnosticsConfig's, so a library call warns like a configured run (and the energy
+    warning can name the cone: it needs diagnose's target = check's bound). Guards against
+    a default changed in one place only."""
+    import inspect
+
+    from pmdsim.config import DiagnosticsConfig
+
+    c = DiagnosticsConfig()
+    p = inspect.signature(dg.check).parameters
+    assert p["min_energy_fraction"].default == c.min_energy_fraction
+    assert p["max_phase_error_mrad"].default == c.max_phase_error_mrad
+    assert p["min_ess_fraction"].default == c.min_ess_fraction
+    p = inspect.signature(dg.diagnose).parameters
+    assert tuple(p["grid"].default) == tuple(c.grid)
+    assert p["phase_method"].default == c.phase_method
+    assert p["target_fraction"].default == c.min_energy_fraction
+    assert inspect.signature(dg.energy_fraction).parameters["target"].default == c.min_energy_fraction
+    assert inspect.signature(dg.lobe_energy).parameters["target"].default == c.min_energy_fraction

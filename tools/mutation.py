@@ -58,9 +58,21 @@ SRC = ROOT / "src"
 TARGETS = {
     "measure/deviation.py": ["tests/test_deviation_independent.py", "tests/test_analysis.py"],
     "measure/chain.py": ["tests/test_deviation_independent.py",
-                         "tests/test_geometry_independent.py"],
-    "studies/diagnostics.py": ["tests/test_diagnostics_independent.py"],
-    "studies/convergence.py": ["tests/test_convergence_independent.py"],
+                         "tests/test_geometry_independent.py",
+                         "tests/test_chain.py::test_decode_problem_names_the_widths_and_the_fix"],
+    "studies/diagnostics.py": [
+        "tests/test_diagnostics_independent.py",
+        *(f"tests/test_converge.py::{t}" for t in (
+            "test_energy_fraction_matches_dense_quadrature",
+            "test_fig3_lobe_holds_about_a_third_inside_one_degree",
+            "test_energy_fraction_limits_and_monotone", "test_effective_sample_size_formula",
+            "test_delta_method_matches_iid_replications", "test_phase_error_seeds",
+            "test_full_map_is_bilinear_and_fills_missing_nodes",
+            "test_diagnose_and_check_name_the_fixing_setting",
+            "test_check_reports_washed_out_fringes", "test_mirror_has_nothing_to_diagnose"))],
+    "studies/convergence.py": ["tests/test_convergence_independent.py",
+                               "tests/test_converge.py::test_reduced_config_keeps_the_field_of_view",
+                               "tests/test_converge.py::test_run_convergence_rejects_bad_input"],
     "measure/decode.py": ["tests/test_decode_independent.py", "tests/test_decode.py"],
 }
 
