@@ -58,6 +58,20 @@ __all__ = [
 ]
 
 
+def _lstsq(a, b):
+    """Least squares via the normal equations (Cholesky): our design matrices are tall and
+    well conditioned (orthogonal bases, scaled coordinates), and LAPACK's QR/SVD drivers
+    are needlessly slow on tall matrices with threaded BLAS. Falls back to lstsq when the
+    normal matrix is not positive definite."""
+    import scipy.linalg
+
+    ata = a.T @ a
+    try:
+        return scipy.linalg.solve(ata, a.T @ b, assume_a="pos")
+    except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
+        return np.linalg.lstsq(a, b, rcond=None)[0]
+
+
 # --------------------------------------------------------------------------------- grid
 def grid_coordinates(shape, spacing, origin_mm=None):
     """(x, y) coordinate arrays (H, W) in mm of the grid convention above.
@@ -440,7 +454,7 @@ def modal_fit(slope_x, slope_y, spacing, mask=None, *, basis="zernike", n_terms=
         gy[:, k] = b / scale[1]
     a = np.vstack([gx[:, 1:], gy[:, 1:]])
     rhs = np.concatenate([sx[m], sy[m]])
-    coef, *_ = np.linalg.lstsq(a, rhs, rcond=None)
+    coef = _lstsq(a, rhs)
     coef = np.concatenate([[0.0], coef])
     res = a @ coef[1:] - rhs
     # height on the grid; piston chosen so the fitted terms have zero mean on the aperture
@@ -505,9 +519,13 @@ def remove_terms(height, mask, x, y, terms="piston", _components=False):
             means = ndimage.mean(np.where(m, h, 0.0), lab, index=np.arange(1, n + 1))
             out[m] = h[m] - np.asarray(means)[lab[m] - 1]
             return out
-    cols = _term_columns(names, np.asarray(x, np.float64)[m], np.asarray(y, np.float64)[m])
+    xm, ym = np.asarray(x, np.float64)[m], np.asarray(y, np.float64)[m]
+    xc, yc = xm.mean(), ym.mean()
+    scale = max(np.abs(xm - xc).max(), np.abs(ym - yc).max(), 1e-300)
+    # centred, scaled coordinates keep the normal equations well conditioned (same span)
+    cols = _term_columns(names, (xm - xc) / scale, (ym - yc) / scale)
     a = np.stack(cols, axis=1)
-    coef, *_ = np.linalg.lstsq(a, h[m], rcond=None)
+    coef = _lstsq(a, h[m])
     out[m] = h[m] - a @ coef
     return out
 

@@ -7,7 +7,10 @@ import json
 import time
 from pathlib import Path
 
+from dataclasses import replace
+
 from ..config import RunConfig
+from ..scene.sensor import Sensor, capture_dn
 from ..measure import chain
 from ..render import Geometry, Simulation
 from . import files as pio
@@ -51,12 +54,21 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         images = sim.render_images(levels, progress=steps.tiles())
         steps.finish_render(base, n_tiles)
     timings["render"] = time.perf_counter() - t
+    sensor = Sensor.from_config(cfg.sensor)
+    if sensor.enabled:  # what the camera writes: digital numbers (docs/system.md)
+        if fringes is not None:
+            fringes = replace(fringes, images=capture_dn(sensor, fringes.images, 0))
+        if dot_images is not None:
+            dot_images = capture_dn(sensor, dot_images, 2)
+        if images is not None:
+            images = capture_dn(sensor, images, 3)
 
     t = time.perf_counter()
     out = cfg.output
     stacks = [a for a in (None if fringes is None else fringes.images, dot_images, images)
               if a is not None]
-    exposure = pio.exposure_factor(stacks, out.bit_depth)
+    exposure = (pio.exposure_factor(stacks, out.bit_depth) if not sensor.enabled
+                else 2.0 ** min(0, out.bit_depth - sensor.bit_depth))
     image_paths = pio.write_images(folder, cfg, fringes, dots, dot_images, image_files, images,
                                 exposure) if out.write_images else []
     steps.advance()
@@ -68,9 +80,12 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     stats: dict = {}
     if reference is not None and fringes is not None:
         measured = chain.compare(
-            chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode),
+            chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
+                                 sensor.saturation_dn if sensor.enabled else None),
             reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
-            cfg.decode, len(fringes.shifts))
+            cfg.decode, len(fringes.shifts),
+            slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
+                reference.points_mm, sim.scene.camera.position, sim.scene.monitor))
         stats = chain.statistics(measured, cfg.name)
         ds = assign_to_dataset(ds, measured, stats)
         del measured
