@@ -342,6 +342,20 @@ def test_check_boundaries_are_strict():
     assert dg.check(_diag(se, energy=e, **kw), min_energy_fraction=0.375) == []
     mod = np.full((1, 1, 3, 7), 0.2)          # ESS 100: floor 2 / 10 = 0.2 exactly
     assert dg.check(_diag(se * 0.1, ess=np.full((3, 7), 100.0), modulation=mod, **kw)) == []
+    # the default smallest measurable modulation is 5 %: 6 % with a low noise floor is fine
+    mod = np.full((1, 1, 3, 7), 0.06)
+    assert dg.check(_diag(se * 0.1, ess=np.full((3, 7), 1e4), modulation=mod, **kw)) == []
+    assert [w.code for w in dg.check(_diag(se * 0.1, ess=np.full((3, 7), 1e4), modulation=mod,
+                                           **kw), min_modulation=0.07)] == ["washed_out"]
+
+
+def test_ess_over_the_last_axis_of_any_shape():
+    """(sum w)^2 / sum w^2 over the last axis for a (2, 3, 4) array, by loops."""
+    w = np.random.default_rng(3).uniform(0.0, 1.0, (2, 3, 4))
+    ess = dg.ess_from_weights(w)
+    for a in range(2):
+        for b in range(3):
+            assert ess[a, b] == pytest.approx(sum(w[a, b]) ** 2 / sum(w[a, b] ** 2), rel=1e-12)
 
 
 def test_energy_summary_statistics():

@@ -77,7 +77,39 @@ TARGETS = {
 }
 
 #: Mutants that cannot change behaviour, by key (see :func:`Mutant.key`), with the reason.
-EQUIVALENT: dict[str, str] = {}
+#: (``python tools/mutation.py --list --keys MODULE`` prints the keys.)
+EQUIVALENT: dict[str, str] = {
+    "studies/diagnostics.py:ess_from_weights:Gt->GtE:s2 > 0#0":
+        "weights are >= 0: sum w^2 = 0 only if sum w = 0, and 0/0 is the NaN the where gives",
+    "studies/diagnostics.py:phase_error_from_rays:Gt->GtE:wsum > 0#0":
+        "wsum = 0 means every weight is 0, so |zbar| n / wsum is 0/0 = NaN as well",
+    "studies/diagnostics.py:lobe_energy:LtE->Lt:ang <= th#0":
+        "an angle exactly equal to the cone half angle has probability zero",
+    "studies/diagnostics.py:lobe_energy:Sub->Add:n_samples - 1#0":
+        "the cumulative fraction ends at 1, so (cum < target).sum() <= n - 1 for target <= 1: "
+        "the min() never binds",
+    "studies/diagnostics.py:incidence:Gt->GtE:dot(i, normal) > 0#0":
+        "exactly grazing vision rays (i.n = 0 to the last bit) do not occur",
+    "studies/diagnostics.py:check:float 1.0->2.0:1.0#1":
+        "worst starts at -1 or -2: below every standard error (>= 0) either way",
+    "studies/diagnostics.py:check:float 1.0->2.0:1.0#2":
+        "'else 1.0' runs only with rays None and phase_se set, which diagnose never makes "
+        "(rays is None only for the mirror, whose phase_se is None)",
+    "studies/diagnostics.py:check:float 0.0->1.0:0.0#0":
+        "'else 0.0' runs only with rays None and phase_se set, which diagnose never makes",
+    "studies/diagnostics.py:check:float 1.0->2.0:1.0#3":
+        "ESS >= 1 for any bundle with weight, so the floor 2/sqrt(max(ESS, 1 or 2)) >= 1.41 "
+        "exceeds every modulation (<= 1) when ESS < 2 either way",
+    "studies/diagnostics.py:check:Gt->GtE:p95 > worst#0":
+        "only ties change: the same worst error and suggested N, the message names the other "
+        "of two equally bad fringes",
+    "measure/deviation.py:image_moments:Gt->GtE:minor > 0#0":
+        "major / 0.0 on float64 is inf, the value of the else branch",
+    "measure/chain.py:surface_to_monitor_mm:int 128->129:128#0":
+        "the chunk size of the trace does not change the distances",
+    "measure/chain.py:dot_table:Gt->GtE:peak > 0#0":
+        "peak = 0 gives threshold 0 x 0 = 0, the else value",
+}
 
 #: Call names swapped by the reduction operator (attribute or plain name).
 SWAPS = {"mean": "median", "median": "mean", "min": "max", "max": "min",
@@ -346,6 +378,8 @@ def main(argv=None) -> int:
     ap.add_argument("--tests", nargs="*", help="test files to run instead of the defaults")
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per mutant")
     ap.add_argument("--list", action="store_true", help="list the mutants and exit")
+    ap.add_argument("--keys", action="store_true", help="with --list: print each mutant's key "
+                                                         "(for EQUIVALENT)")
     ap.add_argument("--out", default=str(ROOT / "out" / "mutation" / "report.json"))
     ap.add_argument("--python", default=sys.executable)
     args = ap.parse_args(argv)
@@ -373,6 +407,8 @@ def main(argv=None) -> int:
                 eq = "  [equivalent]" if m.key in EQUIVALENT else ""
                 print(f"  #{m.index:4d} {mod}:{m.line:<5d} {m.operator:<22s} "
                       f"{m.original[:60]!s} -> {m.mutated[:60]!s}{eq}")
+                if args.keys:
+                    print(f"        key: {m.key}")
             continue
         tests = args.tests or TARGETS.get(mod)
         if not tests:
