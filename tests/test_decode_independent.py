@@ -13,7 +13,6 @@ The decoder must reproduce this error phase by phase (1e-9 rad).
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest

@@ -423,6 +423,24 @@ def test_dot_table_of_a_dark_image():
     rows = chain.dot_table(imgs, [Dot(1.0, 2.0, 3.0)] * 3)
     for r in rows:
         assert r["threshold"] == 0.0 and r["total"] == 0.0 and math.isnan(r["sigma_major_px"])
+        assert math.isnan(r["elongation"]) and math.isnan(r["centroid_col"])
+
+
+def test_moments_do_not_depend_on_the_brightness():
+    """A faint spot (total 0.03) has the moments of the same spot 1000 x brighter (guards
+    against an emptiness test that is not 'total <= 0')."""
+    img = ns.gaussian_spot((30, 30), (14.3, 15.1), 3.0, 1.5, 0.4, peak=1e-3)
+    faint, bright = image_moments(img), image_moments(img * 1e3)
+    assert faint.total < 0.05
+    assert faint.sigma_major == pytest.approx(bright.sigma_major, rel=1e-12)
+    assert faint.centroid == pytest.approx(bright.centroid, rel=1e-12)
+
+
+def test_nothing_considered_means_nothing_valid():
+    """No pixel could be measured (``considered`` empty): valid_fraction 0 and no masked
+    count, whatever ``valid`` says (guards against dividing by an empty count)."""
+    s = deviation_stats(np.ones((2, 2)), np.ones((2, 2), bool), np.zeros((2, 2), bool))
+    assert s.valid_fraction == 0.0 and s.n_masked == 0
 
 
 def test_library_defaults_match_the_configuration_defaults():

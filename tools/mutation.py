@@ -42,7 +42,6 @@ import ast
 import json
 import os
 import random
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -103,6 +102,8 @@ EQUIVALENT: dict[str, str] = {
     "studies/diagnostics.py:check:Gt->GtE:p95 > worst#0":
         "only ties change: the same worst error and suggested N, the message names the other "
         "of two equally bad fringes",
+    "measure/deviation.py:image_moments:Gt->GtE:img > threshold#0":
+        "a pixel exactly at the threshold weighs img - threshold = 0 either way",
     "measure/deviation.py:image_moments:Gt->GtE:minor > 0#0":
         "major / 0.0 on float64 is inf, the value of the else branch",
     "measure/chain.py:surface_to_monitor_mm:int 128->129:128#0":
@@ -382,14 +383,21 @@ def main(argv=None) -> int:
                                                          "(for EQUIVALENT)")
     ap.add_argument("--out", default=str(ROOT / "out" / "mutation" / "report.json"))
     ap.add_argument("--python", default=sys.executable)
+    ap.add_argument("--summary", metavar="REPORT", help="print the summary of a (partial) "
+                                                        "report.json and exit")
     args = ap.parse_args(argv)
     modules = args.modules or list(TARGETS)
     for mod in modules:
         if not (SRC / "pmdsim" / mod).is_file():
             ap.error(f"no module src/pmdsim/{mod}")
 
+    if args.summary:
+        summarize(json.loads(Path(args.summary).read_text()))
+        return 0
+    out = Path(args.out)
     if not args.list:
         check_isolation(args.python)
+        out.parent.mkdir(parents=True, exist_ok=True)
     report = {"modules": {}, "settings": {k: v for k, v in vars(args).items()
                                           if k not in ("list",)}}
     for mod in modules:
@@ -423,10 +431,17 @@ def main(argv=None) -> int:
             flag = {"killed": "killed  ", "survived": "SURVIVED", "timeout": "timeout "}[res["status"]]
             print(f"  {flag} #{m.index:4d} line {m.line:<5d} {m.operator:<22s} "
                   f"{m.original[:50]} -> {m.mutated[:50]}  ({res['seconds']:.0f} s)", flush=True)
-        report["modules"][mod] = {"n_mutants": len(mutants), "results": results}
+            report["modules"][mod] = {"n_mutants": len(mutants), "results": results}
+            out.write_text(json.dumps(report, indent=1, default=str))   # partial results
 
     if args.list:
         return 0
+    summarize(report)
+    return 0
+
+
+def summarize(report: dict) -> None:
+    """Print the kill rate per module and the survivors of a (possibly partial) report."""
     print("\nmodule                      run  equiv  killed  survived  timeout  kill rate")
     for mod, r in report["modules"].items():
         res = r["results"]
@@ -444,11 +459,12 @@ def main(argv=None) -> int:
             if x["status"] == "survived" and not x["equivalent"]:
                 print(f"  {mod}:{x['line']} [{x['function']}] {x['operator']}: "
                       f"{x['original']} -> {x['mutated']}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(report, indent=1, default=str))
-    print(f"\nreport: {out}")
-    return 0
+    print("\nequivalent (not counted):")
+    for mod, r in report["modules"].items():
+        for x in r["results"]:
+            if x["equivalent"]:
+                print(f"  {mod}:{x['line']} {x['original']} -> {x['mutated']} "
+                      f"({x['status']}): {x['equivalent']}")
 
 
 if __name__ == "__main__":
