@@ -193,3 +193,45 @@ def test_radiometric_beckmann_weights_with_smith_below_one():
         g1i_max = max(g1i_max, g1i)
     assert n_hit > 60
     assert g1i_max < 0.9                                 # Smith really matters for i
+
+
+# =========================================================================== slopes
+@pytest.mark.parametrize("theta_i", [25.0, 50.0])
+def test_slope_conversion_follows_the_plane_of_incidence_closed_form(theta_i):
+    """A surface tilt delta turns the reflected ray by 2 delta in the plane of incidence and
+    by 2 delta cos(theta_i) across it; on a monitor at distance d facing the ray a
+    coordinate deviation c (mm) is therefore a slope c / (2 d) in the plane and
+    c / (2 d cos(theta_i)) across (PHYSICS.md). chain.slope_deviation_urad (3-D) against
+    that, for 0.2 monitor px of 0.1 mm at d = 500 mm (within 1e-3), and the small-angle path
+    (no slope geometry) against c / (2 d) exactly. Guards against the across-plane cos
+    missing, u/v swapped, a wrong sign or unit (urad)."""
+    t = math.radians(theta_i)
+    d = 500.0
+    cfg = parse_config({
+        "camera": {"resolution": [1, 1], "focal_length_px": 1000.0,
+                   "position_mm": [0.0, -2000 * math.sin(t), 2000 * math.cos(t)],
+                   "look_at_mm": [0, 0, 0], "up": [0, 1, 0]},
+        "monitor": {"resolution": [801, 801], "pixel_pitch_mm": 0.1,
+                    "centre_mm": [0.0, d * math.sin(t), d * math.cos(t)],
+                    "look_at_mm": [0, 0, 0], "up": [0, 1, 0], "pixel_model": "continuous"},
+        "surface": {"type": "flat", "size_mm": [100.0, 100.0]},
+        "brdf": {"model": "mirror"},
+    })
+    sim = Simulation.from_config(cfg)
+    geo = sim.geometry()
+    assert geo.monitor_mask[0, 0]
+    prim = naive.primary(cfg)
+    sg = chain.SlopeGeometry(prim["point"], np.asarray(cfg.camera.position_mm, np.float64),
+                             sim.scene.monitor)
+    dist = np.array([[d]])
+    c_px = np.array([[0.2]])
+    c_mm = 0.2 * 0.1
+    # the monitor's v axis lies in the plane of incidence (y-z), u across it
+    along = chain.slope_deviation_urad("y", c_px, geo, sg, dist, 0.1)[0, 0]
+    across = chain.slope_deviation_urad("x", c_px, geo, sg, dist, 0.1)[0, 0]
+    # same sign as the small-angle path (a positive coordinate deviation, a positive slope)
+    assert along == pytest.approx(c_mm / (2 * d) * 1e6, rel=1e-3)
+    assert across == pytest.approx(c_mm / (2 * d * math.cos(t)) * 1e6, rel=1e-3)
+    small = chain.slope_deviation_urad("x", c_px, geo, None, dist, 0.1)[0, 0]
+    assert small == pytest.approx(c_mm / (2 * d) * 1e6, rel=1e-12)
+    assert np.isnan(chain.slope_deviation_urad("x", np.array([[np.nan]]), geo, sg, dist, 0.1)[0, 0])

@@ -58,7 +58,8 @@ TARGETS = {
     "measure/deviation.py": ["tests/test_deviation_independent.py", "tests/test_analysis.py"],
     "measure/chain.py": ["tests/test_deviation_independent.py",
                          "tests/test_geometry_independent.py",
-                         "tests/test_chain.py::test_decode_problem_names_the_widths_and_the_fix"],
+                         "tests/test_chain.py::test_decode_problem_names_the_widths_and_the_fix",
+                         "tests/test_chain.py::test_scattering_that_breaks_the_finest_fringes_is_flagged_not_hidden"],
     "studies/diagnostics.py": [
         "tests/test_diagnostics_independent.py",
         *(f"tests/test_converge.py::{t}" for t in (
