@@ -618,6 +618,13 @@ class OutputConfig(_Model):
     bit_depth: Literal[8, 16] = 16
     write_images: bool = True
     figures: bool = True
+    figure_set: Literal["summary", "all"] = Field(
+        "summary", description="summary: setup.png and overview.png (without decoding: "
+        "setup, fringes, modulation); all: every figure (pmdsim report RUN --all draws them "
+        "later from the run folder)")
+    figure_workers: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="processes drawing the figures; default: one per core when there "
+        "are 4 figures or more, else drawn in the run's own process")
 
 
 class ReconstructConfig(_Model):

@@ -133,22 +133,16 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     figure_paths: list[Path] = []
     t = time.perf_counter()
     if figures:
-        from ..report import scene as plot  # matplotlib only when figures are made
+        from .figures import draw_figures, figure_names
 
-        figure_paths = plot.run_figures(sim, ds, folder / "figures")
-        if stats or (dot_table and standalone):
+        figure_paths = draw_figures(folder, figure_names(ds, out.figure_set), cfg.name,
+                                    description(cfg), ds=ds, sim=sim,
+                                    workers=out.figure_workers)
+        if dot_table and standalone:
             from ..report import chain as plot_chain
 
-            if stats:
-                figure_paths += plot_chain.chain_figures(ds, folder / "figures", cfg.name,
-                                                         description(cfg))
-                from ..report.reconstruction import reconstruction_figures
-
-                figure_paths += reconstruction_figures(ds, folder / "figures", cfg.name,
-                                                       description(cfg))
-            if dot_table and standalone:
-                figure_paths += plot_chain.dot_figures(folder / "figures", {cfg.name: dot_images},
-                                             {cfg.name: dot_table}, sim, {})
+            figure_paths += plot_chain.dot_figures(folder / "figures", {cfg.name: dot_images},
+                                                   {cfg.name: dot_table}, sim, {})
         steps.advance()
     timings["figures"] = time.perf_counter() - t
 
