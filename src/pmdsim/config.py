@@ -627,6 +627,24 @@ class OutputConfig(_Model):
         "are 4 figures or more, else drawn in the run's own process")
 
 
+class ReconstructConfig(_Model):
+    """Monocular reconstruction of the surface from the decoded monitor coordinates of both
+    fringe directions (docs/reconstruction.md), with the configured surface as the nominal
+    shape; height and slope errors against the configured (true) surface.
+
+    ``enabled``: None = whenever the chain decodes both directions x and y; ``spacing_mm``:
+    the surface grid; ``remove``: terms removed before the height statistics (``piston``,
+    ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism);
+    ``order``: 2 = classic Southwell, 4 = higher-order; ``anchor``: where the height is
+    tied to the nominal shape (the aperture centre, or the mean over the aperture)."""
+
+    enabled: bool | None = None
+    spacing_mm: PositiveFloat = 0.5
+    remove: Literal["none", "piston", "tilt", "power", "astigmatism"] = "piston"
+    order: Literal[2, 4] = 4
+    anchor: Literal["centre", "mean"] = "centre"
+
+
 class DecodeConfig(_Model):
     """The measurement chain of ``pmdsim simulate``: decode the fringe images (phase
     shifting + temporal unwrapping, :mod:`pmdsim.decode`) of the surface and of its ideal
@@ -838,6 +856,7 @@ class RunConfig(_Model):
     compute: ComputeConfig = ComputeConfig()
     output: OutputConfig = OutputConfig()
     decode: DecodeConfig = DecodeConfig()
+    reconstruct: ReconstructConfig = ReconstructConfig()
     diagnostics: DiagnosticsConfig = DiagnosticsConfig()
     sensor: SensorConfig = SensorConfig()
     variants: tuple[VariantConfig, ...] = ()

@@ -20,7 +20,8 @@ from pathlib import Path
 from .dataset import DATASET_NAME
 
 #: Every per-run figure: name -> (file, needs) with needs "fringes" (fringe images in the
-#: dataset) or "chain" (the measurement chain's variables) or None.
+#: dataset), "chain" (the measurement chain's variables), "reconstruction" (slope and
+#: height error maps of ``[reconstruct]``) or None.
 FIGURES = {
     "setup": ("setup.png", None),
     "fringes": ("fringes.png", "fringes"),
@@ -31,8 +32,9 @@ FIGURES = {
     "histograms": ("histograms.png", "chain"),
     "modulation_ratio": ("modulation_ratio.png", "chain"),
     "masks": ("masks.png", "chain"),
+    "surface_errors": ("surface_errors.png", "reconstruction"),
 }
-SUMMARY_DECODED = ("setup", "overview")
+SUMMARY_DECODED = ("setup", "overview", "surface_errors")
 SUMMARY = ("setup", "fringes", "modulation")
 
 
@@ -41,6 +43,8 @@ def _has(ds, needs: str | None) -> bool:
         return True
     if needs == "fringes":
         return "fringes" in ds
+    if needs == "reconstruction":
+        return "height_error_nm" in ds
     return "phase_deviation" in ds
 
 
@@ -81,6 +85,11 @@ def draw_one(ds, name: str, folder: Path, run_name: str, description: str = "",
         return plot.plot_modulation(ds, path)
     if name == "overview":
         return plot_chain.plot_overview(ds, path, run_name, description)
+    if name == "surface_errors":
+        from ..report.reconstruction import plot_surface_errors
+        from ..report.scene import _save
+
+        return _save(plot_surface_errors(ds, run_name, description), path)
     fn = {"phase": plot_chain.plot_phase, "deviation": plot_chain.plot_deviation,
           "histograms": plot_chain.plot_histograms,
           "modulation_ratio": plot_chain.plot_modulation_ratio,

@@ -87,6 +87,17 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
             slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
                 reference.points_mm, sim.scene.camera.position, sim.scene.monitor))
         stats = chain.statistics(measured, cfg.name)
+        from . import reconstruction as recon
+
+        if recon.wanted(cfg, measured.directions):
+            rvars, rstats = recon.from_chain(cfg, sim.scene, measured, reference.reconstruction)
+            stats.update(rstats)
+            for name in ("surface_x_mm", "surface_y_mm"):
+                if name in rvars:
+                    dims, data, attrs = rvars.pop(name)
+                    ds = ds.assign_coords({dims[0]: (dims, data, attrs)})
+            for name, var in rvars.items():
+                ds[name] = var
         ds = assign_to_dataset(ds, measured, stats)
         del measured
     dot_table = []
