@@ -230,7 +230,7 @@ def test_bad_sweeps_are_refused_at_their_bounds():
     Guards against '<' / '<=' / '>=' slips on the bounds (N = 1 and 89.9 deg are fine)."""
     cfg = make_config()
     for kw, field in (({"n_values": (0,)}, "n_values"), ({"theta_values": (0.0,)}, "theta"),
-                      ({"theta_values": (90.0,)}, "theta"), ({"estimators": ()}, "estimator")):
+                      ({"theta_values": (1.0, 90.0)}, "theta"), ({"estimators": ()}, "estimator")):
         with pytest.raises(ValueError, match=field):
             convergence_study(cfg, camera_size=(4, 4), diagnostics=False, **kw)
     res = convergence_study(cfg, n_values=(1,), theta_values=(89.9,), estimators=("paper",),

@@ -393,6 +393,10 @@ def test_full_map_on_a_line_and_beyond_the_nodes():
     g = dg.PixelGrid(np.array([0, 4, 9, 11]), np.array([7]), (12, 21))
     full = dg.full_map(np.array([[1.0], [2.0], [3.0], [4.0]]), g)
     np.testing.assert_array_equal(full[:, 0], [1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 4])  # ties: first
+    stacked = dg.full_map(np.stack([np.array([[1.0, 2.0, 3.0]]), np.array([[4.0, 5.0, 6.0]])]),
+                          dg.PixelGrid(np.array([5]), np.array([0, 10, 20]), (12, 21)))
+    assert stacked.shape == (2, 12, 21)                       # leading axes kept
+    np.testing.assert_array_equal(stacked[1] - stacked[0], 3.0)
     g = dg.PixelGrid(np.array([5, 10]), np.array([5, 15]), (20, 20))
     rr, cc = np.meshgrid(g.rows, g.cols, indexing="ij")
     full = dg.full_map(3.0 * rr - 2.0 * cc + 1.0, g)
