@@ -133,6 +133,8 @@ EQUIVALENT: dict[str, str] = {
         _AXIS,
     "studies/diagnostics.py:ray_phases:drop-USub:-1#0":
         _AXIS,
+    "studies/convergence.py:reduced_config:float 1.0->2.0:1.0#0":
+        "any scale >= 1 returns the configuration unchanged, so a cap above 1 is never used",
     "measure/deviation.py:image_moments:Gt->GtE:img > threshold#0":
         "a pixel exactly at the threshold weighs img - threshold = 0 either way",
     "measure/deviation.py:image_moments:Gt->GtE:minor > 0#0":
