@@ -281,7 +281,7 @@ def tiny_run_dict(**changes):
     from test_pipeline import tiny_config_dict
 
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
-    d["output"] = {"figures": True}
+    d["output"] = {"figures": True, "figure_set": "all", "figure_workers": 2}
     d.update(changes)
     return d
 

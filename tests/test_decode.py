@@ -351,7 +351,7 @@ def test_noise_at_monitor_edges_does_not_wrap():
 
 
 def test_valid_is_flags_zero_and_flag_bits():
-    assert [int(f) for f in F] == [1, 2, 4, 8]
+    assert [int(f) for f in F] == [1, 2, 4, 8, 16]
     u = monitor_row()
     frames = sequence(u, [50, 400, 3200], 4)
     frames[0, 0, 0, 0] = np.nan

@@ -51,10 +51,10 @@ def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quant
         ax.barh(y - 0.2, p95, 0.4, color=colours, alpha=0.45, label="P95 |dev|")
         ax.barh(y + 0.2, rms, 0.4, color=colours, label="RMS")
         for yi, (a, b) in enumerate(zip(rms, p95)):
-            if math.isfinite(b):
-                ax.text(b, yi - 0.2, f" {b:.3g}", va="center", fontsize=7)
-            if math.isfinite(a):
-                ax.text(a, yi + 0.2, f" {a:.3g}", va="center", fontsize=7)
+            for val, off in ((b, -0.2), (a, 0.2)):
+                if math.isfinite(val):
+                    ax.text(val, yi + off, f" {val:.3g}" if abs(val) >= 0.01 else " < 0.01",
+                            va="center", fontsize=7)
         ax.set_xlabel(unit)
         ax.set_title(f"{d.upper()} fringes")
         ax.grid(axis="x", alpha=0.3)

@@ -24,6 +24,7 @@ class Reference:
     seconds: float
     notes: tuple = ()
     points_mm: np.ndarray | None = None  # surface point per pixel, for the 3-D slope conversion
+    reconstruction: object = None  # (Reconstruction, SurfaceErrors) of the reference, or None
 
 
 
@@ -77,4 +78,7 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
                 "'continuous' shows the scattering alone (statistics.json: "
                 "reference_vs_exact_px)")
             break
-    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes), points)
+    from . import reconstruction as recon
+
+    rec = recon.reference_reconstruction(cfg, sim.scene, decoded)
+    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes), points, rec)
