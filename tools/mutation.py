@@ -135,6 +135,9 @@ EQUIVALENT: dict[str, str] = {
         _AXIS,
     "studies/convergence.py:reduced_config:float 1.0->2.0:1.0#0":
         "any scale >= 1 returns the configuration unchanged, so a cap above 1 is never used",
+    "measure/deviation.py:image_moments:LtE->Lt:angle <= -np.pi / 2#0":
+        "an angle of exactly -pi/2 needs the eigenvector (0, -1), which LAPACK does not return "
+        "for the diagonal covariance of an axis-aligned spot (it returns (0, 1))",
     "measure/deviation.py:image_moments:Gt->GtE:img > threshold#0":
         "a pixel exactly at the threshold weighs img - threshold = 0 either way",
     "measure/deviation.py:image_moments:Gt->GtE:minor > 0#0":
