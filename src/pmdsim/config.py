@@ -622,6 +622,31 @@ class OutputConfig(_Model):
     bit_depth: Literal[8, 16] = 16
     write_images: bool = True
     figures: bool = True
+    figure_set: Literal["summary", "all"] = Field(
+        "summary", description="summary: setup.png and overview.png (without decoding: "
+        "setup, fringes, modulation); all: every figure (pmdsim report RUN --all draws them "
+        "later from the run folder)")
+    figure_workers: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="processes drawing the figures; default: one per core when there "
+        "are 4 figures or more, else drawn in the run's own process")
+
+
+class ReconstructConfig(_Model):
+    """Monocular reconstruction of the surface from the decoded monitor coordinates of both
+    fringe directions (docs/reconstruction.md), with the configured surface as the nominal
+    shape; height and slope errors against the configured (true) surface.
+
+    ``enabled``: None = whenever the chain decodes both directions x and y; ``spacing_mm``:
+    the surface grid; ``remove``: terms removed before the height statistics (``piston``,
+    ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism);
+    ``order``: 2 = classic Southwell, 4 = higher-order; ``anchor``: where the height is
+    tied to the nominal shape (the aperture centre, or the mean over the aperture)."""
+
+    enabled: bool | None = None
+    spacing_mm: PositiveFloat = 0.5
+    remove: Literal["none", "piston", "tilt", "power", "astigmatism"] = "piston"
+    order: Literal[2, 4] = 4
+    anchor: Literal["centre", "mean"] = "centre"
 
 
 class DecodeConfig(_Model):
@@ -835,6 +860,7 @@ class RunConfig(_Model):
     compute: ComputeConfig = ComputeConfig()
     output: OutputConfig = OutputConfig()
     decode: DecodeConfig = DecodeConfig()
+    reconstruct: ReconstructConfig = ReconstructConfig()
     diagnostics: DiagnosticsConfig = DiagnosticsConfig()
     sensor: SensorConfig = SensorConfig()
     variants: tuple[VariantConfig, ...] = ()

@@ -83,8 +83,21 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
             chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
                                  sensor.saturation_dn if sensor.enabled else None),
             reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
-            cfg.decode, len(fringes.shifts))
+            cfg.decode, len(fringes.shifts),
+            slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
+                reference.points_mm, sim.scene.camera.position, sim.scene.monitor))
         stats = chain.statistics(measured, cfg.name)
+        from . import reconstruction as recon
+
+        if recon.wanted(cfg, measured.directions):
+            rvars, rstats = recon.from_chain(cfg, sim.scene, measured, reference.reconstruction)
+            stats.update(rstats)
+            for name in ("surface_x_mm", "surface_y_mm"):
+                if name in rvars:
+                    dims, data, attrs = rvars.pop(name)
+                    ds = ds.assign_coords({dims[0]: (dims, data, attrs)})
+            for name, var in rvars.items():
+                ds[name] = var
         ds = assign_to_dataset(ds, measured, stats)
         del measured
     dot_table = []
@@ -120,18 +133,16 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     figure_paths: list[Path] = []
     t = time.perf_counter()
     if figures:
-        from ..report import scene as plot  # matplotlib only when figures are made
+        from .figures import draw_figures, figure_names
 
-        figure_paths = plot.run_figures(sim, ds, folder / "figures")
-        if stats or (dot_table and standalone):
+        figure_paths = draw_figures(folder, figure_names(ds, out.figure_set), cfg.name,
+                                    description(cfg), ds=ds, sim=sim,
+                                    workers=out.figure_workers)
+        if dot_table and standalone:
             from ..report import chain as plot_chain
 
-            if stats:
-                figure_paths += plot_chain.chain_figures(ds, folder / "figures", cfg.name,
-                                                         description(cfg))
-            if dot_table and standalone:
-                figure_paths += plot_chain.dot_figures(folder / "figures", {cfg.name: dot_images},
-                                             {cfg.name: dot_table}, sim, {})
+            figure_paths += plot_chain.dot_figures(folder / "figures", {cfg.name: dot_images},
+                                                   {cfg.name: dot_table}, sim, {})
         steps.advance()
     timings["figures"] = time.perf_counter() - t
 

@@ -23,6 +23,8 @@ class Reference:
     distance_mm: np.ndarray
     seconds: float
     notes: tuple = ()
+    points_mm: np.ndarray | None = None  # surface point per pixel, for the 3-D slope conversion
+    reconstruction: object = None  # (Reconstruction, SurfaceErrors) of the reference, or None
 
 
 
@@ -61,7 +63,8 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
                                    sensor.saturation_dn if sensor.enabled else None)
     del fr
-    distance = chain.surface_to_monitor_mm(sim, geometry)
+    points = np.full(sim.shape + (3,), np.nan)
+    distance = chain.surface_to_monitor_mm(sim, geometry, points_out=points)
     notes = []
     for d, res in decoded.items():
         exact = geometry.specular_u if d == "x" else geometry.specular_v
@@ -75,4 +78,7 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
                 "'continuous' shows the scattering alone (statistics.json: "
                 "reference_vs_exact_px)")
             break
-    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes))
+    from . import reconstruction as recon
+
+    rec = recon.reference_reconstruction(cfg, sim.scene, decoded)
+    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes), points, rec)
