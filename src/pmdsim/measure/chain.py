@@ -92,7 +92,7 @@ def _coarse_width(extent: float) -> int:
 
 
 # ----------------------------------------------------------------------------- decoding
-def decode_fringes(fringes, monitor_resolution, decode_cfg) -> dict:
+def decode_fringes(fringes, monitor_resolution, decode_cfg, saturation_level=None) -> dict:
     """Decode every direction of a :class:`~pmdsim.render.FringeResult`.
 
     Returns ``{direction: DecodeResult}``; frames are ``fringes.images[d]`` (n_widths, K,
@@ -103,7 +103,8 @@ def decode_fringes(fringes, monitor_resolution, decode_cfg) -> dict:
         out[d] = dec.decode_sequence(
             fringes.images[di], fringes.widths, fringes.shifts, extent_px(monitor_resolution, d),
             decode_cfg.method, min_relative_amplitude=decode_cfg.min_relative_amplitude,
-            max_order_residual=decode_cfg.max_order_residual, dtype=np.float32)
+            max_order_residual=decode_cfg.max_order_residual, dtype=np.float32,
+            saturation_level=saturation_level)
     return out
 
 

@@ -56,9 +56,10 @@ def deviation_stats(deviation: np.ndarray, valid: np.ndarray, considered: np.nda
         finite pixels of ``deviation`` or ``valid``.
     """
     deviation = np.asarray(deviation, np.float64)
-    valid = np.asarray(valid, bool) & np.isfinite(deviation)
-    if considered is None:
-        considered = valid | np.isfinite(deviation)
+    given = np.asarray(valid, bool)
+    valid = given & np.isfinite(deviation)
+    if considered is None:  # a pixel marked valid whose deviation is NaN is masked, not hidden
+        considered = given | np.isfinite(deviation)
     considered = np.asarray(considered, bool)
     n_cons = int(considered.sum())
     d = deviation[valid]

@@ -211,7 +211,7 @@ def dataset_variables(chain: ChainResult) -> dict:
             "units": "1", "description": f"fringe modulation B/A of each width, {who}"})
         v[prefix + "decode_flags"] = (D, per(lambda dc: get(dc).flags, np.uint8), {
             "description": f"decode reliability flags, {who}: 1 NAN_INPUT, 2 LOW_AMPLITUDE, "
-                           "4 ORDER_RESIDUAL, 8 OUT_OF_RANGE; 0 = valid"})
+                           "4 ORDER_RESIDUAL, 8 OUT_OF_RANGE, 16 SATURATED; 0 = valid"})
         v[prefix + "order_residual"] = (D, per(lambda dc: get(dc).order_residual, np.float32), {
             "units": "1", "description": f"largest fringe-order residual of the unwrapping, {who}"})
         v[prefix + "monitor_coord_px"] = (D, per(lambda dc: get(dc).monitor_coord_px), {

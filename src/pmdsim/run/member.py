@@ -7,7 +7,10 @@ import json
 import time
 from pathlib import Path
 
+from dataclasses import replace
+
 from ..config import RunConfig
+from ..scene.sensor import Sensor, capture_dn
 from ..measure import chain
 from ..render import Geometry, Simulation
 from . import files as pio
@@ -51,12 +54,21 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         images = sim.render_images(levels, progress=steps.tiles())
         steps.finish_render(base, n_tiles)
     timings["render"] = time.perf_counter() - t
+    sensor = Sensor.from_config(cfg.sensor)
+    if sensor.enabled:  # what the camera writes: digital numbers (docs/system.md)
+        if fringes is not None:
+            fringes = replace(fringes, images=capture_dn(sensor, fringes.images, 0))
+        if dot_images is not None:
+            dot_images = capture_dn(sensor, dot_images, 2)
+        if images is not None:
+            images = capture_dn(sensor, images, 3)
 
     t = time.perf_counter()
     out = cfg.output
     stacks = [a for a in (None if fringes is None else fringes.images, dot_images, images)
               if a is not None]
-    exposure = pio.exposure_factor(stacks, out.bit_depth)
+    exposure = (pio.exposure_factor(stacks, out.bit_depth) if not sensor.enabled
+                else 2.0 ** min(0, out.bit_depth - sensor.bit_depth))
     image_paths = pio.write_images(folder, cfg, fringes, dots, dot_images, image_files, images,
                                 exposure) if out.write_images else []
     steps.advance()
@@ -68,7 +80,8 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     stats: dict = {}
     if reference is not None and fringes is not None:
         measured = chain.compare(
-            chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode),
+            chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
+                                 sensor.saturation_dn if sensor.enabled else None),
             reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
             cfg.decode, len(fringes.shifts),
             slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
@@ -120,22 +133,16 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     figure_paths: list[Path] = []
     t = time.perf_counter()
     if figures:
-        from ..report import scene as plot  # matplotlib only when figures are made
+        from .figures import draw_figures, figure_names
 
-        figure_paths = plot.run_figures(sim, ds, folder / "figures")
-        if stats or (dot_table and standalone):
+        figure_paths = draw_figures(folder, figure_names(ds, out.figure_set), cfg.name,
+                                    description(cfg), ds=ds, sim=sim,
+                                    workers=out.figure_workers)
+        if dot_table and standalone:
             from ..report import chain as plot_chain
 
-            if stats:
-                figure_paths += plot_chain.chain_figures(ds, folder / "figures", cfg.name,
-                                                         description(cfg))
-                from ..report.reconstruction import reconstruction_figures
-
-                figure_paths += reconstruction_figures(ds, folder / "figures", cfg.name,
-                                                       description(cfg))
-            if dot_table and standalone:
-                figure_paths += plot_chain.dot_figures(folder / "figures", {cfg.name: dot_images},
-                                             {cfg.name: dot_table}, sim, {})
+            figure_paths += plot_chain.dot_figures(folder / "figures", {cfg.name: dot_images},
+                                                   {cfg.name: dot_table}, sim, {})
         steps.advance()
     timings["figures"] = time.perf_counter() - t
 
