@@ -82,9 +82,18 @@ def vision_geometry_rows(scene: Scene, row: int):
     """Geometry rows (W * S, G_SIZE) and exact monitor hits (W * S, 2) of the S vision rays
     (sub-pixels x aperture samples, :meth:`pmdsim.scene.Camera.vision_rays`) of every pixel
     of camera row ``row``, pixel-major."""
-    w = scene.camera.width
-    o, d = scene.camera.vision_rays(np.full(w, row), np.arange(w))
-    return _rays_geometry(scene, o.reshape(-1, 3), d.reshape(-1, 3))
+    cam = scene.camera
+    w = cam.width
+    chief, aperture, focus = cam.lens_inputs(np.full(w, row), np.arange(w))
+    n = w * cam.rays_per_pixel
+    geo = np.empty((n, kb.G_SIZE))
+    spec = np.empty((n, 2))
+    kprim.geometry_lens(
+        cam.position, np.ascontiguousarray(cam.rotation), chief, aperture, focus,
+        scene.surface.kernel_params(), scene.anisotropy.kernel_params(),
+        scene.monitor.kernel_params(), geo, spec,
+    )
+    return geo, spec
 
 
 def reduce_subrays(out: np.ndarray, estimator: str) -> np.ndarray:
