@@ -434,6 +434,13 @@ class DiagnosticsConfig(_Model):
     grid: tuple[Annotated[Int, Field(ge=2, le=1000)], Annotated[Int, Field(ge=2, le=1000)]] = Field(
         (24, 20), description="(columns, rows) of the coarse camera-pixel grid of the maps"
     )
+    min_view_fraction: Annotated[Float, Field(ge=0, le=1)] = Field(
+        0.01, description="stop before rendering when fewer camera pixels than this fraction "
+        "see the surface and, by their principal reflection, the monitor (a warning with the "
+        "fraction below 50 %)")
+    max_off_monitor_fraction: Annotated[Float, Field(gt=0, le=1)] = Field(
+        0.05, description="flag (and exclude from the valid pixels) a pixel when more than "
+        "this fraction of its bundle's weight misses the monitor")
     phase_method: Literal["seeds", "delta"] = Field(
         "seeds",
         description="phase standard error from independent sample sets (seeds: measures the "
