@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 
 from conftest import base_dict
-from pmdsim import chain
-from pmdsim import decode as dec
-from pmdsim import pipeline
+from pmdsim.measure import chain
+from pmdsim.measure import decode as dec
+from pmdsim import run as pipeline
 from pmdsim.config import parse_config
 from pmdsim.render import Simulation
 
@@ -397,7 +397,7 @@ def test_dot_moments_table_and_figures(tmp_path):
     assert np.all(np.abs(mirror[seen] - 1) < 0.02)
     assert np.all(ds["dot_elongation"].values[seen] > mirror[seen] + 0.02)
     # Moments agree with analysis.image_moments on the stored image.
-    from pmdsim.analysis import image_moments
+    from pmdsim.measure.deviation import image_moments
 
     q = int(np.flatnonzero(seen)[0])
     img = ds["dots"].values[q]

@@ -21,10 +21,11 @@ import numpy as np
 import pytest
 
 from conftest import make_config
-from pmdsim import diagnostics as dg
+from pmdsim.studies import diagnostics as dg
 from pmdsim.brdf import Beckmann, Ward
 from pmdsim.config import DiagnosticsConfig
-from pmdsim.converge import COLUMNS, reduced_config, run_convergence
+from pmdsim.run.convergence import run_convergence
+from pmdsim.studies.convergence import COLUMNS, reduced_config
 from pmdsim.render import Simulation
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import naive_decode as naive
-from pmdsim import decode as dec
+from pmdsim.measure import decode as dec
 from pmdsim.kernels import decode as kd
 
 EXTENT = 1920

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pmdsim import io as pio
-from pmdsim import pipeline
+from pmdsim.run import files as pio
+from pmdsim import run as pipeline
 from pmdsim.config import RunConfig, parse_config
 from pmdsim.render import Simulation
 
@@ -235,7 +235,9 @@ def test_failing_overwrite_keeps_the_old_run(tmp_path, monkeypatch):
     def boom(*args, **kwargs):
         raise RuntimeError("dataset failed")
 
-    monkeypatch.setattr(pipeline, "build_dataset", boom)
+    from pmdsim.run import member
+
+    monkeypatch.setattr(member, "build_dataset", boom)
     with pytest.raises(RuntimeError):
         pipeline.run_simulation(cfg, out, overwrite=True)
     assert (out / pio.MANIFEST).read_text() == before

@@ -82,8 +82,9 @@ def simulate(
     (diagnostics: warnings, each naming the setting that fixes it; bounds in the
     configuration's diagnostics section)."""
     from .config import ConfigError, load_config
-    from .io import check_output_dir
-    from .pipeline import run_simulation, warning_text
+    from .report.text import warning_text
+    from .run import run_simulation
+    from .run.files import check_output_dir
 
     console = _console()
     try:
@@ -251,7 +252,7 @@ def decode(
     """Decode phase-shifted fringe images (real camera images or a simulation's) to absolute
     phase, monitor coordinate, modulation and reliability flags; writes OUT/decode.zarr,
     statistics.json and PNG maps."""
-    from .decode_files import decode_files, make_setup
+    from .run.decode_run import decode_files, make_setup
 
     console = _console()
     try:
@@ -327,7 +328,8 @@ def converge(
     import math
 
     from .config import ConfigError, load_config
-    from .converge import DEFAULT_N, DEFAULT_THETA_DEG, run_convergence
+    from .run.convergence import run_convergence
+    from .studies.convergence import DEFAULT_N, DEFAULT_THETA_DEG
 
     console = _console()
     try:
@@ -378,7 +380,7 @@ def converge(
 @app.command()
 def version() -> None:
     """Print the pmdsim version."""
-    from . import __version__
+    from ._version import __version__
 
     _console().print(f"pmdsim {__version__}")
 

@@ -420,7 +420,7 @@ class PatternsConfig(_Model):
 
 
 class DiagnosticsConfig(_Model):
-    """Bounds for the convergence warnings of :func:`pmdsim.diagnostics.check`."""
+    """Bounds for the convergence warnings of :func:`pmdsim.studies.diagnostics.check`."""
 
     min_energy_fraction: Annotated[Float, Field(gt=0, le=1)] = Field(
         0.95, description="warn when the cone (theta_max) holds less of the lobe's energy"
@@ -470,7 +470,7 @@ class OutputConfig(_Model):
 class DecodeConfig(_Model):
     """The measurement chain of ``pmdsim simulate``: decode the fringe images (phase
     shifting + temporal unwrapping, :mod:`pmdsim.decode`) of the surface and of its ideal
-    specular reference, and compare them (:mod:`pmdsim.chain`).
+    specular reference, and compare them (:mod:`pmdsim.measure.chain`).
 
     ``enabled``: ``"auto"`` (default) decodes whenever the fringes allow it (K >= 3 shifts,
     widths that fit ``method`` over the monitor extent) and otherwise skips decoding with a

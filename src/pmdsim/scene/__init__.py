@@ -8,7 +8,7 @@ import numpy as np
 
 from ..brdf import BRDF, Mirror, brdf_from_config
 from ..config import RunConfig
-from ..sampling import ConeSampling
+from .sampling import ConeSampling
 from .anisotropy import AnisotropyFrame
 from .camera import Camera
 from .monitor import Monitor

@@ -19,7 +19,7 @@ own colours with their counts (never hidden):
 - :func:`plot_decoded`: maps of a decoded image set (``pmdsim decode``).
 
 All functions draw on Agg :class:`~matplotlib.figure.Figure` objects (no pyplot) and take
-in-memory xarray Datasets with the variables of :func:`pmdsim.chain.assign_to_dataset`.
+in-memory xarray Datasets with the variables of :func:`pmdsim.run.dataset.assign_to_dataset`.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from matplotlib.colors import ListedColormap, to_rgba
 from matplotlib.lines import Line2D
 from matplotlib.patches import Ellipse, Patch
 
-from .plot import DPI, _figure, _save
+from .scene import DPI, _figure, _save
 
 #: Colours of the pixel classes in deviation maps.
 CLASS_COLOURS = {
@@ -486,7 +486,7 @@ def plot_dot_contact_sheet(images: dict, tables: dict, path,
     images : {variant: (n_dots, H, W) ndarray}
         Camera images of the dots.
     tables : {variant: list of dict}
-        :func:`pmdsim.chain.dot_table` of each variant.
+        :func:`pmdsim.measure.chain.dot_table` of each variant.
     """
     descriptions = descriptions or {}
     names = list(images)
@@ -720,4 +720,17 @@ def chain_figures(ds, folder, name: str | None = None, description: str = "") ->
 
 __all__ = ["plot_phase", "plot_deviation", "plot_histograms", "plot_modulation_ratio",
            "plot_masks", "plot_overview", "plot_variant_deviation", "plot_dot_contact_sheet",
-           "plot_dot_shapes", "plot_decoded", "chain_figures", "symmetric_limit", "DPI"]
+           "plot_dot_shapes", "plot_decoded", "chain_figures", "dot_figures", "symmetric_limit", "DPI"]
+
+
+def dot_figures(folder: Path, images: dict, tables: dict, sim, descriptions: dict) -> list[Path]:
+    """The dot contact sheet and the dot shapes figure (``sim`` for the turning centre in
+    camera px, drawn when the anisotropy frame is rotational)."""
+    centre = None
+    an = sim.scene.anisotropy
+    if an.kind == "rotational":
+        centre = tuple(float(x) for x in sim.scene.camera.project(an.centre))
+    return [plot_dot_contact_sheet(images, tables, folder / "dot_contact_sheet.png",
+                                              descriptions),
+            plot_dot_shapes(images, tables, folder / "dot_shapes.png", centre,
+                                       descriptions)]

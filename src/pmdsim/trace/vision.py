@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import dot, normalize, reflect
-from .kernels import bundle as kb
+from ..geometry import dot, normalize, reflect
+from ..kernels import bundle as kb
 
 
 @dataclass(frozen=True)

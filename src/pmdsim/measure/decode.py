@@ -72,14 +72,13 @@ from __future__ import annotations
 
 import enum
 import math
-import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from .kernels import decode as _k
+from ..kernels import decode as _k
+from .images import load_image_stack  # noqa: F401  (pmdsim.decode.load_image_stack)
 
 __all__ = [
     "METHODS",
@@ -88,7 +87,6 @@ __all__ = [
     "PhaseShiftResult",
     "UnwrapResult",
     "decode_sequence",
-    "load_image_stack",
     "monitor_px_to_mm",
     "phase_shift",
     "phase_to_monitor_px",
@@ -756,85 +754,7 @@ def monitor_px_to_mm(coord_px, pixel_pitch_mm: float) -> np.ndarray:
 
 # --------------------------------------------------------------------------- file input
 
-_TIFF_SUFFIXES = (".tif", ".tiff")
-_PNG_SUFFIXES = (".png",)
 
 
-def _read_one(path: Path) -> np.ndarray:
-    """(pages, H, W) array of one file, raw counts."""
-    suffix = path.suffix.lower()
-    if suffix not in _TIFF_SUFFIXES + _PNG_SUFFIXES:
-        raise ValueError(f"paths: {str(path)!r} is neither TIFF (.tif, .tiff) nor PNG (.png)")
-    channels = None
-    try:
-        if suffix in _TIFF_SUFFIXES:
-            import tifffile
-
-            with tifffile.TiffFile(path) as tif:
-                series = tif.series[0]
-                if "S" in series.axes:
-                    channels = f"axes {series.axes!r}, shape {series.shape}"
-                else:
-                    img = np.asarray(series.asarray())
-        else:
-            # Pillow (a matplotlib dependency) keeps the raw 8/16-bit counts, as TIFF does;
-            # matplotlib.image.imread would rescale them to [0, 1].
-            from PIL import Image
-
-            with Image.open(path) as png:
-                if png.mode not in ("L", "I", "I;16", "I;16B", "I;16L", "F"):
-                    channels = f"PNG mode {png.mode!r}"
-                else:
-                    img = np.asarray(png)
-    except Exception as exc:  # a corrupt, truncated or mislabelled file
-        raise ValueError(f"paths: cannot read image file {str(path)!r}: {exc}") from exc
-    if channels is not None or img.ndim < 2 or img.dtype.kind not in "uif":
-        what = channels or f"array shape {img.shape}, dtype {img.dtype}"
-        raise ValueError(
-            f"paths: {str(path)!r} is not a single-channel image ({what}); convert it to "
-            "grayscale"
-        )
-    return img.reshape((-1,) + img.shape[-2:])
 
 
-def load_image_stack(paths: Iterable[str | os.PathLike]) -> np.ndarray:
-    """Read camera images (TIFF or PNG) into one stack.
-
-    Parameters
-    ----------
-    paths : iterable of str or path-like
-        Image files in frame order; ``.tif``/``.tiff`` (read with tifffile; a multi-page file
-        contributes all its pages) or ``.png`` (read with Pillow). Single-channel images only;
-        raw counts are kept (no rescaling).
-
-    Returns
-    -------
-    frames : (frames, H, W) ndarray of float64, counts
-
-    Raises
-    ------
-    FileNotFoundError
-        If a file does not exist (the message names it).
-    ValueError
-        If ``paths`` is empty, a file has an unknown suffix, cannot be read, is not
-        single-channel, or differs in size from the first file (the message names it).
-    """
-    if isinstance(paths, (str, os.PathLike)):
-        paths = [paths]
-    path_list = [Path(p) for p in paths]
-    if not path_list:
-        raise ValueError("paths must name at least one image file")
-    stack = []
-    shape = None
-    for path in path_list:
-        if not path.is_file():
-            raise FileNotFoundError(f"paths: image file {str(path)!r} does not exist")
-        img = _read_one(path)
-        if shape is None:
-            shape = img.shape[1:]
-        elif img.shape[1:] != shape:
-            raise ValueError(
-                f"paths: {str(path)!r} has size {img.shape[1:]} but the first image has {shape}"
-            )
-        stack.append(img.astype(np.float64))
-    return np.concatenate(stack, axis=0)

@@ -27,13 +27,17 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import shutil
 import struct
 import zlib
 from pathlib import Path
+from concurrent.futures import ThreadPoolExecutor
 from typing import Iterable, Iterator
 
 import numpy as np
+
+from ..measure import chain
 
 #: File name of the manifest that marks a complete pmdsim run folder.
 MANIFEST = "pmdsim-run.json"
@@ -250,3 +254,75 @@ def open_dataset(path: str | Path):
     import xarray as xr
 
     return xr.open_zarr(Path(path), consolidated=False)
+
+
+def write_dot_csv(path, table: list[dict]) -> None:
+    """Write :func:`dot_table` rows as CSV (header :data:`DOT_COLUMNS`)."""
+    import csv
+
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(chain.DOT_COLUMNS))
+        w.writeheader()
+        for r in table:
+            w.writerow({k: (f"{r[k]:.6g}" if isinstance(r[k], float) else r[k])
+                        for k in chain.DOT_COLUMNS})
+
+
+def _number_tag(x: float, digits: int = 0) -> str:
+    """``50 -> '0050'`` (digits=4), ``37.5 -> '037p5'``: sortable, filename-safe."""
+    text = np.format_float_positional(float(x), trim="-")
+    whole, _, frac = text.partition(".")
+    sign = "m" if whole.startswith("-") else ""
+    whole = whole.lstrip("-").zfill(digits)
+    return sign + whole + ("p" + frac if frac else "")
+
+
+
+def fringe_file_name(direction: str, width: float, k: int, widths=None, shifts: int = 10,
+                     suffix: str = ".tif") -> str:
+    """``x_w0050_k0.tif``: direction, fringe period (monitor px), phase-shift index."""
+    widths = widths or [width]
+    digits = max(3, len(str(int(max(widths)))))
+    kd = len(str(max(shifts - 1, 0)))
+    return f"{direction}_w{_number_tag(width, digits)}_k{k:0{kd}d}{suffix}"
+
+
+
+def _safe_stem(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", Path(name).stem) or "image"
+
+
+
+def write_images(folder: Path, cfg, fringes, dots, dot_images, image_files,
+                  images, exposure: float) -> list[Path]:
+    out = cfg.output
+    suffix = IMAGE_SUFFIX[out.image_format]
+    jobs = []
+
+    def put(rel: str, values: np.ndarray, meta: dict) -> None:
+        jobs.append((rel, values, dict(meta, exposure=exposure,
+                                       scaling="pixel = value * exposure; 0 = no surface")))
+
+    def write(job) -> Path:
+        rel, values, meta = job
+        img = to_integer_image(values, exposure, out.bit_depth)
+        return write_image(folder / rel, img, out.image_format, meta)
+
+    if fringes is not None:
+        for di, d in enumerate(fringes.directions):
+            for wi, w in enumerate(fringes.widths):
+                for k, delta in enumerate(fringes.shifts):
+                    name = fringe_file_name(d, w, k, fringes.widths, len(fringes.shifts), suffix)
+                    put(f"fringes/{name}", fringes.images[di, wi, k],
+                        {"direction": d, "width_px": w, "shift_rad": float(delta), "k": k})
+    if dot_images is not None:
+        for q, dot in enumerate(dots):
+            name = f"dot{q:03d}_u{_number_tag(dot.u, 4)}_v{_number_tag(dot.v, 4)}{suffix}"
+            put(f"dots/{name}", dot_images[q], {"dot_u_px": dot.u, "dot_v_px": dot.v,
+                                               "dot_size_px": dot.size})
+    if images is not None:
+        for q, f in enumerate(image_files):
+            put(f"images/{q:02d}_{_safe_stem(f)}{suffix}", images[q], {"monitor_image": str(f)})
+    # zlib and NumPy release the GIL: a few threads overlap compression and conversion.
+    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+        return list(pool.map(write, jobs))

@@ -34,12 +34,12 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .kernels import bundle as kb
-from .patterns import DIRECTIONS, Dot, phase_shifts
-from .scene import Scene
-from .kernels import primary as kprim
-from .kernels.synth import shifted_images
-from .trace import bundle_geometry, cone_basis, trace_pixels
+from ..kernels import bundle as kb
+from ..patterns import DIRECTIONS, Dot, phase_shifts
+from ..scene import Scene
+from ..kernels import primary as kprim
+from ..kernels.synth import shifted_images
+from ..trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import bundle as kb
+from ..kernels import bundle as kb
 
 _GOLDEN = (1.0 + 5.0**0.5) / 2.0
 

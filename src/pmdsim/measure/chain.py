@@ -4,13 +4,13 @@ A real PMD system only sees camera images. :func:`run_chain` treats simulated on
 way: the fringe images of the surface under test and those of its ideal specular reference
 (the same scene with the mirror BRDF, :meth:`pmdsim.scene.Scene.specular`) are decoded per
 direction with :func:`pmdsim.decode.decode_sequence` (phase shifting + temporal unwrapping,
-with reliability flags), compared with :func:`pmdsim.analysis.compare_direction`, and the
+with reliability flags), compared with :func:`pmdsim.measure.deviation.compare_direction`, and the
 monitor-coordinate deviation is turned into a slope deviation with
-:func:`pmdsim.analysis.slope_deviation` (the distance being that from the surface point to
+:func:`pmdsim.measure.deviation.slope_deviation` (the distance being that from the surface point to
 the reference's monitor point). :func:`dot_table` measures the second moments of dot images.
 
-Everything here computes; nothing is written (see :mod:`pmdsim.pipeline`) or drawn (see
-:mod:`pmdsim.plot_chain`).
+Everything here computes; nothing is written (see :mod:`pmdsim.run`) or drawn (see
+:mod:`pmdsim.report.chain`).
 
 What a deviation means
 ----------------------
@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import analysis
+from . import deviation as analysis
 from . import decode as dec
 
 #: Background threshold of the dot moments, as a fraction of each dot image's maximum.
@@ -108,7 +108,7 @@ def decode_fringes(fringes, monitor_resolution, decode_cfg) -> dict:
 def surface_to_monitor_mm(sim, geometry, rows_per_chunk: int = 128) -> np.ndarray:
     """(H, W) distance (mm) from each pixel's surface point to the exact monitor point of its
     principal reflection P; NaN where P misses the monitor."""
-    from .trace import trace_primary
+    from ..trace import trace_primary
 
     scene = sim.scene
     h, w = sim.shape
@@ -276,123 +276,13 @@ def statistics(chain: ChainResult, name: str) -> dict:
     return out
 
 
-def _fmt(v, digits=4) -> str:
-    if v is None:
-        return "nan"
-    if isinstance(v, int):
-        return str(v)
-    return f"{v:.{digits}g}"
 
 
-def summary_text(stats: dict, timings: dict | None = None) -> str:
-    """A short human-readable summary of :func:`statistics` (for ``summary.txt``)."""
-    lines = [f"pmdsim measurement chain: {stats['name']}",
-             f"decoding: {stats['method']} unwrapping, widths {stats['widths_px']} monitor px, "
-             f"K = {stats['shifts']} shifts; deviation of the finest width "
-             f"({stats['finest_width_px']:g} px) from the ideal specular reference",
-             f"pixels masked when the modulation ratio < {stats['min_modulation_ratio']:g} "
-             "(counted below, never hidden)", ""]
-    head = f"{'dir':<4}{'deviation':<20}{'mean':>11}{'RMS':>11}{'P95':>11}{'max':>11}"
-    lines.append(head)
-    lines.append("-" * len(head))
-    for d, s in stats["directions"].items():
-        for q, unit in stats["units"].items():
-            r = s[q]
-            label = q.rsplit("_", 1)[0] + f" ({unit})"
-            lines.append(f"{d.upper():<4}{label:<20}" + "".join(
-                f"{_fmt(r[k]):>11}" for k in ("mean", "rms", "p95", "max")))
-        p = s["pixels"]
-        frac = s["phase_mrad"]["valid_fraction"]
-        lines.append(f"    valid {p['valid']} of {p['considered']} considered pixels "
-                     f"({100 * frac:.2f} %); masked: low modulation {p['low_modulation']}, "
-                     f"decode flags {p['decode_flagged']}")
-        mr = ", ".join(_fmt(x, 3) for x in s["modulation"]["ratio_median_by_width"])
-        lines.append(f"    median modulation ratio by width {stats['widths_px']}: {mr}")
-        rq = s["reference_vs_exact_px"]
-        lines.append(f"    reference vs exact specular point: RMS {_fmt(rq['rms'])} px "
-                     f"(monitor pixel quantisation of the reference)")
-        lines.append("")
-    if timings:
-        lines.append("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
-    return "\n".join(lines).rstrip() + "\n"
 
 
 # ----------------------------------------------------------------------------- dataset
-def dataset_variables(chain: ChainResult) -> dict:
-    """xarray variables ``{name: (dims, data, attrs)}`` of a chain (to assign to a run
-    dataset with ``direction``, ``width``, ``row``, ``col`` coordinates)."""
-    dirs = list(chain.directions)
-    dcs = [chain.directions[d] for d in dirs]
-    pitch = chain.pitch_mm
-
-    def per(fn, dtype=None):
-        a = np.stack([fn(dc) for dc in dcs])
-        return a.astype(dtype) if dtype is not None else a
-
-    D, DW = ("direction", "row", "col"), ("direction", "width", "row", "col")
-    v = {}
-    for prefix, get in (("", lambda dc: dc.decoded), ("reference_", lambda dc: dc.reference)):
-        who = "surface" if not prefix else "ideal specular reference (mirror BRDF)"
-        v[prefix + "wrapped_phase"] = (DW, per(lambda dc: get(dc).wrapped_phase, np.float32), {
-            "units": "rad", "description": f"wrapped phase of each width, (-pi, pi], {who}"})
-        v[prefix + "absolute_phase"] = (D, per(lambda dc: get(dc).absolute_phase), {
-            "units": "rad", "description": f"absolute phase of the finest width, {who}"})
-        v[prefix + "modulation"] = (DW, per(lambda dc: get(dc).modulation, np.float32), {
-            "units": "1", "description": f"fringe modulation B/A of each width, {who}"})
-        v[prefix + "decode_flags"] = (D, per(lambda dc: get(dc).flags, np.uint8), {
-            "description": f"decode reliability flags, {who}: 1 NAN_INPUT, 2 LOW_AMPLITUDE, "
-                           "4 ORDER_RESIDUAL, 8 OUT_OF_RANGE; 0 = valid"})
-        v[prefix + "order_residual"] = (D, per(lambda dc: get(dc).order_residual, np.float32), {
-            "units": "1", "description": f"largest fringe-order residual of the unwrapping, {who}"})
-        v[prefix + "monitor_coord_px"] = (D, per(lambda dc: get(dc).monitor_coord_px), {
-            "units": "monitor px", "description": f"decoded monitor coordinate (u for x, v for "
-                                                  f"y; 0-based, centres at integers), {who}"})
-        v[prefix + "monitor_coord_mm"] = (D, per(lambda dc: get(dc).monitor_coord_px) * pitch, {
-            "units": "mm", "description": f"decoded monitor coordinate from the centre of "
-                                          f"monitor pixel 0 (coord_px x pitch), {who}"})
-    v["phase_deviation"] = (D, per(lambda dc: dc.deviation.phase), {
-        "units": "rad", "description": "absolute phase (finest width) minus the reference's; "
-                                       "NaN where not valid"})
-    v["coord_deviation_px"] = (D, per(lambda dc: dc.deviation.coord_px), {
-        "units": "monitor px", "description": "decoded monitor coordinate minus the reference's"})
-    v["coord_deviation_mm"] = (D, per(lambda dc: dc.deviation.coord_mm), {
-        "units": "mm", "description": "coord_deviation_px x monitor pixel pitch"})
-    v["slope_deviation_urad"] = (D, per(lambda dc: dc.slope_urad), {
-        "units": "urad", "description": "slope deviation coord_deviation_mm / (2 d), d = "
-                                        "surface_to_monitor_mm (small angles)"})
-    v["modulation_ratio"] = (DW, per(lambda dc: dc.deviation.modulation_ratio, np.float32), {
-        "units": "1", "description": "modulation / reference modulation, per width"})
-    v["valid"] = (D, per(lambda dc: dc.deviation.valid), {
-        "description": "True where surface and reference decode without flags and the "
-                       "modulation ratio reaches min_modulation_ratio: the deviation pixels"})
-    v["low_modulation"] = (D, per(lambda dc: dc.deviation.low_modulation), {
-        "description": "True where the reference is valid but the modulation ratio of some "
-                       "width is below min_modulation_ratio (masked and counted)"})
-    v["surface_to_monitor_mm"] = (("row", "col"), chain.distance_mm, {
-        "units": "mm", "description": "distance from the surface point to the monitor point of "
-                                      "the principal reflection P"})
-    qs = list(QUANTITIES)
-    table = np.array([[[float("nan") if (x := direction_quantity_stats(dc)[q][s]) is None
-                        else x for s in STATISTICS] for q in qs] for dc in dcs])
-    v["deviation_stats"] = (("direction", "quantity", "statistic"), table, {
-        "description": "deviation statistics over the valid pixels; units per quantity: "
-                       + ", ".join(f"{q}: {u}" for q, u in QUANTITIES.items())})
-    return v
 
 
-def assign_to_dataset(ds, chain: ChainResult, stats: dict):
-    """Return ``ds`` with the chain's variables, coordinates ``quantity``/``statistic`` and
-    attrs ``decode_method``, ``statistics_json``."""
-    import json
-
-    ds = ds.assign_coords(quantity=("quantity", np.array(list(QUANTITIES), dtype=object)),
-                          statistic=("statistic", np.array(STATISTICS, dtype=object)))
-    for name, (dims, data, attrs) in dataset_variables(chain).items():
-        ds[name] = (dims, data, attrs)
-    ds.attrs["decode_method"] = chain.method
-    ds.attrs["min_modulation_ratio"] = chain.min_modulation_ratio
-    ds.attrs["statistics_json"] = json.dumps(stats)
-    return ds
 
 
 # ----------------------------------------------------------------------------- dots
@@ -404,7 +294,7 @@ DOT_COLUMNS = ("variant", "dot", "dot_u_px", "dot_v_px", "dot_size_px", "centroi
 
 def dot_table(dot_images: np.ndarray, dots, variant: str = "",
               threshold_fraction: float = DOT_THRESHOLD_FRACTION) -> list[dict]:
-    """Second moments of every dot image (:func:`pmdsim.analysis.image_moments`).
+    """Second moments of every dot image (:func:`pmdsim.measure.deviation.image_moments`).
 
     The background threshold is ``threshold_fraction`` x the image's maximum; centroid in
     camera px (col, row), sigmas in camera px, angle of the major axis from +col towards
@@ -427,42 +317,9 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
     return rows
 
 
-def dot_dataset_variables(table: list[dict]) -> dict:
-    """xarray variables ``{name: (dims, data, attrs)}`` along ``dot`` from :func:`dot_table`."""
-    def col(k):
-        return np.array([r[k] for r in table], np.float64)
-
-    thr = f"moments above {DOT_THRESHOLD_FRACTION:g} x the dot image's maximum"
-    return {
-        "dot_centroid_col": (("dot",), col("centroid_col"), {
-            "units": "camera px", "description": f"dot image centroid column ({thr})"}),
-        "dot_centroid_row": (("dot",), col("centroid_row"), {
-            "units": "camera px", "description": f"dot image centroid row ({thr})"}),
-        "dot_sigma_major": (("dot",), col("sigma_major_px"), {
-            "units": "camera px", "description": f"standard deviation along the major axis ({thr})"}),
-        "dot_sigma_minor": (("dot",), col("sigma_minor_px"), {
-            "units": "camera px", "description": f"standard deviation along the minor axis ({thr})"}),
-        "dot_elongation": (("dot",), col("elongation"), {
-            "units": "1", "description": "sigma_major / sigma_minor"}),
-        "dot_angle": (("dot",), col("angle_deg"), {
-            "units": "deg", "description": "major axis angle from +col towards +row, (-90, 90]"}),
-        "dot_peak": (("dot",), col("peak"), {"description": "maximum camera value of the dot image"}),
-    }
 
 
-def write_dot_csv(path, table: list[dict]) -> None:
-    """Write :func:`dot_table` rows as CSV (header :data:`DOT_COLUMNS`)."""
-    import csv
-
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(DOT_COLUMNS))
-        w.writeheader()
-        for r in table:
-            w.writerow({k: (f"{r[k]:.6g}" if isinstance(r[k], float) else r[k])
-                        for k in DOT_COLUMNS})
 
 
 __all__ = ["DirectionChain", "ChainResult", "decode_problem", "decode_fringes", "compare",
-           "surface_to_monitor_mm", "statistics", "summary_text", "dataset_variables",
-           "assign_to_dataset", "dot_table", "dot_dataset_variables", "write_dot_csv",
-           "QUANTITIES", "STATISTICS", "DOT_THRESHOLD_FRACTION"]
+           "surface_to_monitor_mm", "statistics", "dot_table", "DOT_COLUMNS", "QUANTITIES", "STATISTICS", "DOT_THRESHOLD_FRACTION"]

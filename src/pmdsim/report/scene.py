@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 from matplotlib.ticker import MaxNLocator
 
-from .trace import trace_primary
+from ..trace import trace_primary
 
 DPI = 130
 RED = "#d62728"

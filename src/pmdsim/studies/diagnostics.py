@@ -44,9 +44,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .brdf import lobe_weight
-from .geometry import dot, normalize
-from .sampling import fibonacci_lattice
+from ..brdf import lobe_weight
+from ..geometry import dot, normalize
+from ..scene.sampling import fibonacci_lattice
 
 CONE_ESTIMATORS = ("paper", "weighted_mean")
 
@@ -354,8 +354,8 @@ def phase_error_seeds(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
     independent rays (:func:`phase_error_delta`). With mode ``stratified`` every pixel
     uses the unrotated lattice; its (fixed, structured) error is typically of this size.
     """
-    from .render import Simulation
-    from .sampling import ConeSampling
+    from ..render import Simulation
+    from ..scene.sampling import ConeSampling
 
     if n_seeds < 2:
         raise ValueError(f"n_seeds must be >= 2, got {n_seeds}")

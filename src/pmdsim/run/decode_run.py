@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import decode as dec
-from . import io as pio
+from ..measure import decode as dec
+from . import files as pio
 
 DATASET_NAME = "decode.zarr"
 FORMAT = "pmdsim-decode/1"
@@ -59,8 +59,8 @@ def setup_from_run(run: str | Path, direction: str) -> dict:
     Raises FileNotFoundError for a folder that is not a run, ValueError for a run without
     fringes or without that direction.
     """
-    from .config import RunConfig
-    from .pipeline import CONFIG_NAME, load_run, run_config
+    from ..config import RunConfig
+    from .dataset import CONFIG_NAME, load_run, run_config
 
     run = Path(run)
     if (run / CONFIG_NAME).is_file() and pio.is_run_dir(run):
@@ -183,8 +183,8 @@ def _stats(res: dec.DecodeResult, setup: DecodeSetup) -> dict:
 def _compare_with_run(res: dec.DecodeResult, run: Path, variant: str | None,
                       direction: str) -> dict | None:
     """Decoded-from-files minus the run's own decoding (of its float images), if stored."""
-    from .analysis import deviation_stats
-    from .pipeline import load_run
+    from ..measure.deviation import deviation_stats
+    from .dataset import load_run
 
     try:
         ds = load_run(run, variant=variant)
@@ -243,7 +243,7 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
 
     import xarray as xr
 
-    from . import __version__
+    from .._version import __version__
 
     t0 = time.perf_counter()
     paths = [Path(p) for p in paths]
@@ -316,7 +316,7 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
         (tmp / "statistics.json").write_text(json.dumps(stats, indent=2) + "\n")
         figure_paths = []
         if figures:
-            from .plot_chain import plot_decoded
+            from ..report.chain import plot_decoded
 
             figure_paths = plot_decoded(ds, tmp / "figures")
         seconds = {"read": t_read, "decode": t_decode, "write": time.perf_counter() - t}
