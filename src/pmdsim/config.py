@@ -64,6 +64,17 @@ class ConfigError(ValueError):
     """A configuration is invalid; the message names each offending field and the fix."""
 
 
+class InputError(ValueError):
+    """Bad input other than the configuration's values: an input file (a monitor image, a
+    camera image, a run folder) or a command-line option; the message names it and the fix.
+    With :class:`ConfigError` the only errors the command line reports as bad input (exit
+    code 2); anything else is a bug (a traceback, exit code 1)."""
+
+
+class MissingInputError(InputError, FileNotFoundError):
+    """An input file or folder does not exist (also a :class:`FileNotFoundError`)."""
+
+
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 

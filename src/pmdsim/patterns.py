@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .config import InputError, MissingInputError
+
 DIRECTIONS = ("x", "y")
 
 
@@ -76,7 +78,7 @@ def load_monitor_image(path: str | Path, monitor_shape: tuple[int, int]) -> np.n
     """
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"patterns.images.files: no such file: {path}")
+        raise MissingInputError(f"patterns.images.files: no such file: {path}")
     if path.suffix.lower() in (".tif", ".tiff"):
         import tifffile
 
@@ -91,7 +93,7 @@ def load_monitor_image(path: str | Path, monitor_shape: tuple[int, int]) -> np.n
     if img.ndim == 3:
         img = img[..., :3].mean(axis=-1)
     if img.shape != tuple(monitor_shape):
-        raise ValueError(
+        raise InputError(
             f"patterns.images.files: {path} is {img.shape[1]} x {img.shape[0]} px, but the monitor "
             f"is {monitor_shape[1]} x {monitor_shape[0]}: resize the image or fix monitor.resolution"
         )

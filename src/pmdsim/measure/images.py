@@ -8,6 +8,8 @@ from typing import Iterable
 
 import numpy as np
 
+from ..config import InputError, MissingInputError
+
 
 _TIFF_SUFFIXES = (".tif", ".tiff")
 
@@ -21,7 +23,7 @@ def _read_one(path: Path) -> np.ndarray:
     """(pages, H, W) array of one file, raw counts."""
     suffix = path.suffix.lower()
     if suffix not in _TIFF_SUFFIXES + _PNG_SUFFIXES:
-        raise ValueError(f"paths: {str(path)!r} is neither TIFF (.tif, .tiff) nor PNG (.png)")
+        raise InputError(f"paths: {str(path)!r} is neither TIFF (.tif, .tiff) nor PNG (.png)")
     channels = None
     try:
         if suffix in _TIFF_SUFFIXES:
@@ -44,10 +46,10 @@ def _read_one(path: Path) -> np.ndarray:
                 else:
                     img = np.asarray(png)
     except Exception as exc:  # a corrupt, truncated or mislabelled file
-        raise ValueError(f"paths: cannot read image file {str(path)!r}: {exc}") from exc
+        raise InputError(f"paths: cannot read image file {str(path)!r}: {exc}") from exc
     if channels is not None or img.ndim < 2 or img.dtype.kind not in "uif":
         what = channels or f"array shape {img.shape}, dtype {img.dtype}"
-        raise ValueError(
+        raise InputError(
             f"paths: {str(path)!r} is not a single-channel image ({what}); convert it to "
             "grayscale"
         )
@@ -81,17 +83,17 @@ def load_image_stack(paths: Iterable[str | os.PathLike]) -> np.ndarray:
         paths = [paths]
     path_list = [Path(p) for p in paths]
     if not path_list:
-        raise ValueError("paths must name at least one image file")
+        raise InputError("paths must name at least one image file")
     stack = []
     shape = None
     for path in path_list:
         if not path.is_file():
-            raise FileNotFoundError(f"paths: image file {str(path)!r} does not exist")
+            raise MissingInputError(f"paths: image file {str(path)!r} does not exist")
         img = _read_one(path)
         if shape is None:
             shape = img.shape[1:]
         elif img.shape[1:] != shape:
-            raise ValueError(
+            raise InputError(
                 f"paths: {str(path)!r} has size {img.shape[1:]} but the first image has {shape}"
             )
         stack.append(img.astype(np.float64))

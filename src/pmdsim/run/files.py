@@ -30,6 +30,7 @@ import os
 import re
 import shutil
 import struct
+import warnings
 import zlib
 from pathlib import Path
 from concurrent.futures import ThreadPoolExecutor
@@ -38,6 +39,7 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from ..measure import chain
+from . import claim
 
 #: File name of the manifest that marks a complete pmdsim run folder.
 MANIFEST = "pmdsim-run.json"
@@ -194,44 +196,65 @@ def check_output_dir(final: str | Path, overwrite: bool = False, marker: str = M
 def atomic_run_dir(outdir: str | Path, overwrite: bool = False, marker: str = MANIFEST) -> Iterator[Path]:
     """Context manager yielding a fresh temporary folder that becomes ``outdir`` on success.
 
+    The output folder is first *claimed* (:func:`pmdsim.run.claim.claim_output`, a lock on
+    ``<outdir>.lock``): a second run on the same target fails at once with
+    :class:`~pmdsim.run.claim.OutputBusy`, before any computation. Under the claim,
+    temporary folders that dead processes left (``<outdir>.tmp-<pid>``, ``.old-<pid>``) are
+    removed (a :class:`StaleTemporaryWarning` says which).
+
     The temporary folder is the sibling ``<outdir>.tmp-<pid>``. On normal exit it is
     renamed to ``outdir`` (an existing run folder is first moved aside to
     ``<outdir>.old-<pid>`` and deleted only after the rename succeeded, so a failure never
-    loses the old run). On an exception the temporary folder is removed and the exception
-    propagates; ``outdir`` is untouched.
+    loses the old run). On an exception, SIGINT (KeyboardInterrupt) or SIGTERM (turned into
+    :class:`~pmdsim.run.claim.Terminated` inside the block) the temporary folder is removed
+    after the writers have stopped, and the exception propagates; ``outdir`` is untouched.
 
     Raises
     ------
     FileExistsError
-        ``outdir`` exists and ``overwrite`` is false, or it is not a pmdsim run folder.
+        ``outdir`` exists and ``overwrite`` is false, or it is not a pmdsim run folder;
+        :class:`~pmdsim.run.claim.OutputBusy` when another live run writes it.
     """
     final = Path(outdir).absolute()
     check_output_dir(final, overwrite, marker)  # fail before doing any work
     final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = final.with_name(f"{final.name}.tmp-{os.getpid()}")
-    if tmp.exists():
-        shutil.rmtree(tmp)  # leftover of a crashed run of this very process id
-    tmp.mkdir()
-    try:
-        yield tmp
-        check_output_dir(final, overwrite, marker)  # it may have appeared meanwhile
-        old = None
-        if final.exists():
-            old = final.with_name(f"{final.name}.old-{os.getpid()}")
-            if old.exists():
-                shutil.rmtree(old)
-            os.replace(final, old)
+    with claim.signals_as_interrupt(), claim.claim_output(final):
+        removed, kept = claim.remove_stale(final)
+        for p in removed:
+            warnings.warn(f"removed {p}: the temporary folder of an interrupted run whose "
+                          "process no longer exists", StaleTemporaryWarning, stacklevel=3)
+        for p in kept:
+            warnings.warn(f"{p} belongs to a running process that does not hold the "
+                          "output's lock (an older pmdsim?): left alone", StaleTemporaryWarning,
+                          stacklevel=3)
+        tmp = final.with_name(f"{final.name}.tmp-{os.getpid()}")
+        if tmp.exists():
+            shutil.rmtree(tmp)  # leftover of a crashed run of this very process id
+        tmp.mkdir()
         try:
-            os.replace(tmp, final)
-        except BaseException:
+            yield tmp
+            check_output_dir(final, overwrite, marker)  # it may have appeared meanwhile
+            old = None
+            if final.exists():
+                old = final.with_name(f"{final.name}.old-{os.getpid()}")
+                if old.exists():
+                    shutil.rmtree(old)
+                os.replace(final, old)
+            try:
+                os.replace(tmp, final)
+            except BaseException:
+                if old is not None:
+                    os.replace(old, final)
+                raise
             if old is not None:
-                os.replace(old, final)
+                shutil.rmtree(old, ignore_errors=True)
+        except BaseException:
+            claim.remove_tree(tmp)
             raise
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+
+
+class StaleTemporaryWarning(UserWarning):
+    """A temporary folder of an earlier, interrupted run was found next to the output."""
 
 
 def write_manifest(folder: str | Path, content: dict) -> Path:

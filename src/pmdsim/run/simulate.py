@@ -56,7 +56,7 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from ..config import RESERVED_VARIANT_NAMES, RunConfig
+from ..config import RESERVED_VARIANT_NAMES, ConfigError, RunConfig
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
 from . import files as pio
@@ -179,8 +179,8 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
     figures = cfg.output.figures if figures is None else figures
     for k, v in enumerate(cfg.variants):
         if v.name in RESERVED_NAMES or v.name.startswith("."):
-            raise ValueError(
-                f"variants.{k}.name: {v.name!r} cannot name a sub-folder of the run (reserved "
+            raise ConfigError(
+                f"invalid configuration:\n  variants.{k}.name: {v.name!r} cannot name a sub-folder of the run (reserved "
                 f"or hidden: {sorted(RESERVED_NAMES)}); choose another name")
     members = [(name, c, Simulation.from_config(c)) for name, c in cfg.expand()]
     dots = resolve_dots(cfg)
