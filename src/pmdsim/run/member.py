@@ -10,6 +10,7 @@ from pathlib import Path
 from ..config import RunConfig
 from ..measure import chain
 from ..render import Geometry, Simulation
+from ..studies import coverage
 from . import files as pio
 from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, _encoding
 from ..report.text import description, summary_text_of
@@ -51,6 +52,11 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         images = sim.render_images(levels, progress=steps.tiles())
         steps.finish_render(base, n_tiles)
     timings["render"] = time.perf_counter() - t
+    # nothing empty is written as if it were a result; bundles off the monitor are flagged
+    coverage.check_rendered(None if fringes is None else fringes.images, dot_images)
+    off_monitor = None if fringes is None else coverage.off_monitor_mask(
+        fringes.f_total, fringes.f_hit, geometry.surface_mask,
+        cfg.diagnostics.max_off_monitor_fraction)
 
     t = time.perf_counter()
     out = cfg.output
@@ -62,6 +68,11 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     steps.advance()
     ds = build_dataset(cfg, geometry, fringes, dots, dot_images, image_files, images,
                        exposure, sim.scene.rays_per_pixel)
+    if off_monitor is not None:
+        ds["lobe_off_monitor"] = (("row", "col"), off_monitor, {
+            "units": "bool", "description": "surface pixels whose bundle puts more than "
+            f"diagnostics.max_off_monitor_fraction = {cfg.diagnostics.max_off_monitor_fraction:g}"
+            " of its weight off the monitor (never valid; counted)"})
     timings["write"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -70,7 +81,7 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         measured = chain.compare(
             chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode),
             reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
-            cfg.decode, len(fringes.shifts))
+            cfg.decode, len(fringes.shifts), off_monitor=off_monitor)
         stats = chain.statistics(measured, cfg.name)
         ds = assign_to_dataset(ds, measured, stats)
         del measured
@@ -84,7 +95,7 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
 
     t = time.perf_counter()
     statistics = dict(stats)  # statistics.json: the chain's (when decoded) + diagnostics
-    diagnosed = diagnose_run(cfg, sim, geometry) if diagnostics else None
+    diagnosed = diagnose_run(cfg, sim, geometry, exclude=off_monitor) if diagnostics else None
     if diagnosed is not None:
         ds = ds.assign_coords(diagnosed.coords)
         for name, var in diagnosed.variables.items():

@@ -135,3 +135,36 @@ def off_monitor_mask(f_total: np.ndarray, f_hit: np.ndarray, surface_mask: np.nd
     weight off the monitor."""
     share = off_monitor_fraction(f_total, f_hit)
     return np.asarray(surface_mask, bool) & ~(share <= max_fraction)
+
+
+def check_rendered(fringe_images: np.ndarray | None = None,
+                   dot_images: np.ndarray | None = None) -> None:
+    """Stop a run whose images came out empty (before anything is written).
+
+    Fringes have a mean level of half the monitor's range: wherever a bundle reaches the
+    monitor with a non-zero BRDF value the camera value is positive. Every fringe image
+    black means the BRDF is effectively zero over the sampled bundles (or no bundle reaches
+    the monitor); every dot image black means the camera sees none of the dots.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``brdf`` (fringes) or ``patterns.dots`` (dots).
+    """
+    def lit(a) -> bool:
+        a = np.asarray(a)
+        with np.errstate(invalid="ignore"):
+            return bool(np.any(a > 0))  # NaN compares False
+
+    if fringe_images is not None and not lit(fringe_images):
+        raise ConfigError(
+            "invalid set-up:\n  brdf: every fringe image is black: no scattered ray of any "
+            "pixel carries a non-zero BRDF value onto the monitor; check the BRDF (brdf.*: a "
+            "lobe that puts no weight into the sampled cone), sampling.theta_max_deg, and "
+            "that the monitor lies in the surface's reflection (monitor.centre_mm)")
+    if dot_images is not None and not lit(dot_images):
+        raise ConfigError(
+            f"invalid set-up:\n  patterns.dots: the camera sees none of the "
+            f"{np.asarray(dot_images).shape[0]} dots (every dot image is black); place the "
+            "dots on the part of the monitor that the camera sees in the surface "
+            "(patterns.dots.positions_px / grid, margin_px)")
