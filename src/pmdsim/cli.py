@@ -4,6 +4,9 @@
                                      [--no-diagnostics]
     pmdsim decode IMAGES... -o OUT (--widths W1,W2,.. --shifts K --extent-px E | --from-run RUN)
     pmdsim converge CONFIG -o OUTDIR [--n-values 25,50,..] [--theta 0.5,1,..] [--camera 160x128]
+    pmdsim sweep CONFIG -o OUTDIR [--scheduler threads|processes|synchronous|tcp://..]
+                                  [--workers N] [--overwrite] [--no-figures]
+    pmdsim warmup
     pmdsim version
     pmdsim --help
 
@@ -430,6 +433,79 @@ def version() -> None:
 
 def main() -> None:  # pragma: no cover - console entry for `python -m pmdsim.cli`
     app()
+
+
+@app.command()
+def sweep(
+    config: Path = typer.Argument(..., help="Configuration with a [sweep] table, e.g. "
+                                  "examples/sweep_roughness.toml."),
+    output: Path = typer.Option(..., "-o", "--output",
+                                help="Sweep folder (sweep.zarr, points.csv, figures/); an "
+                                "existing folder of the same sweep is resumed."),
+    scheduler: str = typer.Option(
+        "threads", "--scheduler",
+        help="threads (local thread pool), processes (local dask.distributed cluster), "
+        "synchronous, or the address of a running Dask scheduler (tcp://host:8786)."),
+    workers: int | None = typer.Option(None, "--workers", min=1,
+                                       help="Threads or processes of a local scheduler "
+                                       "(default: all cores)."),
+    overwrite: bool = typer.Option(False, "--overwrite",
+                                   help="Start again when OUTDIR holds a different sweep."),
+    no_figures: bool = typer.Option(False, "--no-figures", help="Do not draw the figures."),
+) -> None:
+    """Run the measurement chain at every point of the configuration's [sweep] (grid, zip or
+    random design over any configuration fields) into one Zarr store with a dimension per
+    swept field; resumes an interrupted sweep with only its unfinished points. See
+    docs/sweeps.md."""
+    from .config import ConfigError, load_config
+    from .run.sweep import run_sweep
+    from .studies.sweep import plan_sweep
+
+    console = _console()
+    try:
+        cfg = load_config(config)
+        plan = plan_sweep(cfg)
+    except (ConfigError, FileNotFoundError, ValueError) as err:
+        _fail(str(err))
+    shape = " x ".join(f"{n} {d}" for n, d in zip(plan.shape, plan.dims))
+    console.print(f"sweep '{cfg.name}': {len(plan.points)} points ({plan.sweep.design}: "
+                  f"{shape}) on {scheduler}")
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+               TimeElapsedColumn(), TimeRemainingColumn())
+    try:
+        with Progress(*columns, console=console, transient=False) as bar:
+            task = bar.add_task("points", total=None)
+
+            def progress(done: int, total: int) -> None:
+                bar.update(task, completed=done, total=total)
+
+            result = run_sweep(cfg, output, scheduler=scheduler, num_workers=workers,
+                               progress=progress, overwrite=overwrite,
+                               figures=not no_figures)
+    except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
+            NotADirectoryError, ValueError) as err:
+        _fail(str(err))
+    console.print(f"computed {len(result.computed)} points, {len(result.skipped)} were already "
+                  f"done, in {result.seconds:.1f} s")
+    console.print(f"store: {result.store}")
+    for f in result.files:
+        console.print(f"wrote {f}")
+
+
+@app.command()
+def warmup() -> None:
+    """Compile every kernel once into Numba's on-disk cache (run once after installing, so
+    that the first simulation does not pay for compilation); a few seconds of tiny runs."""
+    from .run.warmup import CASES, warmup as run_warmup
+
+    console = _console()
+    t0 = time.perf_counter()
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+               TimeElapsedColumn())
+    with Progress(*columns, console=console, transient=False) as bar:
+        task = bar.add_task("compiling kernels", total=len(CASES))
+        run_warmup(lambda done, total: bar.update(task, completed=done))
+    console.print(f"kernels compiled and cached in {time.perf_counter() - t0:.1f} s")
 
 
 if __name__ == "__main__":  # pragma: no cover

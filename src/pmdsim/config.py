@@ -212,7 +212,133 @@ class FlatSurfaceConfig(_Model):
         return self
 
 
-SurfaceConfig = Annotated[FlatSurfaceConfig, Field(discriminator="type")]
+class ApertureConfig(_Model):
+    """The clear aperture of a curved surface, in its local (x, y) (mm, about ``centre_mm``).
+
+    ``circular``: ``radius_mm``; ``annular``: ``radius_mm`` and ``inner_radius_mm``;
+    ``rectangular``: ``size_mm`` (along local x, along local y). ``centre_mm`` off the
+    vertex gives an off-axis segment of the parent surface.
+    """
+
+    shape: Literal["circular", "annular", "rectangular"] = "circular"
+    radius_mm: PositiveFloat | None = None
+    inner_radius_mm: Annotated[Float, Field(ge=0, le=MAX_LENGTH_MM)] = 0.0
+    size_mm: tuple[PositiveFloat, PositiveFloat] | None = None
+    centre_mm: tuple[Coord, Coord] = (0.0, 0.0)
+
+    @model_validator(mode="after")
+    def _check(self) -> "ApertureConfig":
+        if self.shape in ("circular", "annular") and self.radius_mm is None:
+            raise ValueError(f"aperture.radius_mm is required for shape = {self.shape!r}")
+        if self.shape == "annular" and not (0 < self.inner_radius_mm < self.radius_mm):
+            raise ValueError("aperture.inner_radius_mm must be > 0 and < radius_mm for an annulus")
+        if self.shape == "rectangular" and self.size_mm is None:
+            raise ValueError("aperture.size_mm = [width, height] is required for shape = 'rectangular'")
+        return self
+
+
+class _SagSurfaceBase(_Model):
+    """Pose and aperture of a sag surface: vertex at ``centre_mm``, local z = ``normal``
+    (the side the camera looks from), local x = ``x_axis`` (projected). ``radius_mm`` > 0
+    puts the centre of curvature on the +normal side (concave towards the camera);
+    None = flat base. See docs/surfaces.md."""
+
+    centre_mm: Vec3 = (0.0, 0.0, 0.0)
+    normal: Vec3 = (0.0, 0.0, 1.0)
+    x_axis: Vec3 = (1.0, 0.0, 0.0)
+    aperture: ApertureConfig
+
+    _directions = field_validator("normal", "x_axis")(_nonzero_vector)
+
+    @field_validator("radius_mm", check_fields=False)
+    @classmethod
+    def _radius(cls, v):
+        if v is not None and (not np.isfinite(v) or v == 0):
+            raise ValueError("must be a non-zero finite radius of curvature in mm (None or omit for a flat base)")
+        return v
+
+    @model_validator(mode="after")
+    def _check_pose(self):
+        _unit("normal", self.normal)
+        _unit("x_axis", self.x_axis)
+        n = np.asarray(self.normal) / np.linalg.norm(self.normal)
+        x = np.asarray(self.x_axis) / np.linalg.norm(self.x_axis)
+        if abs(n @ x) > 1 - 1e-9:
+            raise ValueError("x_axis must not be parallel to normal")
+        return self
+
+
+class SphereSurfaceConfig(_SagSurfaceBase):
+    """A sphere of radius of curvature ``radius_mm``."""
+
+    type: Literal["sphere"]
+    radius_mm: Coord
+
+
+class ConicSurfaceConfig(_SagSurfaceBase):
+    """A conic: radius of curvature at the vertex and conic constant k (0 sphere, -1
+    paraboloid, < -1 hyperboloid, (-1, 0) prolate and > 0 oblate ellipsoid)."""
+
+    type: Literal["conic"]
+    radius_mm: Coord | None = None
+    conic: Annotated[Float, Field(ge=-1e6, le=1e6)] = 0.0
+
+
+class AsphereSurfaceConfig(_SagSurfaceBase):
+    """Even asphere: the conic plus ``coefficients`` A4, A6, A8, ... of r^4, r^6, r^8, ...
+    (mm^-3, mm^-5, ...)."""
+
+    type: Literal["asphere"]
+    radius_mm: Coord | None = None
+    conic: Annotated[Float, Field(ge=-1e6, le=1e6)] = 0.0
+    coefficients: Annotated[tuple[Float, ...], Field(max_length=64)] = ()
+
+
+class XYPolynomialSurfaceConfig(_SagSurfaceBase):
+    """Freeform: the base conic plus sum c (x/s)^i (y/s)^j over ``terms`` = [[i, j, c_mm], ...],
+    s = ``norm_radius_mm``."""
+
+    type: Literal["xy_polynomial"]
+    radius_mm: Coord | None = None
+    conic: Annotated[Float, Field(ge=-1e6, le=1e6)] = 0.0
+    norm_radius_mm: PositiveFloat = 1.0
+    terms: tuple[tuple[Annotated[Int, Field(ge=0, le=20)], Annotated[Int, Field(ge=0, le=20)], Float], ...] = ()
+
+
+class ZernikeSurfaceConfig(_SagSurfaceBase):
+    """Freeform: the base conic plus sum c_j Z_j(x/s, y/s) with Noll's ordering and
+    normalisation (RMS 1 on the unit disc), ``coefficients`` = [[j, c_mm], ...],
+    s = ``norm_radius_mm``."""
+
+    type: Literal["zernike"]
+    radius_mm: Coord | None = None
+    conic: Annotated[Float, Field(ge=-1e6, le=1e6)] = 0.0
+    norm_radius_mm: PositiveFloat
+    coefficients: tuple[tuple[Annotated[Int, Field(ge=1, le=231)], Float], ...] = ()
+
+
+class HeightMapSurfaceConfig(_SagSurfaceBase):
+    """A measured topography: heights on a regular grid from ``file`` (.npy, .csv, or a
+    32-bit float .tif/.tiff), rows along local y, columns along local x, ``spacing_mm`` =
+    (dx, dy), ``origin_mm`` = local (x, y) of element [0, 0] (default: the grid centred on
+    the vertex), heights in ``height_unit``, added to the base conic; interpolated with a
+    bicubic B-spline (continuous normals). The aperture defaults to the grid."""
+
+    type: Literal["height_map"]
+    file: str
+    spacing_mm: tuple[PositiveFloat, PositiveFloat]
+    origin_mm: tuple[Coord, Coord] | None = None
+    height_unit: Literal["mm", "um", "nm"] = "mm"
+    radius_mm: Coord | None = None
+    conic: Annotated[Float, Field(ge=-1e6, le=1e6)] = 0.0
+    aperture: ApertureConfig | None = None
+
+
+SurfaceConfig = Annotated[
+    FlatSurfaceConfig | SphereSurfaceConfig | ConicSurfaceConfig | AsphereSurfaceConfig
+    | XYPolynomialSurfaceConfig | ZernikeSurfaceConfig | HeightMapSurfaceConfig,
+    Field(discriminator="type"),
+]
 
 
 class AnisotropyConfig(_Model):
@@ -506,6 +632,96 @@ class DecodeConfig(_Model):
     )
 
 
+class SweepRange(_Model):
+    """A continuous range of a swept field for ``design = "random"``: values drawn
+    uniformly in [min, max] (``scale = "log"``: uniformly in log, min > 0)."""
+
+    min: Float
+    max: Float
+    scale: Literal["linear", "log"] = "linear"
+
+    @model_validator(mode="after")
+    def _check(self) -> "SweepRange":
+        if not (math.isfinite(self.min) and math.isfinite(self.max)) or self.max <= self.min:
+            raise ValueError(f"give finite min < max, got min = {self.min}, max = {self.max}")
+        if self.scale == "log" and self.min <= 0:
+            raise ValueError("scale = 'log' needs min > 0")
+        return self
+
+
+_RANGE_KEYS = frozenset({"min", "max", "scale"})
+
+
+def _flatten_parameters(data, prefix: str = "") -> dict:
+    """TOML ``[sweep.parameters]`` as {dotted path: values}: quoted keys
+    (``"brdf.alpha_y" = [...]``) and dotted keys (``brdf.alpha_y = [...]``, which TOML reads
+    as nested tables) give the same path; a table of only min/max/scale is a range."""
+    out = {}
+    for k, v in data.items():
+        path = f"{prefix}{k}"
+        if isinstance(v, dict) and v and not set(v) <= _RANGE_KEYS:
+            out.update(_flatten_parameters(v, path + "."))
+        else:
+            out[path] = v
+    return out
+
+
+class SweepConfig(_Model):
+    """A parameter study (``pmdsim sweep``): the run's configuration is the base, and
+    ``parameters`` names configuration fields by dotted path (``brdf.alpha_y``,
+    ``patterns.fringes.widths_px.0`` for an element of a list) with their values.
+
+    ``design``: ``grid`` (every combination; one store dimension per parameter), ``zip``
+    (the i-th values of every parameter together; lists of equal length; one ``point``
+    dimension), ``random`` (``points`` draws, seeded by ``seed``, from ranges
+    ``{min, max, scale}`` or lists of choices; one ``point`` dimension).
+    ``decimation``: the deviation and modulation maps are stored at every
+    ``decimation``-th camera pixel (0 = no maps). ``common_random_numbers``: every point
+    uses ``sampling.seed`` unchanged; by default a point's seed is derived from
+    (``sampling.seed``, point index), so each point is independent and recomputes
+    bit-identically on its own.
+    """
+
+    design: Literal["grid", "zip", "random"] = "grid"
+    parameters: dict[str, tuple | SweepRange]
+    points: Annotated[Int, Field(ge=1, le=100_000)] | None = Field(
+        None, description="number of points of a random design")
+    seed: Annotated[Int, Field(ge=0, lt=2**63)] = Field(0, description="seed of a random design")
+    decimation: Annotated[Int, Field(ge=0, le=MAX_RESOLUTION_PX)] = Field(
+        8, description="maps at every n-th camera pixel (0: statistics only)")
+    common_random_numbers: Bool = False
+
+    @field_validator("parameters", mode="before")
+    @classmethod
+    def _flat(cls, v):
+        if isinstance(v, dict):
+            v = _flatten_parameters(v)
+            return {k: (x if isinstance(x, dict) else
+                        tuple(x) if isinstance(x, (list, tuple)) else (x,))
+                    for k, x in v.items()}
+        return v
+
+    @model_validator(mode="after")
+    def _check(self) -> "SweepConfig":
+        if not self.parameters:
+            raise ValueError("parameters: name at least one field to sweep")
+        for k, v in self.parameters.items():
+            if isinstance(v, SweepRange) and self.design != "random":
+                raise ValueError(f"parameters.{k!r}: a range {{min, max}} needs design = "
+                                 "'random'; give a list of values for a grid or zip")
+            if isinstance(v, tuple) and len(v) == 0:
+                raise ValueError(f"parameters.{k!r}: give at least one value")
+        if self.design == "zip":
+            n = {k: len(v) for k, v in self.parameters.items()}
+            if len(set(n.values())) > 1:
+                raise ValueError(f"design = 'zip' needs lists of equal length, got {n}")
+        if self.design == "random" and self.points is None:
+            raise ValueError("design = 'random' needs points (the number of draws)")
+        if self.design != "random" and self.points is not None:
+            raise ValueError("points is only for design = 'random'")
+        return self
+
+
 #: Files and folders of a run folder: a variant (a sub-folder) cannot take these names.
 RESERVED_VARIANT_NAMES = frozenset({
     "run.zarr", "config.json", "pmdsim-run.json", "figures", "fringes", "dots", "images",
@@ -556,6 +772,7 @@ class RunConfig(_Model):
     decode: DecodeConfig = DecodeConfig()
     diagnostics: DiagnosticsConfig = DiagnosticsConfig()
     variants: Annotated[tuple[VariantConfig, ...], Field(max_length=64)] = ()
+    sweep: SweepConfig | None = None
 
     @model_validator(mode="before")
     @classmethod
@@ -662,6 +879,9 @@ def load_config(path: str | Path) -> RunConfig:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    surf = data.get("surface")
+    if isinstance(surf, dict) and surf.get("type") == "height_map":
+        surf["file"] = _resolve_file(path.parent, surf.get("file"))
     patterns = data.get("patterns")
     images = patterns.get("images") if isinstance(patterns, dict) else None
     if isinstance(images, dict) and isinstance(images.get("files"), list):

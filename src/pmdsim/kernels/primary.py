@@ -14,6 +14,7 @@ import numpy as np
 
 from ._jit import fastjit
 from .bundle import G_A, G_B, G_C, G_SIZE, G_T, G_U0, G_V0, G_VALID, G_X, G_Y, G_Z
+from .surface import SURF_SAG, intersect_sag
 
 # camera: position (3), rotation row-major (9; columns = camera x, y, z), focal px, cx, cy
 CAM_POS = 0
@@ -26,6 +27,7 @@ CAM_SIZE = 15
 # surface: type, centre (3), normal (3), x axis (3), y axis (3), half sizes (2)
 SURF_TYPE = 0
 SURF_FLAT = 0
+# SURF_SAG = 1 (sphere, conic, asphere, freeforms, height maps): layout SAG_* in kernels/surface.py
 SURF_C = 1
 SURF_N = 4
 SURF_X = 7
@@ -57,6 +59,8 @@ MON_SIZE = 15
 @fastjit(inline="always")
 def _intersect(surf, ox, oy, oz, dx, dy, dz):
     """(hit, t, px, py, pz, nx, ny, nz) of one ray with the surface."""
+    if surf[SURF_TYPE] == SURF_SAG:  # curved and measured surfaces: kernels/surface.py
+        return intersect_sag(surf, ox, oy, oz, dx, dy, dz)
     cx = surf[SURF_C]
     cy = surf[SURF_C + 1]
     cz = surf[SURF_C + 2]
