@@ -133,14 +133,17 @@ def simulate(
     reference (statistics.json, summary.txt, deviation figures), and check the sampling
     (diagnostics: warnings, each naming the setting that fixes it; bounds in the
     configuration's diagnostics section)."""
-    from .config import ConfigError, load_config
-    from .report.text import warning_text
-    from .run import run_simulation
-    from .run.files import check_output_dir
+    from .config import load_config
+    from .run.claim import check_free
 
     console = _console()
     with _guard():
+        check_free(output)  # a run already writing there: fail before the heavy imports
         cfg = load_config(config)
+        from .report.text import warning_text
+        from .run import run_simulation
+        from .run.files import check_output_dir
+
         check_output_dir(output, overwrite)
     figures = False if no_figures else None
     t0 = time.perf_counter()

@@ -93,6 +93,25 @@ def claim_output(final: str | Path) -> Iterator[Path]:
         os.close(fd)  # releases the lock
 
 
+def check_free(final: str | Path) -> None:
+    """Raise :class:`OutputBusy` now if another live process holds the claim on ``final``
+    (a cheap early check for the command line; :func:`claim_output` is what guarantees)."""
+    path = lock_path(final)
+    try:
+        fd = os.open(path, os.O_RDWR)
+    except OSError:
+        return  # no lock file: nobody holds it
+    try:
+        if not _try_lock(fd):
+            owner = _read_pid(fd)
+            who = f"process {owner}" if owner else "another process"
+            raise OutputBusy(
+                f"output folder {Path(final)} is being written by {who} (lock {path}): wait "
+                "for that run to finish or choose another output folder (-o)")
+    finally:
+        os.close(fd)
+
+
 def _try_lock(fd: int) -> bool:
     try:
         import fcntl
