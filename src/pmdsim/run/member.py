@@ -16,7 +16,7 @@ from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, _encoding
 from ..report.text import description, summary_text_of
 from .dataset import assign_to_dataset, dot_dataset_variables
 from .diagnostics import diagnose_run
-from .result import RunResult, _Steps
+from .result import RunResult, _Steps, draw_safely
 
 
 def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
@@ -116,20 +116,24 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     timings["write"] += time.perf_counter() - t
 
     figure_paths: list[Path] = []
+    notes: list[str] = []
     t = time.perf_counter()
     if figures:
         from ..report import scene as plot  # matplotlib only when figures are made
 
-        figure_paths = plot.run_figures(sim, ds, folder / "figures")
+        figure_paths = draw_safely(notes, "of the scene", plot.run_figures, sim, ds,
+                                   folder / "figures")
         if stats or (dot_table and standalone):
             from ..report import chain as plot_chain
 
             if stats:
-                figure_paths += plot_chain.chain_figures(ds, folder / "figures", cfg.name,
-                                                         description(cfg))
+                figure_paths += draw_safely(notes, "of the measurement chain",
+                                            plot_chain.chain_figures, ds, folder / "figures",
+                                            cfg.name, description(cfg))
             if dot_table and standalone:
-                figure_paths += plot_chain.dot_figures(folder / "figures", {cfg.name: dot_images},
-                                             {cfg.name: dot_table}, sim, {})
+                figure_paths += draw_safely(notes, "of the dots", plot_chain.dot_figures,
+                                            folder / "figures", {cfg.name: dot_images},
+                                            {cfg.name: dot_table}, sim, {})
         steps.advance()
     timings["figures"] = time.perf_counter() - t
 
@@ -139,6 +143,6 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         figure_paths=tuple(figure_paths), exposure=exposure, shape=sim.shape,
         surface_pixels=surface_pixels, rays_per_pixel=sim.scene.rays_per_pixel,
         rays_traced=surface_pixels * sim.scene.rays_per_pixel * n_calls, timings=timings,
-        config=cfg, statistics=statistics,
+        config=cfg, statistics=statistics, notes=tuple(notes),
         warnings=() if diagnosed is None else diagnosed.warnings)
     return result, ds

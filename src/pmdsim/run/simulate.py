@@ -167,7 +167,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
             result, _ = run_member(cfg, plan.sim, geometry, tmp, plan.steps, plan.figures,
                                    plan.inputs, reference=reference, standalone=True,
                                    diagnostics=plan.diagnostics)
-            result = replace(result, notes=tuple(plan.notes),
+            result = replace(result, notes=tuple(plan.notes) + result.notes,
                              timings=dict(result.timings, **shared))
         timings = dict(result.timings, total=time.perf_counter() - t_start)
         result = replace(result, timings=timings)
