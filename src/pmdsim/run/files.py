@@ -144,8 +144,9 @@ def write_image(path: str | Path, image: np.ndarray, image_format: str = "tiff",
         import tifffile
 
         desc = json.dumps(metadata) if metadata else None
+        # zlib with horizontal differencing (TIFF predictor 2): lossless, ~20 % smaller
         tifffile.imwrite(path, np.asarray(image), description=desc, metadata=None,
-                         compression="zlib")
+                         compression="zlib", predictor=True)
     elif image_format == "png":
         path.write_bytes(_png_bytes(image))
     else:

@@ -12,7 +12,7 @@ from ..measure import chain
 from ..render import Geometry, Simulation
 from ..studies import coverage
 from . import files as pio
-from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, _encoding
+from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, write_dataset
 from ..report.text import description, summary_text_of
 from .dataset import assign_to_dataset, dot_dataset_variables
 from .diagnostics import diagnose_run
@@ -107,7 +107,7 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     timings["diagnostics"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    ds.to_zarr(folder / DATASET_NAME, mode="w-", consolidated=False, encoding=_encoding(ds))
+    write_dataset(ds, folder / DATASET_NAME)
     (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
     if statistics:
         (folder / "statistics.json").write_text(json.dumps(statistics, indent=2) + "\n")
