@@ -182,6 +182,10 @@ def simulate(
                   f"{chain_time}{diag_time}writing {result.timings['write']:.2f} s, "
                   f"figures {result.timings['figures']:.2f} s)")
     table.add_row("run folder", str(result.outdir))
+    if result.sizes:
+        from .run.files import size_text
+
+        table.add_row("size", size_text(result.sizes).removeprefix("run folder: "))
     if result.variants:
         for sub in result.variants:
             table.add_row(f"variant {sub.config.name}",
@@ -243,19 +247,22 @@ def _print_statistics(console: Console, result) -> None:
     per = {name: st for name, st in per.items() if "directions" in st}  # decoded ones
     if not per:
         return
-    table = Table(title="deviation from the ideal specular reference, RMS/P95 over the valid "
-                  "pixels (all statistics: statistics.json, summary.txt)", title_justify="left")
-    for col in ("variant", "dir", "phase mrad", "monitor px", "slope urad", "valid"):
+    table = Table(title="deviation from the ideal specular reference (decoded mirror) and, "
+                  "for the monitor coordinate, from the exact specular point P; RMS/P95 over "
+                  "the valid pixels (all statistics: statistics.json, summary.txt)",
+                  title_justify="left")
+    for col in ("variant", "dir", "phase mrad", "monitor px", "px vs exact P", "slope urad",
+                "valid"):
         table.add_column(col, justify="left" if col in ("variant", "dir") else "right",
                          no_wrap=True)
 
     def pair(s):
-        return "nan" if s["rms"] is None else f"{s['rms']:.3g}/{s['p95']:.3g}"
+        return "nan" if not s or s["rms"] is None else f"{s['rms']:.3g}/{s['p95']:.3g}"
 
     for name, st in per.items():
         for d, s in st["directions"].items():
             table.add_row(name, d.upper(), pair(s["phase_mrad"]), pair(s["coord_px"]),
-                          pair(s["slope_urad"]),
+                          pair(s.get("coord_vs_exact_px")), pair(s["slope_urad"]),
                           f"{100 * s['coord_px']['valid_fraction']:.1f} %")
     console.print(table)
 

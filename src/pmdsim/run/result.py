@@ -65,6 +65,9 @@ class RunResult:
     notes: tuple[str, ...] = ()
     statistics: dict = field(default_factory=dict)
     warnings: tuple = ()
+    #: bytes of the run folder by part (``total``, ``run.zarr``, ``images``, ``figures``,
+    #: ``other``), measured when it was complete
+    sizes: dict = field(default_factory=dict)
 
     @property
     def rays_per_second(self) -> float:

@@ -171,6 +171,13 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
                              timings=dict(result.timings, **shared))
         timings = dict(result.timings, total=time.perf_counter() - t_start)
         result = replace(result, timings=timings)
+        # the folder's size, measured now that everything but the manifest is written
+        sizes = pio.folder_sizes(tmp)
+        result = replace(result, sizes=sizes)
+        summary = tmp / "summary.txt"
+        if summary.is_file():
+            with open(summary, "a") as fh:
+                fh.write("\n" + pio.size_text(sizes) + "\n")
         if cfg.variants:
             write_variants_manifest(tmp, cfg, result)
         else:
