@@ -10,8 +10,8 @@ factor per run, so that every image of a run is comparable::
     value    ~ pixel / exposure
 
 ``headroom`` is 0.95 by default (the brightest pixel of the run is 95 % of full scale).
-TIFF is written with :mod:`tifffile`; PNG (grey, 8 or 16 bit) with the small encoder below
-(zlib only, no extra dependency).
+TIFF is written with :mod:`tifffile` (zlib, horizontal predictor); PNG (grey, 8 or 16 bit)
+with Pillow (:mod:`pmdsim.imagefile`).
 
 Run folders
 -----------
@@ -29,15 +29,14 @@ import json
 import os
 import re
 import shutil
-import struct
 import warnings
-import zlib
 from pathlib import Path
 from concurrent.futures import ThreadPoolExecutor
 from typing import Iterable, Iterator
 
 import numpy as np
 
+from .. import imagefile
 from ..measure import chain
 from . import claim
 
@@ -83,53 +82,9 @@ def to_integer_image(values: np.ndarray, exposure: float, bit_depth: int = 16) -
 
 
 # ----------------------------------------------------------------------------- image files
-def _png_bytes(image: np.ndarray) -> bytes:
-    """Encode a (H, W) uint8 or uint16 grey image as PNG (no filtering, zlib level 6)."""
-    img = np.asarray(image)
-    if img.ndim != 2 or img.dtype not in (np.uint8, np.uint16):
-        raise ValueError(f"PNG: need a (H, W) uint8/uint16 image, got {img.dtype} {img.shape}")
-    h, w = img.shape
-    depth = 8 * img.dtype.itemsize
-    rows = img.astype(">u2" if depth == 16 else "u1", copy=False)
-    raw = np.zeros((h, 1 + w * img.dtype.itemsize), np.uint8)  # filter byte 0 per row
-    raw[:, 1:] = rows.view(np.uint8).reshape(h, -1)
-
-    def chunk(tag: bytes, data: bytes) -> bytes:
-        return (struct.pack(">I", len(data)) + tag + data
-                + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF))
-
-    header = struct.pack(">IIBBBBB", w, h, depth, 0, 0, 0, 0)  # grey, no interlace
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
-            + chunk(b"IDAT", zlib.compress(raw.tobytes(), 6)) + chunk(b"IEND", b""))
-
-
 def read_png(path: str | Path) -> np.ndarray:
-    """Read a grey 8/16-bit PNG as written by :func:`write_image` (filter type 0 only)."""
-    data = Path(path).read_bytes()
-    if data[:8] != b"\x89PNG\r\n\x1a\n":
-        raise ValueError(f"{path}: not a PNG file")
-    pos, idat, header = 8, [], None
-    while pos < len(data):
-        (n,) = struct.unpack(">I", data[pos:pos + 4])
-        tag = data[pos + 4:pos + 8]
-        body = data[pos + 8:pos + 8 + n]
-        if tag == b"IHDR":
-            header = struct.unpack(">IIBBBBB", body)
-        elif tag == b"IDAT":
-            idat.append(body)
-        pos += 12 + n
-    if header is None:
-        raise ValueError(f"{path}: PNG without IHDR")
-    w, h, depth, colour, _, _, interlace = header
-    if colour != 0 or depth not in (8, 16) or interlace:
-        raise ValueError(f"{path}: only grey, non-interlaced 8/16-bit PNGs are supported")
-    size = depth // 8
-    raw = np.frombuffer(zlib.decompress(b"".join(idat)), np.uint8).reshape(h, 1 + w * size)
-    if np.any(raw[:, 0] != 0):
-        raise ValueError(f"{path}: filtered PNG rows are not supported by this reader")
-    body = np.ascontiguousarray(raw[:, 1:])
-    return body.view(">u2" if size == 2 else "u1").reshape(h, w).astype(
-        np.uint16 if size == 2 else np.uint8)
+    """Read a grey 8/16-bit PNG (Pillow, via :func:`pmdsim.imagefile.read_image_file`)."""
+    return read_image(path)
 
 
 def write_image(path: str | Path, image: np.ndarray, image_format: str = "tiff",
@@ -148,20 +103,16 @@ def write_image(path: str | Path, image: np.ndarray, image_format: str = "tiff",
         tifffile.imwrite(path, np.asarray(image), description=desc, metadata=None,
                          compression="zlib", predictor=True)
     elif image_format == "png":
-        path.write_bytes(_png_bytes(image))
+        imagefile.write_png(path, image)
     else:
         raise ValueError(f"output.image_format: must be 'tiff' or 'png', got {image_format!r}")
     return path
 
 
 def read_image(path: str | Path) -> np.ndarray:
-    """Read an image written by :func:`write_image` (TIFF or PNG) as stored (integers)."""
-    path = Path(path)
-    if path.suffix.lower() in (".tif", ".tiff"):
-        import tifffile
-
-        return tifffile.imread(path)
-    return read_png(path)
+    """Read an image written by :func:`write_image` (TIFF or PNG) as stored (integers),
+    with the one reader of the package (:func:`pmdsim.imagefile.read_image_file`)."""
+    return imagefile.read_image_file(path).array
 
 
 # ----------------------------------------------------------------------------- run folders
