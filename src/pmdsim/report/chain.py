@@ -222,7 +222,7 @@ def plot_deviation(ds, path, name: str | None = None) -> Path:
             _image_axes(ax)
         cb = fig.colorbar(im, ax=list(axes[:, j]), orientation="horizontal", shrink=0.9,
                           extend="both", pad=0.02)
-        cb.set_label(label + f", scale +-{lim:g} (P99.5)", fontsize=8)
+        cb.set_label(label + f"\nscale +-{lim:g} (P99.5)", fontsize=8)
     return _save(fig, path)
 
 
@@ -406,7 +406,7 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
             hist[k], colours[k], styles[k] = m, DIR_COLOURS.get(d), ls
             hstats[k] = st["directions"][d].get(key) or {}
     _histogram(ax, hist, colours, hstats, lim=lim, styles=styles)
-    ax.set_xlabel("coordinate deviation (monitor px): solid vs decoded mirror, dashed vs "
+    ax.set_xlabel("coordinate deviation (monitor px)\nsolid: vs decoded mirror, dashed: vs "
                   "exact specular point", fontsize=7)
     ax.set_ylabel("pixels", fontsize=8)
     ax.set_title("histogram of the valid pixels", fontsize=9)
