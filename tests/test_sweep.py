@@ -109,6 +109,9 @@ def test_designs_and_seeds():
     assert len({p.config.sampling.seed for p in grid.points}) == 6
     crn = plan_sweep(parse_config(_config(dict(SWEEP, common_random_numbers=True))))
     assert {p.config.sampling.seed for p in crn.points} == {3}
+    # The camera's noise is keyed the same way when the sensor is on.
+    noisy = plan_sweep(parse_config(dict(_config(SWEEP), sensor={"enabled": True, "seed": 5})))
+    assert [p.config.sensor.seed for p in noisy.points] == [point_seed(5, i) for i in range(6)]
 
     zipped = plan_sweep(parse_config(_config({"design": "zip", "parameters": {
         "brdf.alpha_x": [0.004, 0.01], "brdf.alpha_y": [0.001, 0.003]}})))

@@ -6,6 +6,7 @@
     pmdsim converge CONFIG -o OUTDIR [--n-values 25,50,..] [--theta 0.5,1,..] [--camera 160x128]
     pmdsim sweep CONFIG -o OUTDIR [--scheduler threads|processes|synchronous|tcp://..]
                                   [--workers N] [--overwrite] [--no-figures]
+    pmdsim report RUN [--all | --figure NAME ...] [--variant NAME] [-o FOLDER]
     pmdsim warmup
     pmdsim version
     pmdsim --help
@@ -434,6 +435,40 @@ def converge(
 
 
 @app.command()
+def budget(
+    config: Path = typer.Argument(..., help="Run configuration (TOML), e.g. "
+                                  "examples/realistic_system.toml."),
+    output: Path = typer.Option(..., "-o", "--output", help="Output folder to create."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
+    no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+) -> None:
+    """Error budget: the chain with each system effect of CONFIG alone and all together on
+    the ideal mirror, and the surface's scattering minus that mirror; deviation from the
+    exact reflection points in mrad, monitor px, mm and urad. Writes OUT/budget.csv,
+    budget.json, budget.png (docs/system.md)."""
+    from .config import ConfigError, load_config
+    from .report.budget import budget_text
+    from .run.budget import run_budget
+
+    console = _console()
+    try:
+        cfg = load_config(config)
+        t0 = time.perf_counter()
+        with console.status(f"error budget of {cfg.name}") as status:
+            result = run_budget(cfg, output, figure=not no_figure, overwrite=overwrite,
+                                progress=lambda msg: status.update(f"error budget of {cfg.name}: {msg}"))
+    except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
+            NotADirectoryError, ValueError) as err:
+        _fail(str(err))
+    console.print(f"pmdsim budget '{cfg.name}' ({time.perf_counter() - t0:.1f} s); deviation from "
+                  "the exact reflection point of each pixel's centre ray")
+    console.print(budget_text(result.rows), markup=False)
+    console.print(f"table  {result.table}")
+    if result.figure is not None:
+        console.print(f"figure {result.figure}")
+
+
+@app.command()
 def version() -> None:
     """Print the pmdsim version."""
     from ._version import __version__
@@ -500,6 +535,58 @@ def sweep(
     console.print(f"store: {result.store}")
     for f in result.files:
         console.print(f"wrote {f}")
+
+
+@app.command()
+def report(
+    run: Path = typer.Argument(..., help="A run folder written by pmdsim simulate."),
+    all_figures: bool = typer.Option(False, "--all", help="Every figure (default: the "
+                                     "summary: setup and overview)."),
+    figure: list[str] | None = typer.Option(None, "--figure", help="A figure by name "
+                                            "(repeatable): setup, fringes, modulation, "
+                                            "overview, phase, deviation, histograms, "
+                                            "modulation_ratio, masks."),
+    variant: str | None = typer.Option(None, "--variant", help="Only this variant of a run "
+                                       "with variants (default: all)."),
+    output: Path | None = typer.Option(None, "-o", "--output", help="Folder for the figures "
+                                       "(default: RUN/figures, or RUN/<variant>/figures)."),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="Drawing processes "
+                                       "(default: one per core for 4 figures or more)."),
+) -> None:
+    """Draw a run's figures again from its folder's dataset alone (run.zarr with its
+    configuration): any of them, all of them, into the run or another folder."""
+    from .config import RunConfig
+    from .report.text import description
+    from .run.dataset import DATASET_NAME
+    from .run.figures import draw_figures, figure_names
+
+    console = _console()
+    run = Path(run)
+    if (run / DATASET_NAME).is_dir():
+        members = [run]
+    else:
+        members = sorted(p.parent for p in run.glob(f"*/{DATASET_NAME}"))
+        if variant is not None:
+            members = [m for m in members if m.name == variant]
+    if not members:
+        _fail(f"{run}: no {DATASET_NAME} here" + (f" for variant {variant!r}" if variant else "")
+              + " (give a run folder written by pmdsim simulate)")
+    from .run.figures import open_dataset
+
+    which = figure or ("all" if all_figures else "summary")
+    t0 = time.perf_counter()
+    for folder in members:
+        ds = open_dataset(folder)
+        cfg = RunConfig.model_validate_json(ds.attrs["config_json"])
+        try:
+            names = figure_names(ds, which)
+        except ValueError as err:
+            _fail(str(err))
+        dest = output / folder.name if output is not None and len(members) > 1 else output
+        for p in draw_figures(folder, names, cfg.name, description(cfg), workers=workers,
+                              folder=dest):
+            console.print(f"wrote {p}")
+    console.print(f"in {time.perf_counter() - t0:.1f} s")
 
 
 @app.command()

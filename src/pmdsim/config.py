@@ -113,16 +113,58 @@ class CameraConfig(_Model):
     look_at_mm: Vec3 | None = None
     up: Vec3 = (0.0, 1.0, 0.0)
     rotation: tuple[Vec3, Vec3, Vec3] | None = None
+    # --- optics (scene/camera.py, docs/system.md) ---------------------------------------
+    camera_matrix: tuple[Vec3, Vec3, Vec3] | None = Field(
+        None, description="OpenCV camera matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (px); "
+        "replaces focal_length_px and principal_point_px")
+    dist_coeffs: tuple[Float, ...] | None = Field(
+        None, description="OpenCV distortion coefficients (k1, k2, p1, p2[, k3]); or give "
+        "k1, k2, k3, p1, p2 by name")
+    k1: Float = 0.0
+    k2: Float = 0.0
+    k3: Float = 0.0
+    p1: Float = 0.0
+    p2: Float = 0.0
+    subpixels: Annotated[Int, Field(ge=1, le=16)] = Field(
+        1, description="n: each pixel value integrates n x n stratified sub-pixel vision rays "
+        "(1 = one ray through the pixel centre)")
+    f_number: PositiveFloat | None = Field(
+        None, description="thin lens of focal_length_mm at this f-number (aperture diameter "
+        "focal_length_mm / f_number); none = pinhole")
+    focus_distance_mm: PositiveFloat | None = Field(
+        None, description="distance of the plane in focus along the optical axis; default: the "
+        "surface point seen by the image centre")
+    aperture_samples: Annotated[Int, Field(ge=1, le=100_000)] = Field(
+        16, description="stratified aperture samples per sub-pixel (thin lens only)")
+    aperture_seed: Annotated[Int, Field(ge=0, lt=2**63)] = 0
 
     _up = field_validator("up")(_nonzero_vector)
 
     @model_validator(mode="after")
     def _check(self) -> "CameraConfig":
+        if self.camera_matrix is not None:
+            k = np.asarray(self.camera_matrix, float)
+            if (k[0, 1] != 0 or k[1, 0] != 0 or k[2, 0] != 0 or k[2, 1] != 0 or k[2, 2] != 1
+                    or k[0, 0] <= 0 or k[1, 1] <= 0):
+                raise ValueError("camera_matrix must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] "
+                                 "with fx, fy > 0 (no skew)")
+            if self.focal_length_px is not None or self.principal_point_px is not None:
+                raise ValueError("give camera_matrix or focal_length_px/principal_point_px, not both")
+        if self.dist_coeffs is not None:
+            if len(self.dist_coeffs) not in (4, 5):
+                raise ValueError("dist_coeffs must be OpenCV's (k1, k2, p1, p2) or (k1, k2, p1, p2, k3)")
+            if any(getattr(self, n) != 0.0 for n in ("k1", "k2", "k3", "p1", "p2")):
+                raise ValueError("give dist_coeffs or k1, k2, k3, p1, p2 by name, not both")
+        if self.f_number is not None and self.focal_length_mm is None:
+            raise ValueError("f_number needs focal_length_mm (the aperture diameter is "
+                             "focal_length_mm / f_number)")
         has_mm = self.focal_length_mm is not None or self.pixel_pitch_mm is not None
-        if self.focal_length_px is None:
+        if self.camera_matrix is not None:
+            pass
+        elif self.focal_length_px is None:
             if self.focal_length_mm is None or self.pixel_pitch_mm is None:
                 raise ValueError(
-                    "give focal_length_mm and pixel_pitch_mm, or focal_length_px"
+                    "give focal_length_mm and pixel_pitch_mm, or focal_length_px (or camera_matrix)"
                 )
         elif has_mm and self.focal_length_mm is not None and self.pixel_pitch_mm is not None:
             if not math.isclose(
@@ -148,9 +190,19 @@ class CameraConfig(_Model):
 
     @property
     def focal_px(self) -> float:
+        if self.camera_matrix is not None:
+            return float(self.camera_matrix[0][0])
         if self.focal_length_px is not None:
             return float(self.focal_length_px)
         return float(self.focal_length_mm / self.pixel_pitch_mm)
+
+    @property
+    def distortion(self) -> tuple[float, float, float, float, float]:
+        """OpenCV order (k1, k2, p1, p2, k3)."""
+        if self.dist_coeffs is not None:
+            d = tuple(float(x) for x in self.dist_coeffs)
+            return d + (0.0,) * (5 - len(d))
+        return (self.k1, self.k2, self.p1, self.p2, self.k3)
 
 
 class MonitorConfig(_Model):
@@ -174,6 +226,27 @@ class MonitorConfig(_Model):
         description="nearest: each monitor pixel a flat square emitter (the pattern value at "
         "the pixel centre); continuous: analytic fringes evaluated at the exact hit point",
     )
+    # --- display physics (scene/display.py, docs/system.md) ---------------------------
+    response_lut: str | None = Field(
+        None, description="CSV file of (drive in [0, 1], relative luminance) rows replacing "
+        "gamma; path relative to the config file")
+    bit_depth: Annotated[Int, Field(ge=1, le=16)] | None = Field(
+        None, description="quantise the drive value to this many bits before the response "
+        "(8 or 10 on real displays); none = unquantised")
+    precompensate_gamma: Bool = Field(
+        False, description="show the pattern through the inverse response, so that the "
+        "luminance (not the drive) is sinusoidal")
+    falloff_exponent: Annotated[Float, Field(ge=0)] = Field(
+        0.0, description="luminance ~ cos(theta)^m of the emission angle (0 = Lambertian)")
+    falloff_table: tuple[tuple[Annotated[Float, Field(ge=0, lt=90)], Annotated[Float, Field(ge=0)]], ...] = Field(
+        (), description="(angle_deg, relative luminance) rows, interpolated; multiplies the "
+        "cos^m falloff")
+    cover_glass_thickness_mm: Annotated[Float, Field(ge=0)] = 0.0
+    cover_glass_index: Annotated[Float, Field(ge=1)] = 1.5
+    flatness_coefficients_mm: tuple[tuple[Float, ...], ...] = Field(
+        (), description="c[i][j]: the emitting surface lies h = sum c[i][j] x^i y^j mm in "
+        "front of the nominal plane (towards the viewer), x, y in mm from the centre along "
+        "the pixel columns / rows; up to 4 x 4")
 
     _up = field_validator("up")(_nonzero_vector)
 
@@ -181,6 +254,14 @@ class MonitorConfig(_Model):
     def _check(self) -> "MonitorConfig":
         if self.white_level <= self.black_level:
             raise ValueError("white_level must be greater than black_level")
+        c = self.flatness_coefficients_mm
+        if c and (len(c) > 4 or any(len(r) != len(c) for r in c)):
+            raise ValueError("flatness_coefficients_mm must be a square matrix of at most 4 x 4")
+        if self.response_lut is not None and self.gamma != 1.0:
+            raise ValueError("give gamma or response_lut, not both")
+        angles = [a for a, _ in self.falloff_table]
+        if any(b <= a for a, b in zip(angles, angles[1:])):
+            raise ValueError("falloff_table angles must increase")
         n = np.subtract(self.look_at_mm, self.centre_mm)
         if np.linalg.norm(n) < 1e-9:
             raise ValueError("look_at_mm must differ from centre_mm")
@@ -602,6 +683,31 @@ class OutputConfig(_Model):
     bit_depth: Literal[8, 16] = 16
     write_images: Bool = True
     figures: Bool = True
+    figure_set: Literal["summary", "all"] = Field(
+        "summary", description="summary: setup.png and overview.png (without decoding: "
+        "setup, fringes, modulation); all: every figure (pmdsim report RUN --all draws them "
+        "later from the run folder)")
+    figure_workers: Annotated[Int, Field(ge=1, le=4096)] | None = Field(
+        None, description="processes drawing the figures; default: one per core when there "
+        "are 4 figures or more, else drawn in the run's own process")
+
+
+class ReconstructConfig(_Model):
+    """Monocular reconstruction of the surface from the decoded monitor coordinates of both
+    fringe directions (docs/reconstruction.md), with the configured surface as the nominal
+    shape; height and slope errors against the configured (true) surface.
+
+    ``enabled``: None = whenever the chain decodes both directions x and y; ``spacing_mm``:
+    the surface grid; ``remove``: terms removed before the height statistics (``piston``,
+    ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism);
+    ``order``: 2 = classic Southwell, 4 = higher-order; ``anchor``: where the height is
+    tied to the nominal shape (the aperture centre, or the mean over the aperture)."""
+
+    enabled: Bool | None = None
+    spacing_mm: PositiveFloat = 0.5
+    remove: Literal["none", "piston", "tilt", "power", "astigmatism"] = "piston"
+    order: Literal[2, 4] = 4
+    anchor: Literal["centre", "mean"] = "centre"
 
 
 class DecodeConfig(_Model):
@@ -630,6 +736,51 @@ class DecodeConfig(_Model):
         0.1, description="mask (low_modulation) pixels whose modulation B/A of any width is "
         "below this fraction of the specular reference's; they are counted, not hidden"
     )
+
+
+class SensorConfig(_Model):
+    """The camera sensor, EMVA 1288 linear model (:mod:`pmdsim.scene.sensor`).
+
+    Off by default (noise-free camera values). When ``enabled``, camera values become digital
+    numbers (DN): the brightest finite value of each captured stack gets ``exposure`` mean
+    electrons (give one of ``exposure_electrons``, ``exposure_photons`` (times
+    ``quantum_efficiency``) or ``target_fill`` of ``full_well_electrons``; default fill 0.7),
+    then PRNU, shot noise (Poisson), dark signal, DSNU and temporal dark noise (electrons),
+    clipping at the full well, gain ``gain_dn_per_electron`` (default: the full well fills
+    the ADC), offset, rounding and clipping to ``bit_depth`` bits. Fixed patterns (DSNU,
+    PRNU) depend on ``seed`` only; temporal noise on ``seed`` and the frame.
+    """
+
+    enabled: Bool = False
+    quantum_efficiency: Annotated[Float, Field(gt=0, le=1)] = 1.0
+    exposure_electrons: PositiveFloat | None = None
+    exposure_photons: PositiveFloat | None = None
+    target_fill: Annotated[Float, Field(gt=0, le=1)] | None = None
+    full_well_electrons: PositiveFloat = 10000.0
+    dark_noise_electrons: Annotated[Float, Field(ge=0)] = Field(
+        0.0, description="sigma_d, temporal dark noise (std, e-)")
+    dark_signal_electrons: Annotated[Float, Field(ge=0)] = Field(
+        0.0, description="mu_d, mean dark signal (e-)")
+    dsnu_electrons: Annotated[Float, Field(ge=0)] = Field(
+        0.0, description="dark signal non-uniformity: std of the per-pixel dark offset (e-)")
+    prnu: Annotated[Float, Field(ge=0, lt=1)] = Field(
+        0.0, description="photo-response non-uniformity: relative std of the per-pixel gain (1)")
+    gain_dn_per_electron: PositiveFloat | None = Field(
+        None, description="overall system gain K (DN/e-); default (2^bits - 1 - offset) / full well")
+    bit_depth: Annotated[Int, Field(ge=1, le=16)] = 12
+    offset_dn: Annotated[Float, Field(ge=0)] = 0.0
+    shot_noise: Bool = True
+    seed: Annotated[Int, Field(ge=0, lt=2**63)] = 0
+
+    @model_validator(mode="after")
+    def _check(self) -> "SensorConfig":
+        given = [k for k in ("exposure_electrons", "exposure_photons", "target_fill")
+                 if getattr(self, k) is not None]
+        if len(given) > 1:
+            raise ValueError(f"give one of exposure_electrons, exposure_photons, target_fill (got {given})")
+        if self.offset_dn >= 2**self.bit_depth - 1:
+            raise ValueError(f"offset_dn must be below the ADC maximum 2^{self.bit_depth} - 1")
+        return self
 
 
 class SweepRange(_Model):
@@ -770,7 +921,9 @@ class RunConfig(_Model):
     compute: ComputeConfig = ComputeConfig()
     output: OutputConfig = OutputConfig()
     decode: DecodeConfig = DecodeConfig()
+    reconstruct: ReconstructConfig = ReconstructConfig()
     diagnostics: DiagnosticsConfig = DiagnosticsConfig()
+    sensor: SensorConfig = SensorConfig()
     variants: Annotated[tuple[VariantConfig, ...], Field(max_length=64)] = ()
     sweep: SweepConfig | None = None
 
@@ -879,6 +1032,9 @@ def load_config(path: str | Path) -> RunConfig:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    mon = data.get("monitor")
+    if isinstance(mon, dict) and isinstance(mon.get("response_lut"), str):
+        mon["response_lut"] = str((path.parent / mon["response_lut"]).resolve())
     surf = data.get("surface")
     if isinstance(surf, dict) and surf.get("type") == "height_map":
         surf["file"] = _resolve_file(path.parent, surf.get("file"))

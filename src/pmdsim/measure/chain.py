@@ -5,9 +5,11 @@ way: the fringe images of the surface under test and those of its ideal specular
 (the same scene with the mirror BRDF, :meth:`pmdsim.scene.Scene.specular`) are decoded per
 direction with :func:`pmdsim.decode.decode_sequence` (phase shifting + temporal unwrapping,
 with reliability flags), compared with :func:`pmdsim.measure.deviation.compare_direction`, and the
-monitor-coordinate deviation is turned into a slope deviation with
-:func:`pmdsim.measure.deviation.slope_deviation` (the distance being that from the surface point to
-the reference's monitor point). :func:`dot_table` measures the second moments of dot images.
+monitor-coordinate deviation is turned into a slope deviation with the full 3-D geometry,
+:func:`pmdsim.measure.reconstruct.slope_deviation_3d` (the tilt of the bisector normal at
+the surface point that moves the exact specular monitor point by the deviation), or, without
+the surface points, the small-angle :func:`pmdsim.measure.deviation.slope_deviation`
+(coord / 2 d: right in the plane of incidence, cos(theta_i) short across it). :func:`dot_table` measures the second moments of dot images.
 
 Everything here computes; nothing is written (see :mod:`pmdsim.run`) or drawn (see
 :mod:`pmdsim.report.chain`).
@@ -90,7 +92,7 @@ def _coarse_width(extent: float) -> int:
 
 
 # ----------------------------------------------------------------------------- decoding
-def decode_fringes(fringes, monitor_resolution, decode_cfg) -> dict:
+def decode_fringes(fringes, monitor_resolution, decode_cfg, saturation_level=None) -> dict:
     """Decode every direction of a :class:`~pmdsim.render.FringeResult`.
 
     Returns ``{direction: DecodeResult}``; frames are ``fringes.images[d]`` (n_widths, K,
@@ -101,13 +103,15 @@ def decode_fringes(fringes, monitor_resolution, decode_cfg) -> dict:
         out[d] = dec.decode_sequence(
             fringes.images[di], fringes.widths, fringes.shifts, extent_px(monitor_resolution, d),
             decode_cfg.method, min_relative_amplitude=decode_cfg.min_relative_amplitude,
-            max_order_residual=decode_cfg.max_order_residual, dtype=np.float32)
+            max_order_residual=decode_cfg.max_order_residual, dtype=np.float32,
+            saturation_level=saturation_level)
     return out
 
 
-def surface_to_monitor_mm(sim, geometry, rows_per_chunk: int = 128) -> np.ndarray:
+def surface_to_monitor_mm(sim, geometry, rows_per_chunk: int = 128, points_out=None) -> np.ndarray:
     """(H, W) distance (mm) from each pixel's surface point to the exact monitor point of its
-    principal reflection P; NaN where P misses the monitor."""
+    principal reflection P; NaN where P misses the monitor. ``points_out`` ((H, W, 3),
+    optional) receives the surface points (NaN off the surface)."""
     from ..trace import trace_primary
 
     scene = sim.scene
@@ -118,7 +122,36 @@ def surface_to_monitor_mm(sim, geometry, rows_per_chunk: int = 128) -> np.ndarra
         hits = trace_primary(scene, r0, r1)
         target = scene.monitor.pixel_to_world(geometry.specular_u[r0:r1], geometry.specular_v[r0:r1])
         out[r0:r1] = np.linalg.norm(target - hits.point, axis=-1)
+        if points_out is not None:
+            points_out[r0:r1] = hits.point
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class SlopeGeometry:
+    """What the 3-D slope conversion needs: the surface point of every pixel (H, W, 3) mm,
+    the camera centre (3,) and the monitor (``pixel_to_world``)."""
+
+    points_mm: np.ndarray
+    camera_position: np.ndarray
+    monitor: object
+
+
+def slope_deviation_urad(direction, coord_px, geometry, slope_geometry, distance_mm, pitch_mm):
+    """Slope deviation (urad) of one direction: 3-D when ``slope_geometry`` is given
+    (exact specular point moved by the deviation along the direction's monitor axis), else
+    the small-angle coord / (2 d)."""
+    if slope_geometry is None:
+        return analysis.slope_deviation(coord_px * pitch_mm, distance_mm) * 1e6
+    from .reconstruct import slope_deviation_3d
+
+    su, sv = geometry.specular_u, geometry.specular_v
+    du = np.where(np.isfinite(coord_px), coord_px, np.nan)
+    u1, v1 = (su + du, sv) if direction == "x" else (su, sv + du)
+    with np.errstate(invalid="ignore"):
+        s = slope_deviation_3d(slope_geometry.points_mm, slope_geometry.camera_position,
+                               slope_geometry.monitor, su, sv, u1, v1)
+    return np.where(np.isfinite(coord_px), s * 1e6, np.nan)
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,7 +190,8 @@ class ChainResult:
 
 
 def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, pitch_mm: float,
-            decode_cfg, shifts: int, off_monitor: np.ndarray | None = None) -> ChainResult:
+            decode_cfg, shifts: int, slope_geometry: SlopeGeometry | None = None,
+            off_monitor: np.ndarray | None = None) -> ChainResult:
     """Deviation of every decoded direction from the decoded reference.
 
     Parameters
@@ -169,6 +203,9 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
         Surface-to-monitor distance for the slope deviation.
     pitch_mm : float
         Monitor pixel pitch.
+    slope_geometry : SlopeGeometry, optional
+        Surface points, camera centre and monitor for the 3-D slope conversion (default:
+        the small-angle coord / (2 d), wrong by cos(theta_i) across the plane of incidence).
     off_monitor : (H, W) bool ndarray, optional
         Pixels whose bundle hangs off the monitor: excluded from the valid pixels and
         counted (``pixels.lobe_off_monitor`` of the statistics).
@@ -184,7 +221,7 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
                 res.valid if keep is None else res.valid & keep,
                 ref.absolute_phase, ref.monitor_coord_px, ref.modulation, ref.valid, pitch_mm,
                 decode_cfg.min_modulation_ratio)
-        slope = analysis.slope_deviation(dev.coord_mm, distance_mm) * 1e6
+        slope = slope_deviation_urad(d, dev.coord_px, geometry, slope_geometry, distance_mm, pitch_mm)
         considered = np.asarray(ref.valid, bool)
         per[d] = DirectionChain(
             d, res, ref, dev, slope, analysis.deviation_stats(slope, dev.valid, considered),
@@ -243,7 +280,7 @@ def statistics(chain: ChainResult, name: str) -> dict:
         "units": dict(QUANTITIES),
         "definitions": {
             "deviation": "decoded(surface) - decoded(specular reference), finest width",
-            "slope_urad": "coord_mm / (2 d), d = surface point to monitor point (mm), in urad",
+            "slope_urad": "tilt of the bisector normal (surface point -> camera, -> monitor point) that moves the exact specular monitor point by the coordinate deviation (full 3-D geometry), in urad",
             "p95, max": "of the absolute deviation",
             "valid_fraction": "valid / considered; considered = pixels whose reference decodes "
                               "without flags (n_masked = considered - valid)",
@@ -337,4 +374,4 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
 
 
 __all__ = ["DirectionChain", "ChainResult", "decode_problem", "decode_fringes", "compare",
-           "surface_to_monitor_mm", "statistics", "dot_table", "DOT_COLUMNS", "QUANTITIES", "STATISTICS", "DOT_THRESHOLD_FRACTION"]
+           "surface_to_monitor_mm", "SlopeGeometry", "slope_deviation_urad", "statistics", "dot_table", "DOT_COLUMNS", "QUANTITIES", "STATISTICS", "DOT_THRESHOLD_FRACTION"]

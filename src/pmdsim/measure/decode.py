@@ -65,6 +65,8 @@ bit    name                  meaning
                              ``max_order_residual`` (0 = perfect, 0.5 = ambiguous)
 8      ``OUT_OF_RANGE``      the monitor coordinate lies outside the monitor,
                              ``[-0.5, extent_px - 0.5)`` monitor px
+16     ``SATURATED``         a frame of the pixel reached ``saturation_level`` (the camera's
+                             full well or ADC maximum): its phase is biased
 =====  ====================  ===========================================================
 """
 
@@ -107,6 +109,7 @@ class DecodeFlag(enum.IntFlag):
     LOW_AMPLITUDE = int(_k.FLAG_LOW_AMPLITUDE)
     ORDER_RESIDUAL = int(_k.FLAG_ORDER_RESIDUAL)
     OUT_OF_RANGE = int(_k.FLAG_OUT_OF_RANGE)
+    SATURATED = 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -618,6 +621,7 @@ def decode_sequence(
     min_relative_amplitude: float = 0.1,
     max_order_residual: float = 0.25,
     dtype=np.float64,
+    saturation_level: float | None = None,
 ) -> DecodeResult:
     """Decode the fringe images of one direction to absolute phase and monitor coordinate.
 
@@ -648,6 +652,9 @@ def decode_sequence(
     dtype : {float64, float32}, optional
         Dtype of the per-width maps (wrapped phase, amplitude, offset, modulation). Absolute
         phase, monitor coordinate and order residual are always float64.
+    saturation_level : float, optional
+        Grey value at which the camera saturates (e.g. ``2**bits - 1``): pixels with a frame
+        at or above it get ``SATURATED``. None: no check.
 
     Returns
     -------
@@ -696,6 +703,9 @@ def decode_sequence(
                         abs_phase, coord, residual, flags)
     if a_min > 0 or rel > 0:
         _k.flag_low_amplitude(amplitude, _amplitude_thresholds(amplitude, a_min, rel), flags)
+    if saturation_level is not None:
+        sat = np.any(arr >= saturation_level, axis=(0, 1))
+        flags[sat] |= np.uint8(DecodeFlag.SATURATED)
     return DecodeResult(
         absolute_phase=abs_phase,
         monitor_coord_px=coord,

@@ -56,9 +56,10 @@ def deviation_stats(deviation: np.ndarray, valid: np.ndarray, considered: np.nda
         finite pixels of ``deviation`` or ``valid``.
     """
     deviation = np.asarray(deviation, np.float64)
-    valid = np.asarray(valid, bool) & np.isfinite(deviation)
-    if considered is None:
-        considered = valid | np.isfinite(deviation)
+    given = np.asarray(valid, bool)
+    valid = given & np.isfinite(deviation)
+    if considered is None:  # a pixel marked valid whose deviation is NaN is masked, not hidden
+        considered = given | np.isfinite(deviation)
     considered = np.asarray(considered, bool)
     n_cons = int(considered.sum())
     d = deviation[valid]
@@ -165,6 +166,11 @@ def slope_deviation(coord_mm: np.ndarray, distance_mm: np.ndarray) -> np.ndarray
     hit by 2 delta_s d (small angles, monitor roughly normal to the ray, d = distance from
     the surface point to the monitor hit): delta_s = delta_c / (2 d). This is the
     sensitivity PMD works with (PHYSICS.md: delta_s = p delta_phi / (4 pi d)).
+
+    Only right in the plane of incidence: across it a tilt delta turns the ray by
+    2 delta cos(theta_i), so this is cos(theta_i) too small there (0.906 at 25 deg, 0.707
+    at 45 deg). The measurement chain uses the full 3-D conversion
+    :func:`pmdsim.measure.reconstruct.slope_deviation_3d` when it knows the geometry.
     """
     return np.asarray(coord_mm, np.float64) / (2.0 * np.asarray(distance_mm, np.float64))
 

@@ -42,6 +42,8 @@ __all__ = [
     "prior_frame",
     "PriorFrame",
     "slope_deviation_3d",
+    "SurfaceErrors",
+    "surface_errors",
 ]
 
 
@@ -185,6 +187,28 @@ def _support_ok(valid, col, row):
     return inside & valid[r0, c0] & valid[r0 + 1, c0] & valid[r0, c0 + 1] & valid[r0 + 1, c0 + 1]
 
 
+def _anchor(z, nominal, ok, anchor_idx):
+    """Tie each connected part of the measured grid to the nominal shape: the part holding
+    the anchor node (or, when that node is not measured, the measured node nearest to it)
+    at that node, every other part (and all with ``anchor_idx`` None) by its mean."""
+    if not ok.any():
+        return z
+    labels, n = ndimage.label(ok)
+    out = z.copy()
+    if anchor_idx is not None and not ok[anchor_idx]:
+        rr, cc = np.nonzero(ok)
+        k = np.argmin((rr - anchor_idx[0]) ** 2 + (cc - anchor_idx[1]) ** 2)
+        anchor_idx = (int(rr[k]), int(cc[k]))
+    anchored = labels[anchor_idx] if anchor_idx is not None else 0
+    for lab in range(1, n + 1):
+        part = labels == lab
+        if lab == anchored:
+            out[part] = z[part] - z[anchor_idx] + nominal[anchor_idx]
+        else:
+            out[part] = z[part] - z[part].mean() + nominal[part].mean()
+    return out
+
+
 def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, grid=None,
                 anchor="centre", order=4, max_iter=30, tol_mm=1e-9, solver="auto") -> Reconstruction:
     """Surface height and slopes from decoded monitor coordinates (monocular PMD).
@@ -201,7 +225,8 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     grid : (x_mm, y_mm), optional — 1-D local coordinates of the grid columns / rows
     anchor : "centre" | "mean" | (x, y)
         Where the height is tied to the prior: the grid node nearest the aperture centre
-        (default) or (x, y), or the mean over the aperture.
+        (default) or (x, y) (the nearest measured node when that one is not measured), or
+        the mean over the aperture. Separate measured parts are each tied by their mean.
     order, solver : passed to :func:`~pmdsim.measure.integrate.southwell`
     max_iter, tol_mm : the height-normal iteration stops when max |dz| < tol_mm.
     """
@@ -260,12 +285,7 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         sx[node_ok] = a
         sy[node_ok] = b
         zi = southwell(sx, sy, (dx, dy), node_ok, order=order, solver=solver, remove="none")
-        if anchor_idx is None:
-            zi = zi - np.nanmean(zi[node_ok]) + nominal[node_ok].mean()
-        else:
-            if not node_ok[anchor_idx]:
-                raise ValueError(f"anchor node {anchor_idx} is not measured; choose anchor='mean' or another point")
-            zi = zi - zi[anchor_idx] + nominal[anchor_idx]
+        zi = _anchor(zi, nominal, node_ok, anchor_idx)
         znew = np.where(node_ok, zi, nominal)
         change = float(np.max(np.abs(znew - z)[node_ok])) if node_ok.any() else 0.0
         history.append(change)
@@ -297,3 +317,44 @@ def slope_deviation_3d(points, camera_position, monitor, u_ref, v_ref, u, v):
     dv = np.asarray(v, np.float64) - v_ref
     sign = np.where(np.abs(du) >= np.abs(dv), np.sign(du), np.sign(dv))
     return sign * ang
+
+
+@dataclass(frozen=True)
+class SurfaceErrors:
+    """Reconstructed minus true surface on the reconstruction grid.
+
+    ``height_nm`` after removing ``removed`` (see :func:`~pmdsim.measure.integrate.remove_terms`),
+    ``slope_x_urad`` / ``slope_y_urad`` the slope errors dz/dx, dz/dy in the surface's local
+    frame; ``stats``: RMS/PV/P95 of each (:func:`~pmdsim.measure.integrate.height_stats`)."""
+
+    height_nm: np.ndarray
+    slope_x_urad: np.ndarray
+    slope_y_urad: np.ndarray
+    removed: str
+    stats: dict
+
+
+def surface_errors(rec: Reconstruction, truth, remove="piston") -> SurfaceErrors:
+    """Errors of a :class:`Reconstruction` against the true surface (a scene surface or a
+    :class:`PriorFrame`; its sag and gradient are evaluated on the grid)."""
+    from .integrate import height_stats, remove_terms
+
+    x, y = np.meshgrid(rec.x_mm, rec.y_mm)
+    if hasattr(truth, "sag") and not isinstance(truth, PriorFrame):
+        z, gx, gy, _ = truth.sag(x, y)
+    else:  # flat rectangle / prior frame: numerical gradient of its sag is zero for a plane
+        pf = truth if isinstance(truth, PriorFrame) else prior_frame(truth)
+        z = np.asarray(pf.sag(x, y), np.float64)
+        gx = np.zeros_like(z)
+        gy = np.zeros_like(z)
+    m = rec.mask
+    dh = remove_terms(rec.height_mm - z, m, x, y, remove) * 1e6
+    ex = np.where(m, rec.slope_x - gx, np.nan) * 1e6
+    ey = np.where(m, rec.slope_y - gy, np.nan) * 1e6
+    stats = {"height_error_nm": height_stats(dh).as_dict(),
+             "slope_error_x_urad": height_stats(ex).as_dict(),
+             "slope_error_y_urad": height_stats(ey).as_dict()}
+    # slope statistics are about zero, not the mean: report the RMS about zero too
+    for k, a in (("slope_error_x_urad", ex), ("slope_error_y_urad", ey)):
+        stats[k]["rms_about_zero"] = float(np.sqrt(np.nanmean(a**2))) if np.isfinite(a).any() else float("nan")
+    return SurfaceErrors(dh, ex, ey, remove if isinstance(remove, str) else "+".join(remove), stats)

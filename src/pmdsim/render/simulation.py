@@ -45,11 +45,17 @@ ProgressFn = Callable[[int, int], None]
 
 
 def scene_geometry_rows(scene: Scene, row0: int, row1: int):
-    """Compiled vision-ray trace of camera rows ``row0:row1``.
+    """Compiled vision-ray trace of camera rows ``row0:row1``, one pinhole ray per pixel
+    centre (cameras with sub-pixels, a lens or distortion: :func:`vision_geometry_rows`).
 
     Returns the bundle geometry rows ((row1-row0)*W, G_SIZE) and the exact monitor
     coordinates of P ((row1-row0)*W, 2), NaN where P misses the monitor.
     """
+    if not scene.camera.is_simple_pinhole:
+        rows, cols = np.mgrid[row0:row1, 0 : scene.camera.width]
+        o = np.broadcast_to(scene.camera.position, (rows.size, 3))
+        d = scene.camera.ray_directions(rows.ravel(), cols.ravel())
+        return _rays_geometry(scene, o, d)
     n = (row1 - row0) * scene.camera.width
     geo = np.empty((n, kb.G_SIZE))
     spec = np.empty((n, 2))
@@ -59,6 +65,51 @@ def scene_geometry_rows(scene: Scene, row0: int, row1: int):
         row0, row1, scene.camera.width, geo, spec,
     )
     return geo, spec
+
+def _rays_geometry(scene: Scene, origins, dirs):
+    n = origins.shape[0]
+    geo = np.empty((n, kb.G_SIZE))
+    spec = np.empty((n, 2))
+    kprim.geometry_rays(
+        np.ascontiguousarray(origins, np.float64), np.ascontiguousarray(dirs, np.float64),
+        scene.surface.kernel_params(), scene.anisotropy.kernel_params(),
+        scene.monitor.kernel_params(), geo, spec,
+    )
+    return geo, spec
+
+
+def vision_geometry_rows(scene: Scene, row: int):
+    """Geometry rows (W * S, G_SIZE) and exact monitor hits (W * S, 2) of the S vision rays
+    (sub-pixels x aperture samples, :meth:`pmdsim.scene.Camera.vision_rays`) of every pixel
+    of camera row ``row``, pixel-major."""
+    w = scene.camera.width
+    o, d = scene.camera.vision_rays(np.full(w, row), np.arange(w))
+    return _rays_geometry(scene, o.reshape(-1, 3), d.reshape(-1, 3))
+
+
+def reduce_subrays(out: np.ndarray, estimator: str) -> np.ndarray:
+    """Pixel sums (P, C) from the kernel sums of their S vision rays (P, S, C).
+
+    A pixel integrates radiance over its footprint and the aperture: its value is the mean
+    over its S rays of each ray's estimate. The ``paper`` and ``radiometric`` estimators
+    share the factor 1/N, so the raw sums are averaged; ``weighted_mean`` normalises every
+    ray by its own sum of weights first (the pixel's ``OUT_FTOTAL`` becomes 1). Rays that
+    miss the surface (NaN) see a black background; a pixel none of whose rays hits is NaN.
+    """
+    s = out.shape[1]
+    hit = np.isfinite(out[..., kb.OUT_FTOTAL])
+    if estimator == "weighted_mean":
+        ft = out[..., kb.OUT_FTOTAL]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scaled = out / ft[..., None]
+        hit &= ft > 0
+        out = scaled
+    summed = np.where(hit[..., None], out, 0.0).sum(axis=1) / s
+    if estimator == "weighted_mean":
+        summed[:, kb.OUT_FTOTAL] = 1.0
+    summed[~hit.any(axis=1)] = np.nan
+    return summed
+
 
 #: Harmonics used for analytic fringes on a continuous monitor with gamma != 1.
 GAMMA_HARMONICS = 16
@@ -205,22 +256,43 @@ class Simulation:
         dots = np.zeros((0, 4)) if dots is None else np.asarray(dots, np.float64)
         width = scene.camera.width
         none = np.zeros((0, 0))
+        mc = scene.monitor.correction_params()
+        extra = () if mc is None else (mc,)
+        cam = scene.camera
+        simple = cam.is_simple_pinhole
+        n_sub = cam.rays_per_pixel
 
-        def tile(r0, r1):
-            geo, _ = scene_geometry_rows(scene, r0, r1)
-            rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
+        def kernel(geo, rot):
             out = np.empty((geo.shape[0], ncols))
             if lobe:
                 kb.render_tile_lobe(
                     geo, brdf, u1, u2, rot, mshape, mode,
-                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none,
+                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
                 )
             else:
                 kb.render_tile(
                     geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, True, mshape, mode,
-                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none,
+                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
                 )
-            return out.reshape(r1 - r0, width, ncols)
+            return out
+
+        def tile(r0, r1):
+            if simple:
+                geo, _ = scene_geometry_rows(scene, r0, r1)
+                rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
+                return kernel(geo, rot).reshape(r1 - r0, width, ncols)
+            # camera optics: S vision rays per pixel, each with its own scattered bundle,
+            # one camera row per kernel call; the pixel's sums are the mean over its rays
+            res = np.empty((r1 - r0, width, ncols))
+            for r in range(r0, r1):
+                geo, _ = vision_geometry_rows(scene, r)
+                if delta or samp.mode == "stratified":
+                    rot = np.zeros((0, 2))
+                else:
+                    rot = np.random.default_rng([samp.seed, r]).random((geo.shape[0], 2))
+                out = kernel(geo, rot).reshape(width, n_sub, ncols)
+                res[r - r0] = reduce_subrays(out, scene.estimator)
+            return res
 
         parts = self._compute(tile, self._tiles(), progress)
         return np.concatenate(parts, axis=0)
@@ -234,8 +306,23 @@ class Simulation:
             return np.where(ftot > 0, 1.0 / ftot, np.nan)
 
     # ------------------------------------------------------------------ public API
+    def footprint_specular(self) -> tuple[np.ndarray, np.ndarray]:
+        """(u, v) (H, W): the exact monitor coordinates of the principal reflections averaged
+        over each pixel's vision rays (sub-pixels x aperture; NaN where any misses)."""
+        h, w = self.shape
+        u = np.empty((h, w))
+        v = np.empty((h, w))
+        n = self.scene.camera.rays_per_pixel
+        for r in range(h):
+            _, spec = vision_geometry_rows(self.scene, r)
+            spec = spec.reshape(w, n, 2)
+            u[r] = spec[..., 0].mean(axis=1)
+            v[r] = spec[..., 1].mean(axis=1)
+        return u, v
+
     def geometry(self) -> Geometry:
-        """Vision-ray results for the whole camera (NumPy; no bundle)."""
+        """Vision-ray results for the whole camera: the chief ray through each pixel centre
+        (no bundle)."""
         h, w = self.shape
         geo, spec = scene_geometry_rows(self.scene, 0, h)
         valid = geo[:, kb.G_VALID].reshape(h, w) > 0
@@ -266,7 +353,7 @@ class Simulation:
         black, white, gamma = mon.black_level, mon.white_level, mon.gamma
         nw, nd = len(widths), len(directions)
         coords = {"x": np.arange(mon.width, dtype=np.float64), "y": np.arange(mon.height, dtype=np.float64)}
-        linear = gamma == 1.0
+        linear = mon.is_linear
         continuous = mon.pixel_model == "continuous"
         # Build the per-direction work lists: each entry is a profile table (nearest) or a
         # frequency (continuous).

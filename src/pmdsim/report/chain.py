@@ -33,7 +33,7 @@ from matplotlib.colors import ListedColormap, to_rgba
 from matplotlib.lines import Line2D
 from matplotlib.patches import Ellipse, Patch
 
-from .scene import DPI, _figure, _save
+from .scene import DPI, _figure, _save, imshow
 
 #: Colours of the pixel classes in deviation maps.
 CLASS_COLOURS = {
@@ -122,7 +122,7 @@ def _overlay(ax, ds, d: str, legend: bool = False, counts: bool = True):
         if m.any() or name in ("low modulation", "decode flagged"):
             lab = f"{name}: {int(m.sum()):,}" if counts else name
             handles.append(Patch(facecolor=CLASS_COLOURS[name], edgecolor="0.5", label=lab))
-    ax.imshow(rgba, interpolation="nearest")
+    imshow(ax, rgba, interpolation="nearest")
     if legend:
         ax.legend(handles=handles, loc="lower left", fontsize=6, framealpha=0.85)
     return handles
@@ -162,7 +162,7 @@ def plot_phase(ds, path, name: str | None = None) -> Path:
         im = None
         for j, wd in enumerate(widths):
             ax = axes[i, j]
-            im = ax.imshow(ds["wrapped_phase"].sel(direction=d, width=wd).values, cmap="twilight",
+            im = imshow(ax, ds["wrapped_phase"].sel(direction=d, width=wd).values, cmap="twilight",
                            vmin=-np.pi, vmax=np.pi, interpolation="nearest")
             ax.set_title(f"{name}: {d.upper()} wrapped phase\nwidth {wd:g} monitor px", fontsize=8)
             _noticks(ax)
@@ -173,7 +173,7 @@ def plot_phase(ds, path, name: str | None = None) -> Path:
         ax = axes[i, -1]
         absphase = ds["absolute_phase"].sel(direction=d).values
         absphase = np.where(ds["decode_flags"].sel(direction=d).values == 0, absphase, np.nan)
-        im = ax.imshow(absphase, cmap="viridis", interpolation="nearest")
+        im = imshow(ax, absphase, cmap="viridis", interpolation="nearest")
         ax.set_facecolor(CLASS_COLOURS["no valid reference"])
         ax.set_title(f"{name}: {d.upper()} absolute phase\nwidth {min(widths):g} px "
                      "(flagged pixels grey)", fontsize=8)
@@ -214,7 +214,7 @@ def plot_deviation(ds, path, name: str | None = None) -> Path:
         im = None
         for i, d in enumerate(dirs):
             ax = axes[i, j]
-            im = ax.imshow(maps[i], cmap=DEV_CMAP, vmin=-lim, vmax=lim, interpolation="nearest")
+            im = imshow(ax, maps[i], cmap=DEV_CMAP, vmin=-lim, vmax=lim, interpolation="nearest")
             _overlay(ax, ds, d, legend=(j == 0))
             st = stats[d].get(key) or {}
             ax.set_title(f"{name}: {d.upper()} {title}\nmean {_g(st.get('mean'))}, "
@@ -296,7 +296,7 @@ def plot_modulation_ratio(ds, path, name: str | None = None) -> Path:
         for j, wd in enumerate(widths):
             r = ds["modulation_ratio"].sel(direction=d, width=wd).values
             ax = axes[i, j]
-            im = ax.imshow(r, cmap="viridis", vmin=0.0, vmax=1.0, interpolation="nearest")
+            im = imshow(ax, r, cmap="viridis", vmin=0.0, vmax=1.0, interpolation="nearest")
             ax.set_facecolor(CLASS_COLOURS["no valid reference"])
             med = np.nanmedian(r) if np.isfinite(r).any() else np.nan
             below = int(np.count_nonzero(r < thr))
@@ -336,7 +336,7 @@ def plot_masks(ds, path, name: str | None = None) -> Path:
         cls[flagged & (flags & 2 > 0)] = 2
         cls[low] = 1
         cls[valid] = 0
-        ax.imshow(cls, cmap=cmap, vmin=-0.5, vmax=6.5, interpolation="nearest")
+        imshow(ax, cls, cmap=cmap, vmin=-0.5, vmax=6.5, interpolation="nearest")
         handles = [Patch(facecolor=c, edgecolor="0.5", label=f"{lab}: {int((cls == k).sum()):,}")
                    for k, (c, lab) in enumerate(zip(cols, labels))]
         lax.legend(handles=handles, loc="upper center", ncol=2, fontsize=7, frameon=False)
@@ -365,14 +365,14 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
     last = {}
     for i, d in enumerate(dirs[:2]):
         ax = fig.add_subplot(gs[i, 0])
-        im = ax.imshow(fr[i], cmap="gray", vmin=0, vmax=vmax, interpolation="nearest")
+        im = imshow(ax, fr[i], cmap="gray", vmin=0, vmax=vmax, interpolation="nearest")
         last["f"] = (ax, im)
         ax.set_title(f"{name}: {d.upper()} fringes, width {fine:g} monitor px, shift 0",
                      fontsize=9)
         _image_axes(ax)
         ax = fig.add_subplot(gs[i, 1])
         r = ds["modulation_ratio"].sel(direction=d, width=fine).values
-        im = ax.imshow(r, cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
+        im = imshow(ax, r, cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
         last["m"] = (ax, im)
         ax.set_facecolor(CLASS_COLOURS["no valid reference"])
         ax.set_title(f"{name}: {d.upper()} modulation ratio (width {fine:g} px)\nmedian "
@@ -381,7 +381,7 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
         for col, (m, against, key) in enumerate(((maps[i], VS_MIRROR, "coord_px"),
                                                  (exact[i], VS_EXACT, "coord_vs_exact_px"))):
             ax = fig.add_subplot(gs[i, 2 + col])
-            im = ax.imshow(m, cmap=DEV_CMAP, vmin=-lim, vmax=lim, interpolation="nearest")
+            im = imshow(ax, m, cmap=DEV_CMAP, vmin=-lim, vmax=lim, interpolation="nearest")
             last["c" + str(col)] = (ax, im)
             _overlay(ax, ds, d, legend=(col == 0))
             s = st["directions"][d].get(key) or {}
@@ -467,7 +467,7 @@ def plot_variant_deviation(datasets: dict, path, descriptions: dict | None = Non
         for j, d in enumerate(dirs):
             ax = fig.add_subplot(gs[i, j])
             map_axes.append(ax)
-            im = ax.imshow(maps[n, d], cmap=DEV_CMAP, vmin=-lim, vmax=lim,
+            im = imshow(ax, maps[n, d], cmap=DEV_CMAP, vmin=-lim, vmax=lim,
                            interpolation="nearest")
             _overlay(ax, datasets[n], d, legend=True)
             s = st[d]["coord_px"]
@@ -572,7 +572,7 @@ def plot_dot_contact_sheet(images: dict, tables: dict, path,
             ax.set_axis_on()
             crop = _crop(np.asarray(stack[r["dot"]], np.float64), r["centroid_col"],
                          r["centroid_row"], size)
-            im = ax.imshow(crop, cmap="gray", vmin=0, vmax=peak, interpolation="nearest")
+            im = imshow(ax, crop, cmap="gray", vmin=0, vmax=peak, interpolation="nearest")
             _noticks(ax)
             if not np.isfinite(r["elongation"]):
                 ax.set_facecolor("0.85")
@@ -633,7 +633,7 @@ def plot_dot_shapes(images: dict, tables: dict, path, centre_px=None,
             peak = img.max()
             if peak > 0:
                 np.maximum(comp, img / peak, out=comp)
-        ax.imshow(comp, cmap="gray_r", vmin=0, vmax=1.5, interpolation="nearest")
+        imshow(ax, comp, cmap="gray_r", vmin=0, vmax=1.5, interpolation="nearest")
         for r in tables[n]:
             if not np.isfinite(r["sigma_major_px"]):
                 continue
@@ -710,7 +710,7 @@ def plot_decoded(ds, folder) -> list[Path]:
     def one(arr, fname, title, label, cmap="viridis", **kw):
         fig = _figure(size)
         ax = fig.subplots()
-        im = ax.imshow(arr, cmap=cmap, interpolation="nearest", **kw)
+        im = imshow(ax, arr, cmap=cmap, interpolation="nearest", **kw)
         ax.set_facecolor(CLASS_COLOURS["no valid reference"])
         ax.set_title(title, fontsize=9)
         _image_axes(ax)
@@ -731,7 +731,7 @@ def plot_decoded(ds, folder) -> list[Path]:
     im = None
     for ax, wd in zip(axes, widths):
         m = ds["modulation"].sel(width=wd).values
-        im = ax.imshow(m, cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
+        im = imshow(ax, m, cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
         ax.set_title(f"{d} modulation B/A, width {wd:g} px\nmedian "
                      f"{_g(np.nanmedian(m) if np.isfinite(m).any() else np.nan)}", fontsize=8)
         _noticks(ax)
@@ -750,7 +750,7 @@ def plot_decoded(ds, folder) -> list[Path]:
     ax = fig.add_subplot(gs[0])
     lax = fig.add_subplot(gs[1])
     lax.set_axis_off()
-    ax.imshow(cls, cmap=ListedColormap(cols), vmin=-0.5, vmax=4.5, interpolation="nearest")
+    imshow(ax, cls, cmap=ListedColormap(cols), vmin=-0.5, vmax=4.5, interpolation="nearest")
     counts = [n_valid] + [int(np.count_nonzero(flags & (1 << (k - 1)))) for k in range(1, 5)]
     lax.legend(handles=[Patch(facecolor=c, edgecolor="0.5", label=f"{lab}: {n:,}")
                         for c, lab, n in zip(cols, labels, counts)],

@@ -118,7 +118,28 @@ def summary_text_of(statistics: dict) -> str:
         parts.append(summary_text(statistics))
     if "diagnostics" in statistics:
         parts.append(diagnostics_text(statistics.get("name", ""), statistics["diagnostics"]))
+    if "reconstruction" in statistics:
+        parts.append(reconstruction_text(statistics.get("name", ""), statistics["reconstruction"]))
     return "\n".join(parts)
+
+
+def reconstruction_text(name: str, rec: dict) -> str:
+    """The surface-error lines of summary.txt (reconstructed minus true surface)."""
+    if "error" in rec:
+        return f"reconstruction ({name}): not possible: {rec['error']}\n"
+    h, sx, sy = rec["height_error_nm"], rec["slope_error_x_urad"], rec["slope_error_y_urad"]
+    lines = [
+        f"reconstruction ({name}): {rec['grid_points']} points on a {rec['spacing_mm']:g} mm grid "
+        f"({100 * rec['aperture_fraction']:.1f} % of the aperture), {rec['removed']} removed, "
+        f"{rec['iterations']} iterations" + ("" if rec["converged"] else " (NOT converged)"),
+        f"  height error  RMS {h['rms']:.3g} nm  PV {h['pv']:.3g} nm  P95 {h['p95']:.3g} nm",
+        f"  slope error x RMS {sx['rms_about_zero']:.3g} urad  PV {sx['pv']:.3g} urad;  "
+        f"y RMS {sy['rms_about_zero']:.3g} urad  PV {sy['pv']:.3g} urad",
+    ]
+    if "reference_height_error_nm" in rec:
+        r = rec["reference_height_error_nm"]
+        lines.append(f"  specular reference (the chain's floor): height RMS {r['rms']:.3g} nm  PV {r['pv']:.3g} nm")
+    return "\n".join(lines) + "\n"
 
 
 

@@ -273,7 +273,7 @@ def dataset_variables(chain: ChainResult) -> dict:
             "units": "1", "description": f"fringe modulation B/A of each width, {who}"})
         v[prefix + "decode_flags"] = (D, per(lambda dc: get(dc).flags, np.uint8), {
             "description": f"decode reliability flags, {who}: 1 NAN_INPUT, 2 LOW_AMPLITUDE, "
-                           "4 ORDER_RESIDUAL, 8 OUT_OF_RANGE; 0 = valid"})
+                           "4 ORDER_RESIDUAL, 8 OUT_OF_RANGE, 16 SATURATED; 0 = valid"})
         v[prefix + "order_residual"] = (D, per(lambda dc: get(dc).order_residual, np.float32), {
             "units": "1", "description": f"largest fringe-order residual of the unwrapping, {who}"})
         v[prefix + "monitor_coord_px"] = (D, per(lambda dc: get(dc).monitor_coord_px), {
@@ -290,8 +290,10 @@ def dataset_variables(chain: ChainResult) -> dict:
     v["coord_deviation_mm"] = (D, per(lambda dc: dc.deviation.coord_mm), {
         "units": "mm", "description": "coord_deviation_px x monitor pixel pitch"})
     v["slope_deviation_urad"] = (D, per(lambda dc: dc.slope_urad), {
-        "units": "urad", "description": "slope deviation coord_deviation_mm / (2 d), d = "
-                                        "surface_to_monitor_mm (small angles)"})
+        "units": "urad", "description": "slope deviation: tilt of the bisector normal that moves "
+                                        "the exact specular monitor point by the coordinate "
+                                        "deviation (full 3-D geometry; not coord / (2 d), which "
+                                        "is cos(theta_i) short across the plane of incidence)"})
     v["modulation_ratio"] = (DW, per(lambda dc: dc.deviation.modulation_ratio, np.float32), {
         "units": "1", "description": "modulation / reference modulation, per width"})
     v["valid"] = (D, per(lambda dc: dc.deviation.valid), {

@@ -302,7 +302,7 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
                                                                  "from the centre of pixel 0"})
     ds["order_residual"] = (P, res.order_residual, {"units": "1"})
     ds["flags"] = (P, res.flags, {"description": "1 NAN_INPUT, 2 LOW_AMPLITUDE, "
-                                                 "4 ORDER_RESIDUAL, 8 OUT_OF_RANGE; 0 = valid"})
+                                                 "4 ORDER_RESIDUAL, 8 OUT_OF_RANGE, 16 SATURATED; 0 = valid"})
     ds["valid"] = (P, res.valid, {"description": "flags == 0"})
     ds.attrs = {"title": "pmdsim decode", "direction": setup.direction,
                 "finest_width_px": res.finest_width_px, "shifts": k, "method": setup.method,

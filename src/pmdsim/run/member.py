@@ -7,7 +7,10 @@ import json
 import time
 from pathlib import Path
 
+from dataclasses import replace
+
 from ..config import RunConfig
+from ..scene.sensor import Sensor, capture_dn
 from ..measure import chain
 from ..render import Geometry, Simulation
 from ..studies import coverage
@@ -57,12 +60,21 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     off_monitor = None if fringes is None else coverage.off_monitor_mask(
         fringes.f_total, fringes.f_hit, geometry.surface_mask,
         cfg.diagnostics.max_off_monitor_fraction)
+    sensor = Sensor.from_config(cfg.sensor)
+    if sensor.enabled:  # what the camera writes: digital numbers (docs/system.md)
+        if fringes is not None:
+            fringes = replace(fringes, images=capture_dn(sensor, fringes.images, 0))
+        if dot_images is not None:
+            dot_images = capture_dn(sensor, dot_images, 2)
+        if images is not None:
+            images = capture_dn(sensor, images, 3)
 
     t = time.perf_counter()
     out = cfg.output
     stacks = [a for a in (None if fringes is None else fringes.images, dot_images, images)
               if a is not None]
-    exposure = pio.exposure_factor(stacks, out.bit_depth)
+    exposure = (pio.exposure_factor(stacks, out.bit_depth) if not sensor.enabled
+                else 2.0 ** min(0, out.bit_depth - sensor.bit_depth))
     image_paths = pio.write_images(folder, cfg, fringes, dots, dot_images, image_files, images,
                                 exposure) if out.write_images else []
     steps.advance()
@@ -79,10 +91,25 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     stats: dict = {}
     if reference is not None and fringes is not None:
         measured = chain.compare(
-            chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode),
+            chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
+                                 sensor.saturation_dn if sensor.enabled else None),
             reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
-            cfg.decode, len(fringes.shifts), off_monitor=off_monitor)
+            cfg.decode, len(fringes.shifts),
+            slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
+                reference.points_mm, sim.scene.camera.position, sim.scene.monitor),
+            off_monitor=off_monitor)
         stats = chain.statistics(measured, cfg.name)
+        from . import reconstruction as recon
+
+        if recon.wanted(cfg, measured.directions):
+            rvars, rstats = recon.from_chain(cfg, sim.scene, measured, reference.reconstruction)
+            stats.update(rstats)
+            for name in ("surface_x_mm", "surface_y_mm"):
+                if name in rvars:
+                    dims, data, attrs = rvars.pop(name)
+                    ds = ds.assign_coords({dims[0]: (dims, data, attrs)})
+            for name, var in rvars.items():
+                ds[name] = var
         ds = assign_to_dataset(ds, measured, stats)
         del measured
     dot_table = []
@@ -119,21 +146,17 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     notes: list[str] = []
     t = time.perf_counter()
     if figures:
-        from ..report import scene as plot  # matplotlib only when figures are made
+        from .figures import draw_figures, figure_names
 
-        figure_paths = draw_safely(notes, "of the scene", plot.run_figures, sim, ds,
-                                   folder / "figures")
-        if stats or (dot_table and standalone):
+        figure_paths = draw_figures(folder, figure_names(ds, out.figure_set), cfg.name,
+                                    description(cfg), ds=ds, sim=sim,
+                                    workers=out.figure_workers, notes=notes)
+        if dot_table and standalone:
             from ..report import chain as plot_chain
 
-            if stats:
-                figure_paths += draw_safely(notes, "of the measurement chain",
-                                            plot_chain.chain_figures, ds, folder / "figures",
-                                            cfg.name, description(cfg))
-            if dot_table and standalone:
-                figure_paths += draw_safely(notes, "of the dots", plot_chain.dot_figures,
-                                            folder / "figures", {cfg.name: dot_images},
-                                            {cfg.name: dot_table}, sim, {})
+            figure_paths += draw_safely(notes, "of the dots", plot_chain.dot_figures,
+                                        folder / "figures", {cfg.name: dot_images},
+                                        {cfg.name: dot_table}, sim, {})
         steps.advance()
     timings["figures"] = time.perf_counter() - t
 

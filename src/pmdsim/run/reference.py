@@ -4,13 +4,14 @@ shared by the variants)."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..config import ConfigError, RunConfig
 from ..measure import chain
 from ..render import Geometry, Simulation
+from ..scene.sensor import Sensor, capture_dn
 from .result import _Steps
 
 
@@ -22,6 +23,8 @@ class Reference:
     distance_mm: np.ndarray
     seconds: float
     notes: tuple = ()
+    points_mm: np.ndarray | None = None  # surface point per pixel, for the 3-D slope conversion
+    reconstruction: object = None  # (Reconstruction, SurfaceErrors) of the reference, or None
 
 
 
@@ -54,9 +57,14 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     fr = ref_sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
                                 progress=steps.tiles())
     steps.finish_render(base, n_tiles)
-    decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode)
+    sensor = Sensor.from_config(cfg.sensor)
+    if sensor.enabled:  # the reference is captured too (its own noise: stream 1)
+        fr = replace(fr, images=capture_dn(sensor, fr.images, 1))
+    decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
+                                   sensor.saturation_dn if sensor.enabled else None)
     del fr
-    distance = chain.surface_to_monitor_mm(sim, geometry)
+    points = np.full(sim.shape + (3,), np.nan)
+    distance = chain.surface_to_monitor_mm(sim, geometry, points_out=points)
     notes = []
     for d, res in decoded.items():
         exact = geometry.specular_u if d == "x" else geometry.specular_v
@@ -70,4 +78,7 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
                 "'continuous' shows the scattering alone (statistics.json: "
                 "reference_vs_exact_px)")
             break
-    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes))
+    from . import reconstruction as recon
+
+    rec = recon.reference_reconstruction(cfg, sim.scene, decoded)
+    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes), points, rec)

@@ -47,7 +47,7 @@ class Scene:
             # a curved surface is turned about its vertex normal, not each point's normal
             anisotropy = replace(anisotropy, axis=surface.normal.copy())
         return cls(
-            camera=Camera.from_config(cfg.camera),
+            camera=Camera.from_config(cfg.camera).focused_on(surface),
             monitor=Monitor.from_config(cfg.monitor),
             surface=surface,
             anisotropy=anisotropy,

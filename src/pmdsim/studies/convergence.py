@@ -207,7 +207,8 @@ def convergence_study(
     if diagnostics:
         from . import diagnostics as dg
 
-        diag = dg.diagnose(sim_of(base), widths, directions, grid=small.diagnostics.grid)
+        diag = dg.diagnose(sim_of(base), widths, directions, grid=small.diagnostics.grid,
+                           phase_method=small.diagnostics.phase_method)
         warnings = dg.check(diag, bounds=small.diagnostics)
         diag_summary = diag.summary
         say("diagnostics")

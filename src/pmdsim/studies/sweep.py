@@ -15,10 +15,11 @@ Designs:
   log-uniform with ``scale = "log"``, or uniform over a list of choices); one ``point``
   dimension.
 
-Each point's random streams are keyed by (``sampling.seed``, point index): its
-``sampling.seed`` is ``SeedSequence([sampling.seed, index])``'s first word (unless
-``sampling.seed`` is itself swept, or ``common_random_numbers = true``), so any point
-recomputes bit-identically on its own, on any worker, in any order.
+Each point's random streams are keyed by (seed, point index): its ``sampling.seed`` is
+``SeedSequence([sampling.seed, index])``'s first word (unless ``sampling.seed`` is itself
+swept, or ``common_random_numbers = true``), and with an enabled ``[sensor]`` its
+``sensor.seed`` likewise, so any point recomputes bit-identically on its own, on any
+worker, in any order.
 
 :func:`measure_point` runs the measurement chain of one point (render the fringes, decode
 them and the ideal specular reference, compare) in memory, without writing a run folder,
@@ -240,6 +241,9 @@ def plan_sweep(cfg: RunConfig, sweep: SweepConfig | None = None) -> SweepPlan:
             node[key] = v
         if not seed_swept and not sweep.common_random_numbers:
             d["sampling"]["seed"] = point_seed(cfg.sampling.seed, index)
+        if (d.get("sensor") or {}).get("enabled") and "sensor.seed" not in sweep.parameters \
+                and not sweep.common_random_numbers:  # the camera noise: keyed the same way
+            d["sensor"]["seed"] = point_seed(cfg.sensor.seed, index)
         shown = ", ".join(f"{p} = {v!r}" for p, v in vals.items())
         pc = parse_config(d, f"sweep point {index} ({shown})")
         points.append(SweepPoint(index, tuple(int(i) for i in pos), vals, pc))
@@ -281,10 +285,11 @@ REFERENCE_CACHE_SIZE = 2
 
 
 def reference_key(cfg: RunConfig) -> str:
-    """What the ideal specular reference of a point depends on (the camera, monitor,
-    surface, patterns and decoding), as text: points with the same key share it."""
-    return json.dumps(cfg.model_dump(mode="json", include={
-        "camera", "monitor", "surface", "patterns", "decode"}), sort_keys=True)
+    """What the ideal specular reference of a point depends on (everything but the BRDF, its
+    frame, the sampling and the diagnostics), as text: points with the same key share it."""
+    return json.dumps(cfg.model_dump(mode="json", exclude={
+        "name", "brdf", "anisotropy", "sampling", "diagnostics", "compute", "output",
+        "variants", "sweep"}), sort_keys=True)
 
 
 def _reference(cfg: RunConfig, sim, geometry):
@@ -296,12 +301,22 @@ def _reference(cfg: RunConfig, sim, geometry):
         if key in _REFERENCES:
             _REFERENCES.move_to_end(key)
             return _REFERENCES[key]
+    from dataclasses import replace
+
+    from ..scene.sensor import Sensor, capture_dn
+
     fr_cfg = cfg.patterns.fringes
     ref_sim = Simulation(sim.scene.specular(), sim.tile_rows, sim.scheduler, sim.num_workers)
     fr = ref_sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts)
-    decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode)
+    sensor = Sensor.from_config(cfg.sensor)
+    if sensor.enabled:  # as a run: the reference is captured too (its own stream, 1)
+        fr = replace(fr, images=capture_dn(sensor, fr.images, 1))
+    decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
+                                   sensor.saturation_dn if sensor.enabled else None)
     del fr
-    value = (decoded, chain.surface_to_monitor_mm(sim, geometry))
+    points = np.full(sim.shape + (3,), np.nan)
+    distance = chain.surface_to_monitor_mm(sim, geometry, points_out=points)
+    value = (decoded, distance, points)
     with _REFERENCES_LOCK:
         _REFERENCES[key] = value
         while len(_REFERENCES) > REFERENCE_CACHE_SIZE:
@@ -334,16 +349,26 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
     from ..measure import chain
     from ..render import Simulation
 
+    from dataclasses import replace
+
+    from ..scene.sensor import Sensor, capture_dn
+
     sim = Simulation.from_config(cfg)
     sim = Simulation(sim.scene, sim.tile_rows, scheduler, None)
     geometry = sim.geometry()
-    ref_decoded, distance = _reference(cfg, sim, geometry)
+    ref_decoded, distance, points = _reference(cfg, sim, geometry)
     fr_cfg = cfg.patterns.fringes
     fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts)
-    decoded = chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode)
+    sensor = Sensor.from_config(cfg.sensor)
+    if sensor.enabled:  # as a run: what the camera writes (stream 0)
+        fringes = replace(fringes, images=capture_dn(sensor, fringes.images, 0))
+    decoded = chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
+                                   sensor.saturation_dn if sensor.enabled else None)
     del fringes
     measured = chain.compare(decoded, ref_decoded, geometry, distance,
-                             cfg.monitor.pixel_pitch_mm, cfg.decode, fr_cfg.shifts)
+                             cfg.monitor.pixel_pitch_mm, cfg.decode, fr_cfg.shifts,
+                             slope_geometry=chain.SlopeGeometry(
+                                 points, sim.scene.camera.position, sim.scene.monitor))
     dcs = [measured.directions[d] for d in fr_cfg.directions]
     stats = np.array([[[np.nan if (x := chain.direction_quantity_stats(dc)[q][s]) is None
                         else x for s in STATISTICS] for q in QUANTITIES] for dc in dcs],
