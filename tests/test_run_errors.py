@@ -46,16 +46,21 @@ def test_bad_input_is_exit_2_without_traceback(tmp_path, config_file):
 
 
 def test_a_figure_that_cannot_be_drawn_is_a_note_and_the_data_land(monkeypatch, tmp_path):
-    import pmdsim.report.scene as scene_figures
+    import pmdsim.run.figures as figures
     from pmdsim import load_run
     from pmdsim.run import run_simulation
 
-    def broken(*args, **kwargs):
-        raise RuntimeError("matplotlib exploded")
+    real = figures.draw_one
 
-    monkeypatch.setattr(scene_figures, "run_figures", broken)
+    def broken(ds, name, *args, **kwargs):
+        if name == "setup":
+            raise RuntimeError("matplotlib exploded")
+        return real(ds, name, *args, **kwargs)
+
+    monkeypatch.setattr(figures, "draw_one", broken)
     cfg = parse_config(base_dict())
     result = run_simulation(cfg, tmp_path / "out", figures=True)
     assert any("could not be drawn" in n and "matplotlib exploded" in n for n in result.notes)
+    assert result.figure_paths  # the other figures were drawn
     ds = load_run(result.outdir)
     assert "fringes" in ds and (result.outdir / "pmdsim-run.json").is_file()
