@@ -250,3 +250,18 @@ def test_compiled_trace_matches_numpy_trace_on_curved_surfaces(surface):
     u, v, on = trace.specular_monitor_coords(scene, hits)
     np.testing.assert_allclose(spec[:, 0], u.reshape(-1), rtol=0, atol=1e-10)
     assert np.isfinite(geo).all()
+
+
+def test_bspline_pair_matches_scipy_map_coordinates():
+    from pmdsim.kernels.surface import bspline_eval_pair
+    from pmdsim.scene.surfaces import bspline_coefficients
+
+    rng = np.random.default_rng(5)
+    a, b = rng.normal(size=(2, 23, 31))
+    rows = rng.uniform(0, 22, 200)
+    cols = rng.uniform(0, 30, 200)
+    rows[:2], cols[:2] = (0.0, 22.0), (30.0, 0.0)  # the grid's corners
+    ou, ov = np.empty(200), np.empty(200)
+    bspline_eval_pair(bspline_coefficients(a), bspline_coefficients(b), rows, cols, ou, ov)
+    np.testing.assert_allclose(ou, ndimage.map_coordinates(a, [rows, cols], order=3, mode="mirror"), atol=1e-12)
+    np.testing.assert_allclose(ov, ndimage.map_coordinates(b, [rows, cols], order=3, mode="mirror"), atol=1e-12)
