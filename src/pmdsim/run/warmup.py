@@ -36,7 +36,7 @@ _BASE = {
     "brdf": {"model": "ward", "alpha_x": 0.025, "alpha_y": 0.002},
     "sampling": {"n_rays": 8},
     "patterns": {"fringes": {"widths_px": [50.0, 400.0, 3200.0]},
-                 "dots": {"positions_px": [[960.0, 540.0]], "size_px": 15}},
+                 "dots": {"positions_px": [[960.0, 540.0]], "size_px": 241}},
     "diagnostics": {"grid": [3, 2]},
     "output": {"write_images": False, "figures": False},
 }
