@@ -245,6 +245,8 @@ def test_reduced_camera_keeps_at_least_one_pixel_per_axis():
     tighter axis sets the scale (guards against one axis used for both)."""
     cfg = make_config(camera={"resolution": [400, 20], "focal_length_px": 800.0})
     assert reduced_config(cfg, (10, 10)).camera.resolution == (10, 1)
+    cfg = make_config(camera={"resolution": [20, 400], "focal_length_px": 800.0})
+    assert reduced_config(cfg, (10, 10)).camera.resolution == (1, 10)
     # the tighter axis sets the scale: 40 x 32 into 30 x 12 is 3/8, i.e. 15 x 12
     assert reduced_config(make_config(), (30, 12)).camera.resolution == (15, 12)
     assert reduced_config(make_config(), (12, 30)).camera.resolution == (12, 10)

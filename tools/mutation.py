@@ -144,6 +144,11 @@ EQUIVALENT: dict[str, str] = {
         "-pi/3 instead of -pi/2 differs only for raw eigenvector angles in (-90, -60] deg; "
         "LAPACK's 2 x 2 eigenvectors never point into (-90, 0) deg (0 of 20 000 random "
         "covariances), so the branch sees the same angles",
+    "studies/diagnostics.py:lobe_energy:float 1.0->2.0:1.0#0":
+        "np.clip's upper bound only catches the rounding overshoot of a unit dot product "
+        "(1 + 1e-16) for a sample within ~1e-8 rad of P; the lattice has none there",
+    "studies/diagnostics.py:lobe_energy:Lt->LtE:cum < target#0":
+        "differs only when a cumulative weight fraction equals the target to the last bit",
     "measure/deviation.py:image_moments:Gt->GtE:minor > 0#0":
         "major / 0.0 on float64 is inf, the value of the else branch",
     "measure/chain.py:surface_to_monitor_mm:int 128->129:128#0":
