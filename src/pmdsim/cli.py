@@ -134,12 +134,16 @@ def simulate(
     reference (statistics.json, summary.txt, deviation figures), and check the sampling
     (diagnostics: warnings, each naming the setting that fixes it; bounds in the
     configuration's diagnostics section)."""
+    from .run.claim import OutputBusy, check_free
+
+    try:  # a run already writing there: fail before the heavy imports (pydantic, NumPy)
+        check_free(output)
+    except OutputBusy as err:
+        _fail(str(err))
     from .config import load_config
-    from .run.claim import check_free
 
     console = _console()
     with _guard():
-        check_free(output)  # a run already writing there: fail before the heavy imports
         cfg = load_config(config)
         from .report.text import warning_text
         from .run import run_simulation
