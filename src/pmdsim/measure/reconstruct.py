@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from ..kernels.surface import bspline_eval_pair
 from .integrate import _lstsq, southwell
 
 __all__ = [
@@ -170,8 +171,8 @@ def _spline_maps(u, v, valid):
         idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
         uf = _smooth_fill(u, valid, idx)
         vf = _smooth_fill(v, valid, idx)
-    cu = ndimage.spline_filter(uf, order=3, mode="mirror")
-    cv = ndimage.spline_filter(vf, order=3, mode="mirror")
+    cu = np.pad(ndimage.spline_filter(uf, order=3, mode="mirror"), 2, mode="reflect")
+    cv = np.pad(ndimage.spline_filter(vf, order=3, mode="mirror"), 2, mode="reflect")
     return cu, cv
 
 
@@ -274,9 +275,10 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         col = np.where(fin, col, -10.0)
         row = np.where(fin, row, -10.0)
         node_ok = node_ok & fin & _support_ok(ok_pix, col, row)
-        coords = np.stack([row[node_ok], col[node_ok]])
-        mu = ndimage.map_coordinates(cu, coords, order=3, mode="mirror", prefilter=False)
-        mv = ndimage.map_coordinates(cv, coords, order=3, mode="mirror", prefilter=False)
+        mu = np.empty(int(node_ok.sum()))
+        mv = np.empty_like(mu)
+        # = ndimage.map_coordinates(..., order=3, mode="mirror") of u and v, in one pass
+        bspline_eval_pair(cu, cv, np.ascontiguousarray(row[node_ok]), np.ascontiguousarray(col[node_ok]), mu, mv)
         m3 = monitor.pixel_to_world(mu, mv)
         n = bisector_normals(s[node_ok], cam_pos, m3)
         a, b = slopes_in_frame(n, pf.rotation)
@@ -357,4 +359,28 @@ def surface_errors(rec: Reconstruction, truth, remove="piston") -> SurfaceErrors
     # slope statistics are about zero, not the mean: report the RMS about zero too
     for k, a in (("slope_error_x_urad", ex), ("slope_error_y_urad", ey)):
         stats[k]["rms_about_zero"] = float(np.sqrt(np.nanmean(a**2))) if np.isfinite(a).any() else float("nan")
+    stats["terms_nm"] = _error_terms(rec, truth, ex, ey)
     return SurfaceErrors(dh, ex, ey, remove if isinstance(remove, str) else "+".join(remove), stats)
+
+
+def _error_terms(rec, truth, ex, ey, n_zernike=15, n_legendre=10):
+    """Low-order content of the height error (nm) from a modal fit of the slope errors:
+    Noll Zernikes Z2..Z15 on the aperture's disc (circular and annular apertures), else
+    Legendre products on the grid's rectangle; each coefficient is that term's RMS over the
+    disc (rectangle). Empty when too few points."""
+    from .integrate import modal_fit
+
+    m = rec.mask & np.isfinite(ex) & np.isfinite(ey)
+    if m.sum() < 4 * n_zernike:
+        return {}
+    ap = getattr(truth, "aperture", None)
+    x0 = float(rec.x_mm[0])
+    y0 = float(rec.y_mm[0])
+    if isinstance(ap, tuple) and ap[0] in ("circular", "annular"):
+        fit = modal_fit(ex * 1e-6, ey * 1e-6, rec.spacing, m, basis="zernike", n_terms=n_zernike,
+                        centre_mm=(ap[1], ap[2]), radius_mm=ap[3], origin_mm=(x0, y0))
+    else:
+        fit = modal_fit(ex * 1e-6, ey * 1e-6, rec.spacing, m, basis="legendre", n_terms=n_legendre,
+                        origin_mm=(x0, y0),
+                        centre_mm=(0.5 * (rec.x_mm[0] + rec.x_mm[-1]), 0.5 * (rec.y_mm[0] + rec.y_mm[-1])))
+    return {"basis": fit.basis, **{n: float(c * 1e6) for n, c in zip(fit.names[1:], fit.coefficients[1:])}}
