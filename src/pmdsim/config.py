@@ -1174,15 +1174,19 @@ def estimate_resources(cfg: "RunConfig") -> ResourceEstimate:
     :class:`ResourceEstimate`); pure arithmetic on the configuration."""
     width, height = cfg.camera.resolution
     n_px = float(width) * float(height)
-    # the vision-ray geometry of the whole camera (25 float64 per pixel and the specular
-    # monitor coordinates), the masks and the dataset's copies of the maps
-    parts = {"camera.resolution": n_px * (25 * 8 + 16 + 64)}
+    cam = cfg.camera
+    # vision rays per pixel (sub-pixels x thin-lens aperture samples): every one carries a
+    # bundle of scattered rays
+    vision = cam.subpixels ** 2 * (cam.aperture_samples if cam.f_number is not None else 1)
+    # the vision-ray geometry of the whole camera (25 float64 per vision ray and the
+    # specular monitor coordinates), the masks and the dataset's copies of the maps
+    parts = {"camera.resolution": n_px * (25 * 8 * vision + 16 + 64)}
     rays = 0.0
     member_parts = []
     for _, member in cfg.expand():
         p, r = _member_estimate(member, n_px, width)
         member_parts.append(p)
-        rays += r
+        rays += r * vision
     # the members run one after the other: the largest counts
     biggest = max(member_parts, key=lambda p: sum(p.values()))
     for k, v in biggest.items():
@@ -1192,7 +1196,7 @@ def estimate_resources(cfg: "RunConfig") -> ResourceEstimate:
         fr = cfg.patterns.fringes
         nd, nw = len(fr.directions), len(fr.widths_px)
         parts["patterns.fringes"] = parts.get("patterns.fringes", 0.0) + n_px * (48 * nd * nw + 96 * nd)
-        rays += n_px
+        rays += n_px * vision
     memory = BASE_MEMORY_BYTES + sum(parts.values())
     return ResourceEstimate(int(memory), rays, rays / RAYS_PER_CPU_SECOND,
                             {k: int(v) for k, v in parts.items()})
