@@ -141,3 +141,53 @@ def test_precompensated_gamma_renders_like_a_linear_display():
         ok = a[d][1] & b[d][1]
         np.testing.assert_allclose(b[d][0][ok], a[d][0][ok], atol=1e-9)
         assert np.nanmax(np.abs(c[d][0] - a[d][0])[ok]) > 0.01  # gamma 2.2 uncompensated shows
+
+
+def test_falloff_dims_by_the_emission_angle():
+    """An all-white monitor seen in a mirror: each pixel shows cos(theta)^m of its principal
+    ray's emission angle, times the tabulated factor."""
+    sim = Simulation.from_config(make_config(brdf=MIRROR, monitor={
+        "falloff_exponent": 3.0, "falloff_table": [[0.0, 1.0], [40.0, 0.6]]}))
+    img = sim.render_images(np.ones((1,) + sim.scene.monitor.shape))[0]
+    _, (ou, ov, on) = _exact_monitor_hits(sim)
+    theta = np.arccos(-on)
+    expect = np.cos(theta) ** 3 * np.interp(np.degrees(theta), [0, 40], [1.0, 0.6])
+    geo = sim.geometry()
+    ok = geo.monitor_mask
+    assert ok.sum() > 500 and np.ptp(expect[ok]) > 0.05
+    np.testing.assert_allclose(img[ok], expect[ok], rtol=1e-5)
+
+
+def test_lut_and_sensor_photons_from_a_config_file(tmp_path):
+    from pmdsim.config import load_config
+
+    (tmp_path / "lut.csv").write_text("drive,cd_m2\n0,0.5\n128,60\n255,300\n")
+    (tmp_path / "c.toml").write_text('''
+[camera]
+resolution = [8, 6]
+focal_length_px = 20.0
+position_mm = [0.0, -120.0, 260.0]
+look_at_mm = [0.0, 0.0, 0.0]
+[monitor]
+resolution = [100, 80]
+pixel_pitch_mm = 1.0
+centre_mm = [0.0, 90.0, 180.0]
+look_at_mm = [0.0, 0.0, 0.0]
+response_lut = "lut.csv"
+[surface]
+size_mm = [50.0, 50.0]
+[brdf]
+model = "mirror"
+[sensor]
+enabled = true
+quantum_efficiency = 0.5
+exposure_photons = 8000.0
+''')
+    cfg = load_config(tmp_path / "c.toml")
+    sim = Simulation.from_config(cfg)
+    mon = sim.scene.monitor
+    assert not mon.is_linear
+    np.testing.assert_allclose(mon.luminance([0.0, 128 / 255, 1.0]), [0.0, (60 - 0.5) / 299.5, 1.0])
+    from pmdsim.scene.sensor import Sensor
+
+    assert Sensor.from_config(cfg.sensor).exposure == pytest.approx(4000.0)
