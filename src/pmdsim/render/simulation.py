@@ -271,8 +271,13 @@ class Simulation:
         simple = cam.is_simple_pinhole
         n_sub = cam.rays_per_pixel
 
-        def kernel(geo, rot):
-            out = np.empty((geo.shape[0], ncols))
+        # In-process schedulers: the tiles write straight into one (H, W, ncols) array (no
+        # per-tile result arrays, no concatenation copy: half the render's peak memory).
+        full = (np.empty((cam.height, width, ncols))
+                if self.scheduler in ("threads", "synchronous") else None)
+
+        def kernel(geo, rot, out=None):
+            out = np.empty((geo.shape[0], ncols)) if out is None else out
             if lobe:
                 kb.render_tile_lobe(
                     geo, brdf, u1, u2, rot, mshape, mode,
@@ -289,10 +294,13 @@ class Simulation:
             if simple:
                 geo, _ = scene_geometry_rows(scene, r0, r1)
                 rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
+                if full is not None:
+                    kernel(geo, rot, full[r0:r1].reshape(-1, ncols))
+                    return None
                 return kernel(geo, rot).reshape(r1 - r0, width, ncols)
             # camera optics: S vision rays per pixel, each with its own scattered bundle,
             # one camera row per kernel call; the pixel's sums are the mean over its rays
-            res = np.empty((r1 - r0, width, ncols))
+            res = full[r0:r1] if full is not None else np.empty((r1 - r0, width, ncols))
             for r in range(r0, r1):
                 geo, _ = vision_geometry_rows(scene, r)
                 if delta or samp.mode == "stratified":
@@ -301,10 +309,10 @@ class Simulation:
                     rot = np.random.default_rng([samp.seed, r]).random((geo.shape[0], 2))
                 out = kernel(geo, rot).reshape(width, n_sub, ncols)
                 res[r - r0] = reduce_subrays(out, scene.estimator)
-            return res
+            return None if full is not None else res
 
         parts = self._compute(tile, self._tiles(), progress)
-        return np.concatenate(parts, axis=0)
+        return full if full is not None else np.concatenate(parts, axis=0)
 
     def _normalise(self, out):
         """(H, W) factor turning weighted sums into estimator values."""
