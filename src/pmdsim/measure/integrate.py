@@ -172,11 +172,11 @@ def _dct_poisson(rhs):
     lx = 2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w)
     ly = 2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h)
     lam = ly[:, None] + lx[None, :]
-    c = scipy.fft.dctn(rhs, type=2, norm="ortho")
+    c = scipy.fft.dctn(rhs, type=2, norm="ortho", workers=-1)
     lam[0, 0] = 1.0
     c = c / lam
     c[0, 0] = 0.0
-    return scipy.fft.idctn(c, type=2, norm="ortho")
+    return scipy.fft.idctn(c, type=2, norm="ortho", workers=-1)
 
 
 def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", remove="piston"):
@@ -300,13 +300,13 @@ def frankot_chellappa(slope_x, slope_y, spacing, *, extend="mirror", remove="pis
     kx = 2 * np.pi * scipy.fft.fftfreq(we, d=dx)
     ky = 2 * np.pi * scipy.fft.fftfreq(he, d=dy)
     kxx, kyy = np.meshgrid(kx, ky)
-    fx = scipy.fft.fft2(sx_e)
-    fy = scipy.fft.fft2(sy_e)
+    fx = scipy.fft.fft2(sx_e, workers=-1)
+    fy = scipy.fft.fft2(sy_e, workers=-1)
     den = kxx**2 + kyy**2
     den[0, 0] = 1.0
     fz = (-1j * kxx * fx - 1j * kyy * fy) / den
     fz[0, 0] = 0.0
-    z = scipy.fft.ifft2(fz).real[:h, :w]
+    z = scipy.fft.ifft2(fz, workers=-1).real[:h, :w]
     m = np.ones((h, w), bool)
     return remove_terms(z, m, *grid_coordinates(m.shape, (dx, dy)), terms=remove)
 
