@@ -445,6 +445,9 @@ def budget(
     output: Path = typer.Option(..., "-o", "--output", help="Output folder to create."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
     no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+    truth: str = typer.Option("centre", "--truth", help="Ground truth of the system rows: "
+                              "'centre' (the chief ray through each pixel centre) or "
+                              "'footprint' (averaged over the pixel's vision rays)."),
 ) -> None:
     """Error budget: the chain with each system effect of CONFIG alone and all together on
     the ideal mirror, and the surface's scattering minus that mirror; deviation from the
@@ -460,12 +463,14 @@ def budget(
         t0 = time.perf_counter()
         with console.status(f"error budget of {cfg.name}") as status:
             result = run_budget(cfg, output, figure=not no_figure, overwrite=overwrite,
-                                progress=lambda msg: status.update(f"error budget of {cfg.name}: {msg}"))
+                                progress=lambda msg: status.update(f"error budget of {cfg.name}: {msg}"),
+                                truth=truth)
     except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
             NotADirectoryError, ValueError) as err:
         _fail(str(err))
+    what = "centre ray" if truth == "centre" else "vision rays (footprint average)"
     console.print(f"pmdsim budget '{cfg.name}' ({time.perf_counter() - t0:.1f} s); deviation from "
-                  "the exact reflection point of each pixel's centre ray")
+                  f"the exact reflection point of each pixel's {what}")
     console.print(budget_text(result.rows), markup=False)
     console.print(f"table  {result.table}")
     if result.figure is not None:
