@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..config import RunConfig
+from ..config import ConfigError, RunConfig
 from ..measure import chain
 from ..render import Geometry, Simulation
 from ..scene.sensor import Sensor, capture_dn
@@ -38,7 +38,7 @@ def chain_mode(cfg: RunConfig, decode: bool | None) -> tuple[bool, list[str]]:
     if problem is None:
         return True, []
     if enabled is True:
-        raise ValueError(f"decoding was requested (decode.enabled = true or --decode), but "
+        raise ConfigError(f"invalid configuration:\n  decode.enabled: decoding was requested (decode.enabled = true or --decode), but "
                          f"{problem}")
     if cfg.patterns.fringes is None:
         return False, []  # nothing to decode, nothing to say

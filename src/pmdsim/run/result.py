@@ -65,6 +65,9 @@ class RunResult:
     notes: tuple[str, ...] = ()
     statistics: dict = field(default_factory=dict)
     warnings: tuple = ()
+    #: bytes of the run folder by part (``total``, ``run.zarr``, ``images``, ``figures``,
+    #: ``other``), measured when it was complete
+    sizes: dict = field(default_factory=dict)
 
     @property
     def rays_per_second(self) -> float:
@@ -107,3 +110,16 @@ class _Steps:
         self.done = base_tiles + n_tiles
         if self.progress is not None:
             self.progress(min(self.done, self.total), self.total)
+
+
+def draw_safely(notes: list, what: str, draw, *args, **kwargs) -> list:
+    """Call a figure function; a figure that cannot be drawn is a note (the run's data are
+    complete without it), never a failed run. Returns the paths it drew ([] on failure).
+    Interrupts (KeyboardInterrupt) and other BaseExceptions propagate."""
+    try:
+        out = draw(*args, **kwargs)
+    except Exception as err:  # noqa: BLE001 - a figure is never worth the run's data
+        notes.append(f"figure(s) {what} could not be drawn ({type(err).__name__}: {err}); "
+                     "the data are complete (run.zarr, statistics.json)")
+        return []
+    return list(out) if isinstance(out, (list, tuple)) else [out]
