@@ -705,13 +705,18 @@ class ReconstructConfig(_Model):
     the surface grid; ``remove``: terms removed before the height statistics (``piston``,
     ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism);
     ``order``: 2 = classic Southwell, 4 = higher-order; ``anchor``: where the height is
-    tied to the nominal shape (the aperture centre, or the mean over the aperture)."""
+    tied to the nominal shape (the aperture centre, or the mean over the aperture);
+    ``prior``: the nominal shape (a surface table like ``[surface]``, e.g. the design when
+    ``[surface]`` is a measured height map); default: the configured surface. The grid is
+    in the prior's frame; errors are always against the configured (true) surface."""
 
     enabled: Bool | None = None
     spacing_mm: PositiveFloat = 0.5
     remove: Literal["none", "piston", "tilt", "power", "astigmatism"] = "piston"
     order: Literal[2, 4] = 4
     anchor: Literal["centre", "mean"] = "centre"
+    prior: SurfaceConfig | None = Field(
+        None, description="nominal shape (a [surface]-like table); default: the configured surface")
 
 
 class DecodeConfig(_Model):
@@ -980,7 +985,8 @@ def _union_tags(union, field: str) -> set:
 
 #: Tagged unions (field name -> its tags): pydantic puts the tag into error locations
 #: (``brdf.ward.alpha_x``); the messages show the path as written in the file (``brdf.alpha_x``).
-_UNION_TAGS = {"surface": _union_tags(SurfaceConfig, "type"), "brdf": _union_tags(BrdfConfig, "model")}
+_UNION_TAGS = {"surface": _union_tags(SurfaceConfig, "type"), "prior": _union_tags(SurfaceConfig, "type"),
+               "brdf": _union_tags(BrdfConfig, "model")}
 
 
 def _error_path(loc) -> list:
@@ -1044,6 +1050,9 @@ def load_config(path: str | Path) -> RunConfig:
     surf = data.get("surface")
     if isinstance(surf, dict) and surf.get("type") == "height_map":
         surf["file"] = _resolve_file(path.parent, surf.get("file"))
+    prior = (data.get("reconstruct") or {}).get("prior") if isinstance(data.get("reconstruct"), dict) else None
+    if isinstance(prior, dict) and prior.get("type") == "height_map":
+        prior["file"] = _resolve_file(path.parent, prior.get("file"))
     patterns = data.get("patterns")
     images = patterns.get("images") if isinstance(patterns, dict) else None
     if isinstance(images, dict) and isinstance(images.get("files"), list):
