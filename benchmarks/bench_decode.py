@@ -18,7 +18,7 @@ import time
 import numba
 import numpy as np
 
-from pmdsim.decode import decode_sequence
+from pmdsim.measure.decode import decode_sequence
 
 HEIGHT, WIDTH = 1024, 1280  # camera px
 N_SHIFTS = 4

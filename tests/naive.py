@@ -3,7 +3,7 @@
 Written from the formulas in the paper and ``docs/conventions.md``, straight from the
 *configuration* (not from pmdsim's scene objects): Python loops over camera pixels, one
 bundle of rays at a time, plain vector algebra. Only the cone sample set is taken from
-:meth:`pmdsim.sampling.ConeSampling.local_directions` (the sample set is a choice of the
+:meth:`pmdsim.scene.sampling.ConeSampling.local_directions` (the sample set is a choice of the
 code, not physics; its distribution is tested on its own).
 """
 
@@ -190,7 +190,7 @@ def cone_basis(n, p, y_axis):
 def bundle(cfg, prim, sampling, offsets=None):
     """Every scattered ray of every valid pixel.
 
-    ``sampling`` is the scene's :class:`~pmdsim.sampling.ConeSampling`; ``offsets``
+    ``sampling`` is the scene's :class:`~pmdsim.scene.sampling.ConeSampling`; ``offsets``
     ((H*W, 2), random mode) the per-pixel rotations of its sample set. Returns a dict of
     (H, W, R) arrays ``u``, ``v`` (monitor px, NaN where the ray misses the monitor),
     ``f`` (BRDF weight of every ray, hit or not) and ``hit``; ``near_edge`` (H, W) marks

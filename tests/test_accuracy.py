@@ -13,7 +13,7 @@ import pytest
 
 import naive
 from conftest import make_config
-from pmdsim.decode import decode_sequence
+from pmdsim.measure.decode import decode_sequence
 from pmdsim.patterns import phase_shifts
 from pmdsim.render import Simulation
 

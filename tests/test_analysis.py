@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pmdsim.analysis import compare_direction, deviation_stats, image_moments, slope_deviation, wrap
+from pmdsim.measure.deviation import compare_direction, deviation_stats, image_moments, slope_deviation, wrap
 
 
 def test_wrap_range_and_identity():

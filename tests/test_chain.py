@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 
 from conftest import base_dict
-from pmdsim import chain
-from pmdsim import decode as dec
-from pmdsim import pipeline
+from pmdsim.measure import chain
+from pmdsim.measure import decode as dec
+from pmdsim import run as pipeline
 from pmdsim.config import parse_config
 from pmdsim.render import Simulation
 
@@ -281,7 +281,7 @@ def tiny_run_dict(**changes):
     from test_pipeline import tiny_config_dict
 
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
-    d["output"] = {"figures": True}
+    d["output"] = {"figures": True, "figure_set": "all", "figure_workers": 2}
     d.update(changes)
     return d
 
@@ -334,14 +334,53 @@ def test_pipeline_writes_the_chain(variant_run):
     assert set(top["variants"]) == {"mirror", "wide"}
     assert (out / "figures" / "deviation_variants.png").is_file()
     assert "reference" in variant_run.timings
-    # The slope follows from the coordinate deviation and the distance.
+    # The slope follows from the coordinate deviation with the full 3-D geometry: the
+    # small-angle coord / (2 d) in the plane of incidence (the x-z plane: direction x),
+    # 1/cos(25 deg) more across it (direction y).
     wide = pipeline.load_run(out, variant="wide")
     slope = wide["slope_deviation_urad"].values
-    expect = wide["coord_deviation_mm"].values / (2 * wide["surface_to_monitor_mm"].values) * 1e6
-    np.testing.assert_allclose(slope, expect, equal_nan=True)
+    scalar = wide["coord_deviation_mm"].values / (2 * wide["surface_to_monitor_mm"].values) * 1e6
+    assert np.array_equal(np.isfinite(slope), np.isfinite(scalar))
+    directions = list(wide["direction"].values)
+    big = np.abs(scalar) > 0.05 * np.nanmax(np.abs(scalar))
+    for d, want in (("x", 1.0), ("y", 1 / math.cos(math.radians(25.0)))):
+        k = directions.index(d)
+        ratio = (slope[k] / scalar[k])[big[k]]
+        assert abs(np.median(ratio) / want - 1) < 0.03, (d, np.median(ratio))
     combined = pipeline.load_run(out)
     assert combined["coord_deviation_px"].dims == ("variant", "direction", "row", "col")
     assert combined["reference_monitor_coord_px"].dims == ("direction", "row", "col")
+
+
+def test_statistics_json_values_follow_from_the_stored_maps(variant_run):
+    """statistics.json of the wide variant against the maps stored in the run: phase figures
+    in mrad are 1e3 x the stored phase deviation (rad) statistics, the mm map is the px map
+    x the configured 3 mm pitch, slope statistics those of the stored slope map; RMS, population std
+    and P95 of |.| recomputed with slow loops (issue 9: the file was only checked for its
+    keys and units, so a mrad/rad slip or a sample std passed)."""
+    import naive_stats as ns
+
+    out = variant_run.outdir
+    ds = pipeline.load_run(out, variant="wide")
+    stats = json.loads((out / "wide" / "statistics.json").read_text())["directions"]
+    for di, d in enumerate(("x", "y")):
+        ok = ds["valid"].values[di]
+        assert ok.sum() > 100
+        dphi = ds["phase_deviation"].values[di][ok]
+        s = stats[d]
+        assert s["phase_mrad"]["rms"] == pytest.approx(1e3 * ns.rms(dphi), rel=1e-9)
+        assert s["phase_mrad"]["std"] == pytest.approx(1e3 * ns.population_std(dphi), rel=1e-9)
+        assert s["phase_mrad"]["p95"] == pytest.approx(
+            1e3 * ns.percentile_linear(np.abs(dphi), 95), rel=1e-9)
+        px = ds["coord_deviation_px"].values[di]
+        mm = ds["coord_deviation_mm"].values[di]
+        np.testing.assert_allclose(mm[ok], 3.0 * px[ok], rtol=1e-12)
+        assert s["coord_mm"]["mean"] == pytest.approx(ns.mean(3.0 * px[ok]), rel=1e-9)
+        slope = ds["slope_deviation_urad"].values[di][ok]     # 3-D geometry: tested above
+        assert s["slope_urad"]["rms"] == pytest.approx(ns.rms(slope), rel=1e-9)
+        assert s["slope_urad"]["p95"] == pytest.approx(
+            ns.percentile_linear(np.abs(slope), 95), rel=1e-9)
+        assert s["coord_px"]["n_valid"] == ok.sum()
 
 
 def test_decoding_required_but_impossible_is_a_clear_error(tmp_path):
@@ -397,7 +436,7 @@ def test_dot_moments_table_and_figures(tmp_path):
     assert np.all(np.abs(mirror[seen] - 1) < 0.02)
     assert np.all(ds["dot_elongation"].values[seen] > mirror[seen] + 0.02)
     # Moments agree with analysis.image_moments on the stored image.
-    from pmdsim.analysis import image_moments
+    from pmdsim.measure.deviation import image_moments
 
     q = int(np.flatnonzero(seen)[0])
     img = ds["dots"].values[q]

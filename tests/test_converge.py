@@ -21,10 +21,11 @@ import numpy as np
 import pytest
 
 from conftest import make_config
-from pmdsim import diagnostics as dg
+from pmdsim.studies import diagnostics as dg
 from pmdsim.brdf import Beckmann, Ward
 from pmdsim.config import DiagnosticsConfig
-from pmdsim.converge import COLUMNS, reduced_config, run_convergence
+from pmdsim.run.convergence import run_convergence
+from pmdsim.studies.convergence import COLUMNS, reduced_config
 from pmdsim.render import Simulation
 
 
@@ -71,12 +72,19 @@ def test_energy_fraction_matches_dense_quadrature(brdf):
 
 
 def test_fig3_lobe_holds_about_a_third_inside_one_degree():
-    """The physics note's claim, measured: ~37 % inside 1 deg, ~4 deg for 95 %."""
+    """The physics note's claim (~37 % inside 1 deg, ~4 deg for 95 %): lobe_energy against
+    the deterministic quadrature of tests/naive_lobe.py (which gives 37.5 % and 3.97 deg)."""
+    import naive_lobe
+
     t = math.radians(25.0)
     i = np.array([[-math.sin(t), 0.0, math.cos(t)]])
-    frac, need, _ = dg.lobe_energy(Ward(0.025, 0.002), i, math.radians(1.0))
-    assert 0.33 < frac[0, 0] < 0.42
-    assert 3.5 < math.degrees(need[0]) < 4.5
+    brdf = Ward(0.025, 0.002)
+    frac, need, _ = dg.lobe_energy(brdf, i, math.radians(1.0))
+    expected = naive_lobe.energy_fraction(brdf, i[0], math.radians(1.0))
+    assert frac[0, 0] == pytest.approx(expected, abs=1e-3)
+    assert math.degrees(need[0]) == pytest.approx(
+        math.degrees(naive_lobe.theta_for_fraction(brdf, i[0], 0.95)), abs=0.01)
+    assert 0.33 < expected < 0.42
 
 
 def test_energy_fraction_limits_and_monotone():
@@ -112,7 +120,11 @@ def test_delta_method_matches_iid_replications():
 @pytest.mark.parametrize("estimator", ["paper", "radiometric"])
 def test_phase_error_seeds(estimator):
     """Seeds: the per-seed phases are the renderer's, the lattice beats N independent rays
-    (the delta method's bound; measured 4.5-7.5x here), and the error falls with N."""
+    (the delta method's bound), and the error falls with N. The size of the advantage
+    (measured 4.5-7.5x here) depends on the lattice and the integrand and has no closed
+    form, so it is not windowed; each factor is checked against an independent value in
+    test_diagnostics_independent.py (the delta method against a slow formula, the seeds
+    method against a direct recomputation and a 64-seed brute force)."""
     cfg = dict(brdf={"alpha_x": 0.02, "alpha_y": 0.01},
                sampling={"estimator": estimator, "mode": "random", "n_rays": 48,
                          "theta_max_deg": 3.0, "seed": 1000})
@@ -132,7 +144,8 @@ def test_phase_error_seeds(estimator):
     for d in range(2):
         ok = np.isfinite(seeds[d, 0]) & np.isfinite(delta[d, 0])
         assert ok.sum() > 100
-        assert 2.0 < np.median(delta[d, 0][ok]) / np.median(seeds[d, 0][ok]) < 20.0
+        assert np.median(delta[d, 0][ok]) > 2.0 * np.median(seeds[d, 0][ok])
+        # 4 x the rays: at least the 1/sqrt(N) of plain Monte Carlo (a lattice does better)
         assert np.median(seeds4[d, 0][ok]) < 0.5 * np.median(seeds[d, 0][ok])
 
 
@@ -220,15 +233,19 @@ def test_run_convergence_writes_table_and_figure(tmp_path):
     assert (out / "convergence.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     meta = json.loads((out / "convergence.json").read_text())
     assert meta["converged"] == "radiometric, N = 64" and meta["camera_size"] == [20, 16]
-    key = lambda r: (r["theta_max_deg"], r["n_rays"], r["direction"], r["width_px"])  # noqa: E731
-    paper = {key(r): r for r in res.rows if r["estimator"] == "paper"}
-    wmean = {key(r): r for r in res.rows if r["estimator"] == "weighted_mean"}
-    assert paper.keys() == wmean.keys()
-    for k, r in paper.items():  # a per-pixel factor apart: same phase and modulation
-        assert r["phase_rms_rad"] == wmean[k]["phase_rms_rad"]
-        assert r["modulation_median"] == wmean[k]["modulation_median"]
+    # The values themselves are checked against a recomputation from the fringe sums and
+    # against closed forms in test_convergence_independent.py; here: the table on disk holds
+    # the study's rows (6 significant digits), one per estimator, theta, N, direction, width.
+    for disk, mem in zip(rows, res.rows):
+        assert disk["estimator"] == mem["estimator"] and int(disk["n_rays"]) == mem["n_rays"]
+        for col in ("phase_rms_rad", "phase_p95_rad", "modulation_median",
+                    "phase_rms_vs_converged_rad"):
+            assert float(disk[col]) == pytest.approx(mem[col], rel=1e-5, abs=1e-12)
+    key = lambda r: (r["estimator"], r["theta_max_deg"], r["n_rays"], r["direction"],  # noqa: E731
+                     r["width_px"])
+    assert len({key(r) for r in res.rows}) == len(res.rows)
     conv = [r for r in res.rows if r["estimator"] == "radiometric" and r["n_rays"] == 64]
-    assert all(r["phase_rms_vs_converged_rad"] == 0.0 and r["n_valid"] > 50 for r in conv)
+    assert all(r["n_valid"] > 50 for r in conv)
     assert not [p for p in tmp_path.iterdir() if p.name != "conv"]  # no temporary folders left
 
     # a folder that is not a convergence folder is never replaced

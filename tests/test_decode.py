@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import naive_decode as naive
-from pmdsim import decode as dec
+from pmdsim.measure import decode as dec
 from pmdsim.kernels import decode as kd
 
 EXTENT = 1920
@@ -166,13 +166,17 @@ def test_phase_noise_matches_sqrt_2_over_k_sigma_over_b(n_shifts):
 
 
 def test_gamma_harmonics_alias_more_with_four_than_five_shifts():
-    """Gamma 2.2 harmonics m = qK +- 1 alias: K = 4 errs ~10 mrad, K = 5 ~1 mrad."""
+    """Gamma 2.2 harmonics m = qK +- 1 alias: K = 4 errs ~10 mrad, K = 5 ~1 mrad. The
+    largest error over the 50 phases equals the one derived from the profile's Fourier
+    series (``naive_decode.gamma_phase_error``), not a window copied from a run."""
     u = np.arange(400.0)[None]
     errors = {}
     for n_shifts in (4, 5):
         frames = pattern(u, 50, n_shifts, black=0.05, white=0.95, gamma=2.2)
         res = dec.phase_shift(frames)
         errors[n_shifts] = np.abs(wrap(res.wrapped_phase - 2 * np.pi * u / 50)).max()
+        derived = np.abs(naive.gamma_phase_error(2 * np.pi * np.arange(50) / 50, 2.2, n_shifts))
+        assert errors[n_shifts] == pytest.approx(derived.max(), abs=1e-9)
     assert errors[4] > 5 * errors[5]
     assert 3e-3 < errors[4] < 3e-2
     assert errors[5] < 3e-3
@@ -347,7 +351,7 @@ def test_noise_at_monitor_edges_does_not_wrap():
 
 
 def test_valid_is_flags_zero_and_flag_bits():
-    assert [int(f) for f in F] == [1, 2, 4, 8]
+    assert [int(f) for f in F] == [1, 2, 4, 8, 16]
     u = monitor_row()
     frames = sequence(u, [50, 400, 3200], 4)
     frames[0, 0, 0, 0] = np.nan

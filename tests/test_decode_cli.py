@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from pmdsim import pipeline
+from pmdsim import run as pipeline
 from pmdsim.cli import app
 from pmdsim.config import parse_config
 from test_pipeline import tiny_config_dict
@@ -75,7 +75,7 @@ def test_from_run_round_trips_the_simulation(run, tmp_path, direction):
 def test_explicit_options_equal_from_run_and_png_input(run, tmp_path):
     import xarray as xr
 
-    from pmdsim.io import read_image, write_image
+    from pmdsim.run.files import read_image, write_image
 
     a, b = tmp_path / "a", tmp_path / "b"
     result, text = invoke("decode", *frames(run), "--from-run", run, "-o", a, "--no-figures")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pmdsim import io as pio
+from pmdsim.run import files as pio
 
 
 def test_exposure_factor_is_run_wide_and_ignores_nan():

@@ -33,7 +33,7 @@ from pmdsim.kernels import bundle as kb
 from pmdsim.kernels._jit import fastjit
 from pmdsim.kernels.fastmath import exp_neg, sincos
 from pmdsim.render import Simulation, scene_geometry_rows
-from pmdsim.sampling import ConeSampling
+from pmdsim.scene.sampling import ConeSampling
 from pmdsim.trace import bundle_geometry, cone_basis, trace_primary
 
 _TWO_PI = 2.0 * math.pi

@@ -7,21 +7,22 @@ Public API::
     sim = Simulation.from_config(cfg)
     result = sim.render_fringes(widths=[50], directions=["x", "y"], shifts=4)
 
-``run_simulation`` and ``load_run`` (:mod:`pmdsim.pipeline`) are available here too; they
+``run_simulation`` and ``load_run`` (:mod:`pmdsim.run`) are available here too; they
 and their dependencies (xarray, zarr) are imported on first use. matplotlib is imported
-only when figures are drawn (:mod:`pmdsim.plot`).
+only when figures are drawn (:mod:`pmdsim.report`). ``pmdsim.decode`` is
+:mod:`pmdsim.measure.decode` (decoding phase-shifted images, plain arrays).
+
+Packages, in the order the data flows (see docs/architecture.md): ``config``, ``scene``
+and ``brdf``, ``trace``, ``render`` (compiled ``kernels`` underneath), ``measure``,
+``studies``, ``run``, ``report``, ``cli``.
 """
 
 from __future__ import annotations
 
-from importlib import metadata as _metadata
-
-try:
-    __version__ = _metadata.version("pmdsim")
-except _metadata.PackageNotFoundError:  # running from a source tree without installing
-    __version__ = "0+unknown"
+from ._version import __version__
 
 from . import patterns
+from .measure import decode
 from .config import ConfigError, RunConfig, load_config, parse_config
 from .render import Simulation
 from .scene import Scene
@@ -31,13 +32,13 @@ _LAZY = {"run_simulation", "load_run", "RunResult"}
 
 def __getattr__(name: str):
     if name in _LAZY:
-        from . import pipeline
+        from . import run
 
-        return getattr(pipeline, name)
+        return getattr(run, name)
     raise AttributeError(f"module 'pmdsim' has no attribute {name!r}")
 
 
 __all__ = [
     "__version__", "load_config", "parse_config", "ConfigError", "RunConfig", "Scene",
-    "Simulation", "patterns", "run_simulation", "load_run", "RunResult",
+    "Simulation", "patterns", "decode", "run_simulation", "load_run", "RunResult",
 ]

@@ -4,6 +4,10 @@
                                      [--no-diagnostics]
     pmdsim decode IMAGES... -o OUT (--widths W1,W2,.. --shifts K --extent-px E | --from-run RUN)
     pmdsim converge CONFIG -o OUTDIR [--n-values 25,50,..] [--theta 0.5,1,..] [--camera 160x128]
+    pmdsim sweep CONFIG -o OUTDIR [--scheduler threads|processes|synchronous|tcp://..]
+                                  [--workers N] [--overwrite] [--no-figures]
+    pmdsim report RUN [--all | --figure NAME ...] [--variant NAME] [-o FOLDER]
+    pmdsim warmup
     pmdsim version
     pmdsim --help
 
@@ -82,8 +86,9 @@ def simulate(
     (diagnostics: warnings, each naming the setting that fixes it; bounds in the
     configuration's diagnostics section)."""
     from .config import ConfigError, load_config
-    from .io import check_output_dir
-    from .pipeline import run_simulation, warning_text
+    from .report.text import warning_text
+    from .run import run_simulation
+    from .run.files import check_output_dir
 
     console = _console()
     try:
@@ -251,7 +256,7 @@ def decode(
     """Decode phase-shifted fringe images (real camera images or a simulation's) to absolute
     phase, monitor coordinate, modulation and reliability flags; writes OUT/decode.zarr,
     statistics.json and PNG maps."""
-    from .decode_files import decode_files, make_setup
+    from .run.decode_run import decode_files, make_setup
 
     console = _console()
     try:
@@ -327,7 +332,8 @@ def converge(
     import math
 
     from .config import ConfigError, load_config
-    from .converge import DEFAULT_N, DEFAULT_THETA_DEG, run_convergence
+    from .run.convergence import run_convergence
+    from .studies.convergence import DEFAULT_N, DEFAULT_THETA_DEG
 
     console = _console()
     try:
@@ -376,15 +382,174 @@ def converge(
 
 
 @app.command()
+def budget(
+    config: Path = typer.Argument(..., help="Run configuration (TOML), e.g. "
+                                  "examples/realistic_system.toml."),
+    output: Path = typer.Option(..., "-o", "--output", help="Output folder to create."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
+    no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+) -> None:
+    """Error budget: the chain with each system effect of CONFIG alone and all together on
+    the ideal mirror, and the surface's scattering minus that mirror; deviation from the
+    exact reflection points in mrad, monitor px, mm and urad. Writes OUT/budget.csv,
+    budget.json, budget.png (docs/system.md)."""
+    from .config import ConfigError, load_config
+    from .report.budget import budget_text
+    from .run.budget import run_budget
+
+    console = _console()
+    try:
+        cfg = load_config(config)
+        t0 = time.perf_counter()
+        with console.status(f"error budget of {cfg.name}") as status:
+            result = run_budget(cfg, output, figure=not no_figure, overwrite=overwrite,
+                                progress=lambda msg: status.update(f"error budget of {cfg.name}: {msg}"))
+    except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
+            NotADirectoryError, ValueError) as err:
+        _fail(str(err))
+    console.print(f"pmdsim budget '{cfg.name}' ({time.perf_counter() - t0:.1f} s); deviation from "
+                  "the exact reflection point of each pixel's centre ray")
+    console.print(budget_text(result.rows), markup=False)
+    console.print(f"table  {result.table}")
+    if result.figure is not None:
+        console.print(f"figure {result.figure}")
+
+
+@app.command()
 def version() -> None:
     """Print the pmdsim version."""
-    from . import __version__
+    from ._version import __version__
 
     _console().print(f"pmdsim {__version__}")
 
 
 def main() -> None:  # pragma: no cover - console entry for `python -m pmdsim.cli`
     app()
+
+
+@app.command()
+def sweep(
+    config: Path = typer.Argument(..., help="Configuration with a [sweep] table, e.g. "
+                                  "examples/sweep_roughness.toml."),
+    output: Path = typer.Option(..., "-o", "--output",
+                                help="Sweep folder (sweep.zarr, points.csv, figures/); an "
+                                "existing folder of the same sweep is resumed."),
+    scheduler: str = typer.Option(
+        "threads", "--scheduler",
+        help="threads (local thread pool), processes (local dask.distributed cluster), "
+        "synchronous, or the address of a running Dask scheduler (tcp://host:8786)."),
+    workers: int | None = typer.Option(None, "--workers", min=1,
+                                       help="Threads or processes of a local scheduler "
+                                       "(default: all cores)."),
+    overwrite: bool = typer.Option(False, "--overwrite",
+                                   help="Start again when OUTDIR holds a different sweep."),
+    no_figures: bool = typer.Option(False, "--no-figures", help="Do not draw the figures."),
+) -> None:
+    """Run the measurement chain at every point of the configuration's [sweep] (grid, zip or
+    random design over any configuration fields) into one Zarr store with a dimension per
+    swept field; resumes an interrupted sweep with only its unfinished points. See
+    docs/sweeps.md."""
+    from .config import ConfigError, load_config
+    from .run.sweep import run_sweep
+    from .studies.sweep import plan_sweep
+
+    console = _console()
+    try:
+        cfg = load_config(config)
+        plan = plan_sweep(cfg)
+    except (ConfigError, FileNotFoundError, ValueError) as err:
+        _fail(str(err))
+    shape = " x ".join(f"{n} {d}" for n, d in zip(plan.shape, plan.dims))
+    console.print(f"sweep '{cfg.name}': {len(plan.points)} points ({plan.sweep.design}: "
+                  f"{shape}) on {scheduler}")
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+               TimeElapsedColumn(), TimeRemainingColumn())
+    try:
+        with Progress(*columns, console=console, transient=False) as bar:
+            task = bar.add_task("points", total=None)
+
+            def progress(done: int, total: int) -> None:
+                bar.update(task, completed=done, total=total)
+
+            result = run_sweep(cfg, output, scheduler=scheduler, num_workers=workers,
+                               progress=progress, overwrite=overwrite,
+                               figures=not no_figures)
+    except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
+            NotADirectoryError, ValueError) as err:
+        _fail(str(err))
+    console.print(f"computed {len(result.computed)} points, {len(result.skipped)} were already "
+                  f"done, in {result.seconds:.1f} s")
+    console.print(f"store: {result.store}")
+    for f in result.files:
+        console.print(f"wrote {f}")
+
+
+@app.command()
+def report(
+    run: Path = typer.Argument(..., help="A run folder written by pmdsim simulate."),
+    all_figures: bool = typer.Option(False, "--all", help="Every figure (default: the "
+                                     "summary: setup and overview)."),
+    figure: list[str] | None = typer.Option(None, "--figure", help="A figure by name "
+                                            "(repeatable): setup, fringes, modulation, "
+                                            "overview, phase, deviation, histograms, "
+                                            "modulation_ratio, masks."),
+    variant: str | None = typer.Option(None, "--variant", help="Only this variant of a run "
+                                       "with variants (default: all)."),
+    output: Path | None = typer.Option(None, "-o", "--output", help="Folder for the figures "
+                                       "(default: RUN/figures, or RUN/<variant>/figures)."),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="Drawing processes "
+                                       "(default: one per core for 4 figures or more)."),
+) -> None:
+    """Draw a run's figures again from its folder's dataset alone (run.zarr with its
+    configuration): any of them, all of them, into the run or another folder."""
+    from .config import RunConfig
+    from .report.text import description
+    from .run.dataset import DATASET_NAME
+    from .run.figures import draw_figures, figure_names
+
+    console = _console()
+    run = Path(run)
+    if (run / DATASET_NAME).is_dir():
+        members = [run]
+    else:
+        members = sorted(p.parent for p in run.glob(f"*/{DATASET_NAME}"))
+        if variant is not None:
+            members = [m for m in members if m.name == variant]
+    if not members:
+        _fail(f"{run}: no {DATASET_NAME} here" + (f" for variant {variant!r}" if variant else "")
+              + " (give a run folder written by pmdsim simulate)")
+    from .run.figures import open_dataset
+
+    which = figure or ("all" if all_figures else "summary")
+    t0 = time.perf_counter()
+    for folder in members:
+        ds = open_dataset(folder)
+        cfg = RunConfig.model_validate_json(ds.attrs["config_json"])
+        try:
+            names = figure_names(ds, which)
+        except ValueError as err:
+            _fail(str(err))
+        dest = output / folder.name if output is not None and len(members) > 1 else output
+        for p in draw_figures(folder, names, cfg.name, description(cfg), workers=workers,
+                              folder=dest):
+            console.print(f"wrote {p}")
+    console.print(f"in {time.perf_counter() - t0:.1f} s")
+
+
+@app.command()
+def warmup() -> None:
+    """Compile every kernel once into Numba's on-disk cache (run once after installing, so
+    that the first simulation does not pay for compilation); a few seconds of tiny runs."""
+    from .run.warmup import CASES, warmup as run_warmup
+
+    console = _console()
+    t0 = time.perf_counter()
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+               TimeElapsedColumn())
+    with Progress(*columns, console=console, transient=False) as bar:
+        task = bar.add_task("compiling kernels", total=len(CASES))
+        run_warmup(lambda done, total: bar.update(task, completed=done))
+    console.print(f"kernels compiled and cached in {time.perf_counter() - t0:.1f} s")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -75,16 +75,58 @@ class CameraConfig(_Model):
     look_at_mm: Vec3 | None = None
     up: Vec3 = (0.0, 1.0, 0.0)
     rotation: tuple[Vec3, Vec3, Vec3] | None = None
+    # --- optics (scene/camera.py, docs/system.md) ---------------------------------------
+    camera_matrix: tuple[Vec3, Vec3, Vec3] | None = Field(
+        None, description="OpenCV camera matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (px); "
+        "replaces focal_length_px and principal_point_px")
+    dist_coeffs: tuple[float, ...] | None = Field(
+        None, description="OpenCV distortion coefficients (k1, k2, p1, p2[, k3]); or give "
+        "k1, k2, k3, p1, p2 by name")
+    k1: float = 0.0
+    k2: float = 0.0
+    k3: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+    subpixels: Annotated[int, Field(ge=1, le=16)] = Field(
+        1, description="n: each pixel value integrates n x n stratified sub-pixel vision rays "
+        "(1 = one ray through the pixel centre)")
+    f_number: PositiveFloat | None = Field(
+        None, description="thin lens of focal_length_mm at this f-number (aperture diameter "
+        "focal_length_mm / f_number); none = pinhole")
+    focus_distance_mm: PositiveFloat | None = Field(
+        None, description="distance of the plane in focus along the optical axis; default: the "
+        "surface point seen by the image centre")
+    aperture_samples: Annotated[int, Field(ge=1)] = Field(
+        16, description="stratified aperture samples per sub-pixel (thin lens only)")
+    aperture_seed: Annotated[int, Field(ge=0)] = 0
 
     _up = field_validator("up")(_nonzero_vector)
 
     @model_validator(mode="after")
     def _check(self) -> "CameraConfig":
+        if self.camera_matrix is not None:
+            k = np.asarray(self.camera_matrix, float)
+            if (k[0, 1] != 0 or k[1, 0] != 0 or k[2, 0] != 0 or k[2, 1] != 0 or k[2, 2] != 1
+                    or k[0, 0] <= 0 or k[1, 1] <= 0):
+                raise ValueError("camera_matrix must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] "
+                                 "with fx, fy > 0 (no skew)")
+            if self.focal_length_px is not None or self.principal_point_px is not None:
+                raise ValueError("give camera_matrix or focal_length_px/principal_point_px, not both")
+        if self.dist_coeffs is not None:
+            if len(self.dist_coeffs) not in (4, 5):
+                raise ValueError("dist_coeffs must be OpenCV's (k1, k2, p1, p2) or (k1, k2, p1, p2, k3)")
+            if any(getattr(self, n) != 0.0 for n in ("k1", "k2", "k3", "p1", "p2")):
+                raise ValueError("give dist_coeffs or k1, k2, k3, p1, p2 by name, not both")
+        if self.f_number is not None and self.focal_length_mm is None:
+            raise ValueError("f_number needs focal_length_mm (the aperture diameter is "
+                             "focal_length_mm / f_number)")
         has_mm = self.focal_length_mm is not None or self.pixel_pitch_mm is not None
-        if self.focal_length_px is None:
+        if self.camera_matrix is not None:
+            pass
+        elif self.focal_length_px is None:
             if self.focal_length_mm is None or self.pixel_pitch_mm is None:
                 raise ValueError(
-                    "give focal_length_mm and pixel_pitch_mm, or focal_length_px"
+                    "give focal_length_mm and pixel_pitch_mm, or focal_length_px (or camera_matrix)"
                 )
         elif has_mm and self.focal_length_mm is not None and self.pixel_pitch_mm is not None:
             if not math.isclose(
@@ -110,9 +152,19 @@ class CameraConfig(_Model):
 
     @property
     def focal_px(self) -> float:
+        if self.camera_matrix is not None:
+            return float(self.camera_matrix[0][0])
         if self.focal_length_px is not None:
             return float(self.focal_length_px)
         return float(self.focal_length_mm / self.pixel_pitch_mm)
+
+    @property
+    def distortion(self) -> tuple[float, float, float, float, float]:
+        """OpenCV order (k1, k2, p1, p2, k3)."""
+        if self.dist_coeffs is not None:
+            d = tuple(float(x) for x in self.dist_coeffs)
+            return d + (0.0,) * (5 - len(d))
+        return (self.k1, self.k2, self.p1, self.p2, self.k3)
 
 
 class MonitorConfig(_Model):
@@ -135,6 +187,27 @@ class MonitorConfig(_Model):
         description="nearest: each monitor pixel a flat square emitter (the pattern value at "
         "the pixel centre); continuous: analytic fringes evaluated at the exact hit point",
     )
+    # --- display physics (scene/display.py, docs/system.md) ---------------------------
+    response_lut: str | None = Field(
+        None, description="CSV file of (drive in [0, 1], relative luminance) rows replacing "
+        "gamma; path relative to the config file")
+    bit_depth: Annotated[int, Field(ge=1, le=16)] | None = Field(
+        None, description="quantise the drive value to this many bits before the response "
+        "(8 or 10 on real displays); none = unquantised")
+    precompensate_gamma: bool = Field(
+        False, description="show the pattern through the inverse response, so that the "
+        "luminance (not the drive) is sinusoidal")
+    falloff_exponent: Annotated[float, Field(ge=0)] = Field(
+        0.0, description="luminance ~ cos(theta)^m of the emission angle (0 = Lambertian)")
+    falloff_table: tuple[tuple[Annotated[float, Field(ge=0, lt=90)], Annotated[float, Field(ge=0)]], ...] = Field(
+        (), description="(angle_deg, relative luminance) rows, interpolated; multiplies the "
+        "cos^m falloff")
+    cover_glass_thickness_mm: Annotated[float, Field(ge=0)] = 0.0
+    cover_glass_index: Annotated[float, Field(ge=1)] = 1.5
+    flatness_coefficients_mm: tuple[tuple[float, ...], ...] = Field(
+        (), description="c[i][j]: the emitting surface lies h = sum c[i][j] x^i y^j mm in "
+        "front of the nominal plane (towards the viewer), x, y in mm from the centre along "
+        "the pixel columns / rows; up to 4 x 4")
 
     _up = field_validator("up")(_nonzero_vector)
 
@@ -142,6 +215,14 @@ class MonitorConfig(_Model):
     def _check(self) -> "MonitorConfig":
         if self.white_level <= self.black_level:
             raise ValueError("white_level must be greater than black_level")
+        c = self.flatness_coefficients_mm
+        if c and (len(c) > 4 or any(len(r) != len(c) for r in c)):
+            raise ValueError("flatness_coefficients_mm must be a square matrix of at most 4 x 4")
+        if self.response_lut is not None and self.gamma != 1.0:
+            raise ValueError("give gamma or response_lut, not both")
+        angles = [a for a, _ in self.falloff_table]
+        if any(b <= a for a, b in zip(angles, angles[1:])):
+            raise ValueError("falloff_table angles must increase")
         n = np.subtract(self.look_at_mm, self.centre_mm)
         if np.linalg.norm(n) < 1e-9:
             raise ValueError("look_at_mm must differ from centre_mm")
@@ -173,7 +254,133 @@ class FlatSurfaceConfig(_Model):
         return self
 
 
-SurfaceConfig = Annotated[FlatSurfaceConfig, Field(discriminator="type")]
+class ApertureConfig(_Model):
+    """The clear aperture of a curved surface, in its local (x, y) (mm, about ``centre_mm``).
+
+    ``circular``: ``radius_mm``; ``annular``: ``radius_mm`` and ``inner_radius_mm``;
+    ``rectangular``: ``size_mm`` (along local x, along local y). ``centre_mm`` off the
+    vertex gives an off-axis segment of the parent surface.
+    """
+
+    shape: Literal["circular", "annular", "rectangular"] = "circular"
+    radius_mm: PositiveFloat | None = None
+    inner_radius_mm: Annotated[float, Field(ge=0)] = 0.0
+    size_mm: tuple[PositiveFloat, PositiveFloat] | None = None
+    centre_mm: tuple[float, float] = (0.0, 0.0)
+
+    @model_validator(mode="after")
+    def _check(self) -> "ApertureConfig":
+        if self.shape in ("circular", "annular") and self.radius_mm is None:
+            raise ValueError(f"aperture.radius_mm is required for shape = {self.shape!r}")
+        if self.shape == "annular" and not (0 < self.inner_radius_mm < self.radius_mm):
+            raise ValueError("aperture.inner_radius_mm must be > 0 and < radius_mm for an annulus")
+        if self.shape == "rectangular" and self.size_mm is None:
+            raise ValueError("aperture.size_mm = [width, height] is required for shape = 'rectangular'")
+        return self
+
+
+class _SagSurfaceBase(_Model):
+    """Pose and aperture of a sag surface: vertex at ``centre_mm``, local z = ``normal``
+    (the side the camera looks from), local x = ``x_axis`` (projected). ``radius_mm`` > 0
+    puts the centre of curvature on the +normal side (concave towards the camera);
+    None = flat base. See docs/surfaces.md."""
+
+    centre_mm: Vec3 = (0.0, 0.0, 0.0)
+    normal: Vec3 = (0.0, 0.0, 1.0)
+    x_axis: Vec3 = (1.0, 0.0, 0.0)
+    aperture: ApertureConfig
+
+    _directions = field_validator("normal", "x_axis")(_nonzero_vector)
+
+    @field_validator("radius_mm", check_fields=False)
+    @classmethod
+    def _radius(cls, v):
+        if v is not None and (not np.isfinite(v) or v == 0):
+            raise ValueError("must be a non-zero finite radius of curvature in mm (None or omit for a flat base)")
+        return v
+
+    @model_validator(mode="after")
+    def _check_pose(self):
+        _unit("normal", self.normal)
+        _unit("x_axis", self.x_axis)
+        n = np.asarray(self.normal) / np.linalg.norm(self.normal)
+        x = np.asarray(self.x_axis) / np.linalg.norm(self.x_axis)
+        if abs(n @ x) > 1 - 1e-9:
+            raise ValueError("x_axis must not be parallel to normal")
+        return self
+
+
+class SphereSurfaceConfig(_SagSurfaceBase):
+    """A sphere of radius of curvature ``radius_mm``."""
+
+    type: Literal["sphere"]
+    radius_mm: float
+
+
+class ConicSurfaceConfig(_SagSurfaceBase):
+    """A conic: radius of curvature at the vertex and conic constant k (0 sphere, -1
+    paraboloid, < -1 hyperboloid, (-1, 0) prolate and > 0 oblate ellipsoid)."""
+
+    type: Literal["conic"]
+    radius_mm: float | None = None
+    conic: float = 0.0
+
+
+class AsphereSurfaceConfig(_SagSurfaceBase):
+    """Even asphere: the conic plus ``coefficients`` A4, A6, A8, ... of r^4, r^6, r^8, ...
+    (mm^-3, mm^-5, ...)."""
+
+    type: Literal["asphere"]
+    radius_mm: float | None = None
+    conic: float = 0.0
+    coefficients: tuple[float, ...] = ()
+
+
+class XYPolynomialSurfaceConfig(_SagSurfaceBase):
+    """Freeform: the base conic plus sum c (x/s)^i (y/s)^j over ``terms`` = [[i, j, c_mm], ...],
+    s = ``norm_radius_mm``."""
+
+    type: Literal["xy_polynomial"]
+    radius_mm: float | None = None
+    conic: float = 0.0
+    norm_radius_mm: PositiveFloat = 1.0
+    terms: tuple[tuple[Annotated[int, Field(ge=0, le=20)], Annotated[int, Field(ge=0, le=20)], float], ...] = ()
+
+
+class ZernikeSurfaceConfig(_SagSurfaceBase):
+    """Freeform: the base conic plus sum c_j Z_j(x/s, y/s) with Noll's ordering and
+    normalisation (RMS 1 on the unit disc), ``coefficients`` = [[j, c_mm], ...],
+    s = ``norm_radius_mm``."""
+
+    type: Literal["zernike"]
+    radius_mm: float | None = None
+    conic: float = 0.0
+    norm_radius_mm: PositiveFloat
+    coefficients: tuple[tuple[Annotated[int, Field(ge=1, le=231)], float], ...] = ()
+
+
+class HeightMapSurfaceConfig(_SagSurfaceBase):
+    """A measured topography: heights on a regular grid from ``file`` (.npy, .csv, or a
+    32-bit float .tif/.tiff), rows along local y, columns along local x, ``spacing_mm`` =
+    (dx, dy), ``origin_mm`` = local (x, y) of element [0, 0] (default: the grid centred on
+    the vertex), heights in ``height_unit``, added to the base conic; interpolated with a
+    bicubic B-spline (continuous normals). The aperture defaults to the grid."""
+
+    type: Literal["height_map"]
+    file: str
+    spacing_mm: tuple[PositiveFloat, PositiveFloat]
+    origin_mm: tuple[float, float] | None = None
+    height_unit: Literal["mm", "um", "nm"] = "mm"
+    radius_mm: float | None = None
+    conic: float = 0.0
+    aperture: ApertureConfig | None = None
+
+
+SurfaceConfig = Annotated[
+    FlatSurfaceConfig | SphereSurfaceConfig | ConicSurfaceConfig | AsphereSurfaceConfig
+    | XYPolynomialSurfaceConfig | ZernikeSurfaceConfig | HeightMapSurfaceConfig,
+    Field(discriminator="type"),
+]
 
 
 class AnisotropyConfig(_Model):
@@ -512,7 +719,7 @@ class PatternsConfig(_Model):
 
 
 class DiagnosticsConfig(_Model):
-    """Bounds for the convergence warnings of :func:`pmdsim.diagnostics.check`."""
+    """Bounds for the convergence warnings of :func:`pmdsim.studies.diagnostics.check`."""
 
     min_energy_fraction: Annotated[float, Field(gt=0, le=1)] = Field(
         0.95, description="warn when the cone (theta_max) holds less of the lobe's energy"
@@ -547,12 +754,37 @@ class OutputConfig(_Model):
     bit_depth: Literal[8, 16] = 16
     write_images: bool = True
     figures: bool = True
+    figure_set: Literal["summary", "all"] = Field(
+        "summary", description="summary: setup.png and overview.png (without decoding: "
+        "setup, fringes, modulation); all: every figure (pmdsim report RUN --all draws them "
+        "later from the run folder)")
+    figure_workers: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="processes drawing the figures; default: one per core when there "
+        "are 4 figures or more, else drawn in the run's own process")
+
+
+class ReconstructConfig(_Model):
+    """Monocular reconstruction of the surface from the decoded monitor coordinates of both
+    fringe directions (docs/reconstruction.md), with the configured surface as the nominal
+    shape; height and slope errors against the configured (true) surface.
+
+    ``enabled``: None = whenever the chain decodes both directions x and y; ``spacing_mm``:
+    the surface grid; ``remove``: terms removed before the height statistics (``piston``,
+    ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism);
+    ``order``: 2 = classic Southwell, 4 = higher-order; ``anchor``: where the height is
+    tied to the nominal shape (the aperture centre, or the mean over the aperture)."""
+
+    enabled: bool | None = None
+    spacing_mm: PositiveFloat = 0.5
+    remove: Literal["none", "piston", "tilt", "power", "astigmatism"] = "piston"
+    order: Literal[2, 4] = 4
+    anchor: Literal["centre", "mean"] = "centre"
 
 
 class DecodeConfig(_Model):
     """The measurement chain of ``pmdsim simulate``: decode the fringe images (phase
     shifting + temporal unwrapping, :mod:`pmdsim.decode`) of the surface and of its ideal
-    specular reference, and compare them (:mod:`pmdsim.chain`).
+    specular reference, and compare them (:mod:`pmdsim.measure.chain`).
 
     ``enabled``: ``"auto"`` (default) decodes whenever the fringes allow it (K >= 3 shifts,
     widths that fit ``method`` over the monitor extent) and otherwise skips decoding with a
@@ -575,6 +807,141 @@ class DecodeConfig(_Model):
         0.1, description="mask (low_modulation) pixels whose modulation B/A of any width is "
         "below this fraction of the specular reference's; they are counted, not hidden"
     )
+
+
+class SensorConfig(_Model):
+    """The camera sensor, EMVA 1288 linear model (:mod:`pmdsim.scene.sensor`).
+
+    Off by default (noise-free camera values). When ``enabled``, camera values become digital
+    numbers (DN): the brightest finite value of each captured stack gets ``exposure`` mean
+    electrons (give one of ``exposure_electrons``, ``exposure_photons`` (times
+    ``quantum_efficiency``) or ``target_fill`` of ``full_well_electrons``; default fill 0.7),
+    then PRNU, shot noise (Poisson), dark signal, DSNU and temporal dark noise (electrons),
+    clipping at the full well, gain ``gain_dn_per_electron`` (default: the full well fills
+    the ADC), offset, rounding and clipping to ``bit_depth`` bits. Fixed patterns (DSNU,
+    PRNU) depend on ``seed`` only; temporal noise on ``seed`` and the frame.
+    """
+
+    enabled: bool = False
+    quantum_efficiency: Annotated[float, Field(gt=0, le=1)] = 1.0
+    exposure_electrons: PositiveFloat | None = None
+    exposure_photons: PositiveFloat | None = None
+    target_fill: Annotated[float, Field(gt=0, le=1)] | None = None
+    full_well_electrons: PositiveFloat = 10000.0
+    dark_noise_electrons: Annotated[float, Field(ge=0)] = Field(
+        0.0, description="sigma_d, temporal dark noise (std, e-)")
+    dark_signal_electrons: Annotated[float, Field(ge=0)] = Field(
+        0.0, description="mu_d, mean dark signal (e-)")
+    dsnu_electrons: Annotated[float, Field(ge=0)] = Field(
+        0.0, description="dark signal non-uniformity: std of the per-pixel dark offset (e-)")
+    prnu: Annotated[float, Field(ge=0, lt=1)] = Field(
+        0.0, description="photo-response non-uniformity: relative std of the per-pixel gain (1)")
+    gain_dn_per_electron: PositiveFloat | None = Field(
+        None, description="overall system gain K (DN/e-); default (2^bits - 1 - offset) / full well")
+    bit_depth: Annotated[int, Field(ge=1, le=16)] = 12
+    offset_dn: Annotated[float, Field(ge=0)] = 0.0
+    shot_noise: bool = True
+    seed: Annotated[int, Field(ge=0)] = 0
+
+    @model_validator(mode="after")
+    def _check(self) -> "SensorConfig":
+        given = [k for k in ("exposure_electrons", "exposure_photons", "target_fill")
+                 if getattr(self, k) is not None]
+        if len(given) > 1:
+            raise ValueError(f"give one of exposure_electrons, exposure_photons, target_fill (got {given})")
+        if self.offset_dn >= 2**self.bit_depth - 1:
+            raise ValueError(f"offset_dn must be below the ADC maximum 2^{self.bit_depth} - 1")
+        return self
+
+
+class SweepRange(_Model):
+    """A continuous range of a swept field for ``design = "random"``: values drawn
+    uniformly in [min, max] (``scale = "log"``: uniformly in log, min > 0)."""
+
+    min: float
+    max: float
+    scale: Literal["linear", "log"] = "linear"
+
+    @model_validator(mode="after")
+    def _check(self) -> "SweepRange":
+        if not (math.isfinite(self.min) and math.isfinite(self.max)) or self.max <= self.min:
+            raise ValueError(f"give finite min < max, got min = {self.min}, max = {self.max}")
+        if self.scale == "log" and self.min <= 0:
+            raise ValueError("scale = 'log' needs min > 0")
+        return self
+
+
+_RANGE_KEYS = frozenset({"min", "max", "scale"})
+
+
+def _flatten_parameters(data, prefix: str = "") -> dict:
+    """TOML ``[sweep.parameters]`` as {dotted path: values}: quoted keys
+    (``"brdf.alpha_y" = [...]``) and dotted keys (``brdf.alpha_y = [...]``, which TOML reads
+    as nested tables) give the same path; a table of only min/max/scale is a range."""
+    out = {}
+    for k, v in data.items():
+        path = f"{prefix}{k}"
+        if isinstance(v, dict) and v and not set(v) <= _RANGE_KEYS:
+            out.update(_flatten_parameters(v, path + "."))
+        else:
+            out[path] = v
+    return out
+
+
+class SweepConfig(_Model):
+    """A parameter study (``pmdsim sweep``): the run's configuration is the base, and
+    ``parameters`` names configuration fields by dotted path (``brdf.alpha_y``,
+    ``patterns.fringes.widths_px.0`` for an element of a list) with their values.
+
+    ``design``: ``grid`` (every combination; one store dimension per parameter), ``zip``
+    (the i-th values of every parameter together; lists of equal length; one ``point``
+    dimension), ``random`` (``points`` draws, seeded by ``seed``, from ranges
+    ``{min, max, scale}`` or lists of choices; one ``point`` dimension).
+    ``decimation``: the deviation and modulation maps are stored at every
+    ``decimation``-th camera pixel (0 = no maps). ``common_random_numbers``: every point
+    uses ``sampling.seed`` unchanged; by default a point's seed is derived from
+    (``sampling.seed``, point index), so each point is independent and recomputes
+    bit-identically on its own.
+    """
+
+    design: Literal["grid", "zip", "random"] = "grid"
+    parameters: dict[str, tuple | SweepRange]
+    points: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="number of points of a random design")
+    seed: Annotated[int, Field(ge=0)] = Field(0, description="seed of a random design")
+    decimation: Annotated[int, Field(ge=0)] = Field(
+        8, description="maps at every n-th camera pixel (0: statistics only)")
+    common_random_numbers: bool = False
+
+    @field_validator("parameters", mode="before")
+    @classmethod
+    def _flat(cls, v):
+        if isinstance(v, dict):
+            v = _flatten_parameters(v)
+            return {k: (x if isinstance(x, dict) else
+                        tuple(x) if isinstance(x, (list, tuple)) else (x,))
+                    for k, x in v.items()}
+        return v
+
+    @model_validator(mode="after")
+    def _check(self) -> "SweepConfig":
+        if not self.parameters:
+            raise ValueError("parameters: name at least one field to sweep")
+        for k, v in self.parameters.items():
+            if isinstance(v, SweepRange) and self.design != "random":
+                raise ValueError(f"parameters.{k!r}: a range {{min, max}} needs design = "
+                                 "'random'; give a list of values for a grid or zip")
+            if isinstance(v, tuple) and len(v) == 0:
+                raise ValueError(f"parameters.{k!r}: give at least one value")
+        if self.design == "zip":
+            n = {k: len(v) for k, v in self.parameters.items()}
+            if len(set(n.values())) > 1:
+                raise ValueError(f"design = 'zip' needs lists of equal length, got {n}")
+        if self.design == "random" and self.points is None:
+            raise ValueError("design = 'random' needs points (the number of draws)")
+        if self.design != "random" and self.points is not None:
+            raise ValueError("points is only for design = 'random'")
+        return self
 
 
 #: Files and folders of a run folder: a variant (a sub-folder) cannot take these names.
@@ -625,8 +992,11 @@ class RunConfig(_Model):
     compute: ComputeConfig = ComputeConfig()
     output: OutputConfig = OutputConfig()
     decode: DecodeConfig = DecodeConfig()
+    reconstruct: ReconstructConfig = ReconstructConfig()
     diagnostics: DiagnosticsConfig = DiagnosticsConfig()
+    sensor: SensorConfig = SensorConfig()
     variants: tuple[VariantConfig, ...] = ()
+    sweep: SweepConfig | None = None
 
     @model_validator(mode="before")
     @classmethod
@@ -725,6 +1095,12 @@ def load_config(path: str | Path) -> RunConfig:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    mon = data.get("monitor")
+    if isinstance(mon, dict) and isinstance(mon.get("response_lut"), str):
+        mon["response_lut"] = str((path.parent / mon["response_lut"]).resolve())
+    surf = data.get("surface")
+    if isinstance(surf, dict) and surf.get("type") == "height_map" and isinstance(surf.get("file"), str):
+        surf["file"] = str((path.parent / surf["file"]).resolve())
     images = data.get("patterns", {}).get("images")
     if isinstance(images, dict) and isinstance(images.get("files"), list):
         images["files"] = [str((path.parent / f).resolve()) for f in images["files"]]

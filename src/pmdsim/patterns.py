@@ -96,3 +96,27 @@ def load_monitor_image(path: str | Path, monitor_shape: tuple[int, int]) -> np.n
             f"is {monitor_shape[1]} x {monitor_shape[0]}: resize the image or fix monitor.resolution"
         )
     return np.clip(img, 0.0, 1.0)
+
+
+def resolve_dots(cfg) -> list[Dot]:
+    """The dots of ``patterns.dots``: the grid (row by row) then the explicit positions."""
+    d = cfg.patterns.dots
+    if d is None:
+        return []
+    mshape = (cfg.monitor.resolution[1], cfg.monitor.resolution[0])
+    dots = []
+    if d.grid is not None:
+        dots += dot_grid(mshape, d.grid, float(d.size_px), d.margin_px)
+    dots += [Dot(float(u), float(v), float(d.size_px)) for u, v in d.positions_px]
+    return dots
+
+
+
+def resolve_images(cfg) -> tuple[list[str], np.ndarray | None]:
+    """Load the monitor images of ``patterns.images`` as levels (Q, Hm, Wm) in [0, 1]."""
+    im = cfg.patterns.images
+    if im is None or not im.files:
+        return [], None
+    mshape = (cfg.monitor.resolution[1], cfg.monitor.resolution[0])
+    levels = np.stack([load_monitor_image(f, mshape) for f in im.files])
+    return list(im.files), levels

@@ -111,6 +111,17 @@ OUT_FIRST = 2
 
 _TWO_PI = 2.0 * math.pi
 
+# --- display geometry and falloff (optional ``mon_corr`` of the render kernels) -----------
+MC_GLASS_T = 0  # cover glass thickness, mm (pixels at its back)
+MC_GLASS_N = 1  # cover glass refractive index
+MC_PITCH = 2  # monitor pixel pitch, mm
+MC_UC = 3  # (W - 1) / 2: monitor px of the centre
+MC_VC = 4  # (H - 1) / 2
+MC_FLAT_N = 5  # n: flatness polynomial h(x, y) = sum c[i, j] x^i y^j, n x n coefficients
+MC_FALL_M = 6  # luminance falloff cos(theta)^m (0 = none)
+MC_FALL_N = 7  # falloff table size (0 = none): angles (deg, ascending), then factors
+MC_COEF = 8  # c[i, j] row-major (mm, x and y in mm from the centre along e_u, e_v)
+
 
 @fastjit(inline="always")
 def _directions(u1, u2, r1, r2, scheme, theta_max, cos_theta_max, include_principal, a, b, c):
@@ -691,6 +702,101 @@ def _n_orders(brdf):
     return 0
 
 
+@fastjit(inline="always")
+def _flat_height(mc, n, x, y):
+    """h(x, y) = sum_ij c[i, j] x^i y^j (mm) of the display's emitting surface."""
+    h = 0.0
+    xi = 1.0
+    for i in range(n):
+        yj = 1.0
+        for j in range(n):
+            h += mc[MC_COEF + i * n + j] * xi * yj
+            yj *= y
+        xi *= x
+    return h
+
+
+@fastjit
+def monitor_correction(g, mc, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
+    """Move the phase-1 monitor hits of one pixel's ``n`` rays from the nominal (flat, bare)
+    monitor plane to the display's pixels, and weight them by its angular falloff; returns
+    the new sum of weights over monitor hits.
+
+    The ray direction follows from its plane hit: with ``T = G_T`` (minus the distance of
+    the surface point from the plane), ``o = (du pitch, dv pitch, T) / |.|`` in (e_u, e_v,
+    n_m), ``du = u - G_U0``. Then, per ray, with ``c = -o.n_m = cos(theta)``:
+
+    - flatness: the emitting surface lies at height ``h(x, y)`` (mm, towards the viewer)
+      over the plane point (x, y); the ray meets it at ``(x, y) - h (o_u, o_v) / c``
+      (fixed-point iteration, converged for slopes << 1);
+    - cover glass of thickness ``t_g`` and index ``n_g`` in front of the pixels: the ray
+      refracts (``sin theta_r = sin theta / n_g``) and reaches the pixels
+      ``t_g (tan theta - tan theta_r)`` closer to the point below its entry, i.e. shifted
+      by ``-t_g (o_u, o_v) (1/c - 1/sqrt(n_g^2 - sin^2 theta))``;
+    - falloff: the weight is multiplied by ``cos(theta)^m`` and/or the tabulated factor.
+
+    Rays that leave the pixel grid get weight 0 (rays moved onto the grid from outside are
+    not recovered: an edge band of ``t_g tan(theta)`` px).
+    """
+    T = g[G_T]
+    U0 = g[G_U0]
+    V0 = g[G_V0]
+    tg = mc[MC_GLASS_T]
+    ng = mc[MC_GLASS_N]
+    pitch = mc[MC_PITCH]
+    uc = mc[MC_UC]
+    vc = mc[MC_VC]
+    nflat = int(mc[MC_FLAT_N])
+    fall_m = mc[MC_FALL_M]
+    nfall = int(mc[MC_FALL_N])
+    tab0 = MC_COEF + nflat * nflat
+    umax = wm - 0.5
+    vmax = hm - 0.5
+    fhit = 0.0
+    for j in range(n):
+        w = fbuf[j]
+        if w == 0.0:
+            continue
+        ou = (ubuf[j] - U0) * pitch
+        ov = (vbuf[j] - V0) * pitch
+        norm = math.sqrt(ou * ou + ov * ov + T * T)
+        ou /= norm
+        ov /= norm
+        c = -T / norm
+        x = (ubuf[j] - uc) * pitch
+        y = (vbuf[j] - vc) * pitch
+        if nflat > 0:
+            x0 = x
+            y0 = y
+            for _ in range(8):
+                h = _flat_height(mc, nflat, x, y)
+                x = x0 - h * ou / c
+                y = y0 - h * ov / c
+        if tg > 0.0:
+            s2 = ou * ou + ov * ov
+            k = tg * (1.0 / c - 1.0 / math.sqrt(ng * ng - s2))
+            x -= k * ou
+            y -= k * ov
+        u = x / pitch + uc
+        v = y / pitch + vc
+        if fall_m != 0.0:
+            w *= c**fall_m
+        if nfall > 0:
+            ang = math.degrees(math.acos(min(c, 1.0)))
+            w *= np.interp(ang, mc[tab0 : tab0 + nfall], mc[tab0 + nfall : tab0 + 2 * nfall])
+        inside = (u >= -0.5) & (u < umax) & (v >= -0.5) & (v < vmax)
+        if not inside:
+            w = 0.0
+            u = 0.0
+            v = 0.0
+        ubuf[j] = u
+        vbuf[j] = v
+        iubuf[j] = np.int64(np.floor(u + 0.5))
+        ivbuf[j] = np.int64(np.floor(v + 0.5))
+        fbuf[j] = w
+        fhit += w
+    return fhit
+
 
 #: Strict floating point for :func:`_interleaved_sums`: without ``reassoc`` LLVM keeps its
 #: ray loop scalar, and scalar loads from one cache line beat vector gathers here.
@@ -825,6 +931,7 @@ def render_tile(
     out_u,
     out_v,
     out_f,
+    mon_corr=None,
 ):
     """Render one tile of pixels.
 
@@ -862,6 +969,9 @@ def render_tile(
     out_u, out_v, out_f : (P, R) float64
         Written in ``MODE_TRANSPORT``: monitor coordinates and weights of every ray (weight
         0 for rays that miss the monitor).
+    mon_corr : (MC_COEF + ...) float64, optional
+        Display geometry and falloff (layout ``MC_*``, :func:`monitor_correction`); omitted
+        = the nominal flat, bare, Lambertian monitor.
     """
     npix = geo.shape[0]
     m = u1.shape[0]
@@ -915,6 +1025,8 @@ def render_tile(
                                         vbuf, iubuf, ivbuf, fbuf)
         else:
             ftot, fhit = _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+        if mon_corr is not None:
+            fhit = monitor_correction(g, mon_corr, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         out[p, OUT_FTOTAL] = ftot
         out[p, OUT_FHIT] = fhit
         _phase2(
@@ -942,6 +1054,7 @@ def render_tile_lobe(
     out_u,
     out_v,
     out_f,
+    mon_corr=None,
 ):
     """Render one tile with the radiometric estimator: directions sampled from the lobe.
 
@@ -962,7 +1075,8 @@ def render_tile_lobe(
     phase 2 sums ``w L``: ``(1/N) sum w L`` estimates the integral of ``f L cos(theta_o)``
     over the hemisphere. The parameters are those of :func:`render_tile` without the cone
     (``scheme``, ``theta_max``, ``include_principal``); ``geo`` rows may use any orthonormal
-    basis. The mirror (no lobe) is not accepted: render it with :func:`render_tile`.
+    basis; ``mon_corr`` as there. The mirror (no lobe) is not accepted: render it with
+    :func:`render_tile`.
     """
     if int(brdf[B_MODEL]) == MODEL_MIRROR:
         raise ValueError("render_tile_lobe: the mirror has no lobe to sample; use render_tile")
@@ -1023,6 +1137,8 @@ def render_tile_lobe(
                 fbuf[j] *= wsum
             ftot *= wsum
             fhit *= wsum
+        if mon_corr is not None:
+            fhit = monitor_correction(g, mon_corr, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         out[p, OUT_FTOTAL] = ftot
         out[p, OUT_FHIT] = fhit
         _phase2(

@@ -14,6 +14,7 @@ import numpy as np
 
 from ._jit import fastjit
 from .bundle import G_A, G_B, G_C, G_SIZE, G_T, G_U0, G_V0, G_VALID, G_X, G_Y, G_Z
+from .surface import SURF_SAG, intersect_sag
 
 # camera: position (3), rotation row-major (9; columns = camera x, y, z), focal px, cx, cy
 CAM_POS = 0
@@ -26,6 +27,7 @@ CAM_SIZE = 15
 # surface: type, centre (3), normal (3), x axis (3), y axis (3), half sizes (2)
 SURF_TYPE = 0
 SURF_FLAT = 0
+# SURF_SAG = 1 (sphere, conic, asphere, freeforms, height maps): layout SAG_* in kernels/surface.py
 SURF_C = 1
 SURF_N = 4
 SURF_X = 7
@@ -57,6 +59,8 @@ MON_SIZE = 15
 @fastjit(inline="always")
 def _intersect(surf, ox, oy, oz, dx, dy, dz):
     """(hit, t, px, py, pz, nx, ny, nz) of one ray with the surface."""
+    if surf[SURF_TYPE] == SURF_SAG:  # curved and measured surfaces: kernels/surface.py
+        return intersect_sag(surf, ox, oy, oz, dx, dy, dz)
     cx = surf[SURF_C]
     cy = surf[SURF_C + 1]
     cz = surf[SURF_C + 2]
@@ -105,17 +109,11 @@ def _fixed_frame(frame, nx, ny, nz):
     return xx, xy, xz, ny * xz - nz * xy, nz * xx - nx * xz, nx * xy - ny * xx
 
 
-@fastjit
-def geometry_tile(cam, surf, frame, mon, row0, row1, width, geo, spec):
-    """Fill ``geo`` ((row1-row0)*width, G_SIZE) and ``spec`` (same rows, 2): the bundle
-    geometry rows (cone basis about P) and the exact monitor coordinates (u, v) of P (NaN
-    where P misses the monitor or the vision ray misses the surface)."""
-    px0 = cam[CAM_POS]
-    py0 = cam[CAM_POS + 1]
-    pz0 = cam[CAM_POS + 2]
-    f = cam[CAM_F]
-    ccx = cam[CAM_CX]
-    ccy = cam[CAM_CY]
+@fastjit(inline="always")
+def _fill_row(surf, frame, mon, ox, oy, oz, dx, dy, dz, g, spec_k):
+    """Geometry row ``g`` (G_SIZE) and exact monitor hit ``spec_k`` (2) of one vision ray from
+    (ox, oy, oz) along the unit direction (dx, dy, dz): zeros / NaN where it misses the
+    surface or sees its back."""
     mcx = mon[MON_C]
     mcy = mon[MON_C + 1]
     mcz = mon[MON_C + 2]
@@ -132,93 +130,115 @@ def geometry_tile(cam, surf, frame, mon, row0, row1, width, geo, spec):
     wm = mon[MON_W]
     hm = mon[MON_H]
     ftype = int(frame[FRAME_TYPE])
+    for q in range(G_SIZE):
+        g[q] = 0.0
+    spec_k[0] = np.nan
+    spec_k[1] = np.nan
+    hit, t, sx, sy, sz, nx, ny, nz = _intersect(surf, ox, oy, oz, dx, dy, dz)
+    ix = -dx
+    iy = -dy
+    iz = -dz
+    cos_i = ix * nx + iy * ny + iz * nz
+    if not hit or cos_i <= 0.0:
+        return
+    # BRDF frame
+    if ftype == FRAME_ROTATIONAL:
+        rx = sx - frame[FRAME_C]
+        ry = sy - frame[FRAME_C + 1]
+        rz = sz - frame[FRAME_C + 2]
+        if frame[FRAME_HAS_AXIS] != 0.0:
+            ax_ = frame[FRAME_AXIS]
+            ay_ = frame[FRAME_AXIS + 1]
+            az_ = frame[FRAME_AXIS + 2]
+        else:
+            ax_ = nx
+            ay_ = ny
+            az_ = nz
+        ra = rx * ax_ + ry * ay_ + rz * az_
+        rx -= ra * ax_
+        ry -= ra * ay_
+        rz -= ra * az_
+        rn = rx * nx + ry * ny + rz * nz
+        yx, yy, yz, m = _normalize(rx - rn * nx, ry - rn * ny, rz - rn * nz)
+        if m > 1e-9:
+            # x = tangential = radial x n
+            xx = yy * nz - yz * ny
+            xy = yz * nx - yx * nz
+            xz = yx * ny - yy * nx
+        else:
+            xx, xy, xz, yx, yy, yz = _fixed_frame(frame, nx, ny, nz)
+    else:
+        xx, xy, xz, yx, yy, yz = _fixed_frame(frame, nx, ny, nz)
+    # principal direction and cone basis
+    ppx = 2.0 * cos_i * nx - ix
+    ppy = 2.0 * cos_i * ny - iy
+    ppz = 2.0 * cos_i * nz - iz
+    e2x, e2y, e2z, m = _normalize(ny * ppz - nz * ppy, nz * ppx - nx * ppz, nx * ppy - ny * ppx)
+    if m < 1e-12:
+        e2x, e2y, e2z = yx, yy, yz
+    e1x = e2y * ppz - e2z * ppy
+    e1y = e2z * ppx - e2x * ppz
+    e1z = e2x * ppy - e2y * ppx
+    # geometry row
+    ddx = sx - mcx
+    ddy = sy - mcy
+    ddz = sz - mcz
+    g[G_T] = -(ddx * mnx + ddy * mny + ddz * mnz)
+    g[G_U0] = (ddx * eux + ddy * euy + ddz * euz) / pitch + (wm - 1.0) / 2.0
+    g[G_V0] = (ddx * evx + ddy * evy + ddz * evz) / pitch + (hm - 1.0) / 2.0
+    bx = (e1x, e2x, ppx)
+    by = (e1y, e2y, ppy)
+    bz = (e1z, e2z, ppz)
+    for q in range(3):
+        g[G_A + q] = bx[q] * mnx + by[q] * mny + bz[q] * mnz
+        g[G_B + q] = (bx[q] * eux + by[q] * euy + bz[q] * euz) / pitch
+        g[G_C + q] = (bx[q] * evx + by[q] * evy + bz[q] * evz) / pitch
+        g[G_X + 1 + q] = bx[q] * xx + by[q] * xy + bz[q] * xz
+        g[G_Y + 1 + q] = bx[q] * yx + by[q] * yy + bz[q] * yz
+        g[G_Z + 1 + q] = bx[q] * nx + by[q] * ny + bz[q] * nz
+    g[G_X] = ix * xx + iy * xy + iz * xz
+    g[G_Y] = ix * yx + iy * yy + iz * yz
+    g[G_Z] = cos_i
+    g[G_VALID] = 1.0
+    # exact monitor hit of P
+    dn = g[G_A + 2]
+    tm = g[G_T] / dn
+    u = g[G_U0] + tm * g[G_B + 2]
+    v = g[G_V0] + tm * g[G_C + 2]
+    if (dn < 0.0) & (tm > 0.0) & (u >= -0.5) & (u < wm - 0.5) & (v >= -0.5) & (v < hm - 0.5):
+        spec_k[0] = u
+        spec_k[1] = v
+
+
+@fastjit
+def geometry_tile(cam, surf, frame, mon, row0, row1, width, geo, spec):
+    """Fill ``geo`` ((row1-row0)*width, G_SIZE) and ``spec`` (same rows, 2): the bundle
+    geometry rows (cone basis about P) and the exact monitor coordinates (u, v) of P (NaN
+    where P misses the monitor or the vision ray misses the surface). One pinhole ray
+    through each pixel centre."""
+    px0 = cam[CAM_POS]
+    py0 = cam[CAM_POS + 1]
+    pz0 = cam[CAM_POS + 2]
+    f = cam[CAM_F]
+    ccx = cam[CAM_CX]
+    ccy = cam[CAM_CY]
     k = 0
     for r in range(row0, row1):
         for c in range(width):
-            g = geo[k]
-            for q in range(G_SIZE):
-                g[q] = 0.0
-            spec[k, 0] = np.nan
-            spec[k, 1] = np.nan
             xc = (c - ccx) / f
             yc = (r - ccy) / f
             dx = cam[CAM_ROT] * xc + cam[CAM_ROT + 1] * yc + cam[CAM_ROT + 2]
             dy = cam[CAM_ROT + 3] * xc + cam[CAM_ROT + 4] * yc + cam[CAM_ROT + 5]
             dz = cam[CAM_ROT + 6] * xc + cam[CAM_ROT + 7] * yc + cam[CAM_ROT + 8]
             dx, dy, dz, _ = _normalize(dx, dy, dz)
-            hit, t, sx, sy, sz, nx, ny, nz = _intersect(surf, px0, py0, pz0, dx, dy, dz)
-            ix = -dx
-            iy = -dy
-            iz = -dz
-            cos_i = ix * nx + iy * ny + iz * nz
-            if not hit or cos_i <= 0.0:
-                k += 1
-                continue
-            # BRDF frame
-            if ftype == FRAME_ROTATIONAL:
-                rx = sx - frame[FRAME_C]
-                ry = sy - frame[FRAME_C + 1]
-                rz = sz - frame[FRAME_C + 2]
-                if frame[FRAME_HAS_AXIS] != 0.0:
-                    ax_ = frame[FRAME_AXIS]
-                    ay_ = frame[FRAME_AXIS + 1]
-                    az_ = frame[FRAME_AXIS + 2]
-                else:
-                    ax_ = nx
-                    ay_ = ny
-                    az_ = nz
-                ra = rx * ax_ + ry * ay_ + rz * az_
-                rx -= ra * ax_
-                ry -= ra * ay_
-                rz -= ra * az_
-                rn = rx * nx + ry * ny + rz * nz
-                yx, yy, yz, m = _normalize(rx - rn * nx, ry - rn * ny, rz - rn * nz)
-                if m > 1e-9:
-                    # x = tangential = radial x n
-                    xx = yy * nz - yz * ny
-                    xy = yz * nx - yx * nz
-                    xz = yx * ny - yy * nx
-                else:
-                    xx, xy, xz, yx, yy, yz = _fixed_frame(frame, nx, ny, nz)
-            else:
-                xx, xy, xz, yx, yy, yz = _fixed_frame(frame, nx, ny, nz)
-            # principal direction and cone basis
-            ppx = 2.0 * cos_i * nx - ix
-            ppy = 2.0 * cos_i * ny - iy
-            ppz = 2.0 * cos_i * nz - iz
-            e2x, e2y, e2z, m = _normalize(ny * ppz - nz * ppy, nz * ppx - nx * ppz, nx * ppy - ny * ppx)
-            if m < 1e-12:
-                e2x, e2y, e2z = yx, yy, yz
-            e1x = e2y * ppz - e2z * ppy
-            e1y = e2z * ppx - e2x * ppz
-            e1z = e2x * ppy - e2y * ppx
-            # geometry row
-            ddx = sx - mcx
-            ddy = sy - mcy
-            ddz = sz - mcz
-            g[G_T] = -(ddx * mnx + ddy * mny + ddz * mnz)
-            g[G_U0] = (ddx * eux + ddy * euy + ddz * euz) / pitch + (wm - 1.0) / 2.0
-            g[G_V0] = (ddx * evx + ddy * evy + ddz * evz) / pitch + (hm - 1.0) / 2.0
-            bx = (e1x, e2x, ppx)
-            by = (e1y, e2y, ppy)
-            bz = (e1z, e2z, ppz)
-            for q in range(3):
-                g[G_A + q] = bx[q] * mnx + by[q] * mny + bz[q] * mnz
-                g[G_B + q] = (bx[q] * eux + by[q] * euy + bz[q] * euz) / pitch
-                g[G_C + q] = (bx[q] * evx + by[q] * evy + bz[q] * evz) / pitch
-                g[G_X + 1 + q] = bx[q] * xx + by[q] * xy + bz[q] * xz
-                g[G_Y + 1 + q] = bx[q] * yx + by[q] * yy + bz[q] * yz
-                g[G_Z + 1 + q] = bx[q] * nx + by[q] * ny + bz[q] * nz
-            g[G_X] = ix * xx + iy * xy + iz * xz
-            g[G_Y] = ix * yx + iy * yy + iz * yz
-            g[G_Z] = cos_i
-            g[G_VALID] = 1.0
-            # exact monitor hit of P
-            dn = g[G_A + 2]
-            tm = g[G_T] / dn
-            u = g[G_U0] + tm * g[G_B + 2]
-            v = g[G_V0] + tm * g[G_C + 2]
-            if (dn < 0.0) & (tm > 0.0) & (u >= -0.5) & (u < wm - 0.5) & (v >= -0.5) & (v < hm - 0.5):
-                spec[k, 0] = u
-                spec[k, 1] = v
+            _fill_row(surf, frame, mon, px0, py0, pz0, dx, dy, dz, geo[k], spec[k])
             k += 1
+
+
+@fastjit
+def geometry_rays(origins, dirs, surf, frame, mon, geo, spec):
+    """:func:`geometry_tile` for explicit vision rays: ``origins`` and unit ``dirs`` (R, 3)
+    (a thin lens's aperture samples, sub-pixel rays) -> ``geo`` (R, G_SIZE), ``spec`` (R, 2)."""
+    for k in range(origins.shape[0]):
+        _fill_row(surf, frame, mon, origins[k, 0], origins[k, 1], origins[k, 2],
+                  dirs[k, 0], dirs[k, 1], dirs[k, 2], geo[k], spec[k])

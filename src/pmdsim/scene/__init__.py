@@ -8,11 +8,11 @@ import numpy as np
 
 from ..brdf import BRDF, Mirror, brdf_from_config
 from ..config import RunConfig
-from ..sampling import ConeSampling
+from .sampling import ConeSampling
 from .anisotropy import AnisotropyFrame
 from .camera import Camera
 from .monitor import Monitor
-from .surfaces import FlatRectangle, Surface, surface_from_config
+from .surfaces import FlatRectangle, SagSurface, Surface, surface_from_config
 
 ESTIMATORS = ("paper", "weighted_mean", "radiometric")
 
@@ -41,11 +41,16 @@ class Scene:
     @classmethod
     def from_config(cls, cfg: RunConfig) -> "Scene":
         s = cfg.sampling
+        surface = surface_from_config(cfg.surface)
+        anisotropy = AnisotropyFrame.from_config(cfg.anisotropy)
+        if isinstance(surface, SagSurface) and anisotropy.kind == "rotational" and anisotropy.axis is None:
+            # a curved surface is turned about its vertex normal, not each point's normal
+            anisotropy = replace(anisotropy, axis=surface.normal.copy())
         return cls(
-            camera=Camera.from_config(cfg.camera),
+            camera=Camera.from_config(cfg.camera).focused_on(surface),
             monitor=Monitor.from_config(cfg.monitor),
-            surface=surface_from_config(cfg.surface),
-            anisotropy=AnisotropyFrame.from_config(cfg.anisotropy),
+            surface=surface,
+            anisotropy=anisotropy,
             brdf=brdf_from_config(cfg.brdf),
             sampling=ConeSampling(
                 s.n_rays, float(np.deg2rad(s.theta_max_deg)), s.scheme, s.mode, s.seed
@@ -65,4 +70,4 @@ class Scene:
         return 1 if self.brdf.is_delta else self.sampling.n_rays
 
 
-__all__ = ["Scene", "Camera", "Monitor", "FlatRectangle", "AnisotropyFrame", "ESTIMATORS"]
+__all__ = ["Scene", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]

@@ -1,19 +1,60 @@
-"""Pinhole camera."""
+"""Camera: pose, OpenCV intrinsics and distortion, pixel footprint and a thin lens.
+
+Projection follows OpenCV (``cv2.projectPoints``) exactly: camera coordinates
+``X_c = R^T (X - C)`` (``rotation`` columns are the camera x (right), y (down), z (forward)
+axes in world coordinates), ``x' = X_c / Z_c``, ``y' = Y_c / Z_c``, ``r^2 = x'^2 + y'^2``,
+
+    x'' = x' (1 + k1 r^2 + k2 r^4 + k3 r^6) + 2 p1 x' y' + p2 (r^2 + 2 x'^2)
+    y'' = y' (1 + k1 r^2 + k2 r^4 + k3 r^6) + p1 (r^2 + 2 y'^2) + 2 p2 x' y'
+    (col, row) = (fx x'' + cx, fy y'' + cy)
+
+with pixel centres at integer (col, row). A pixel's vision rays start from sensor points:
+the pixel centre (``subpixels = 1``) or the centres of an n x n grid over the pixel
+(stratified footprint); each point is undistorted (Newton iteration) into the chief ray's
+direction ``(x', y', 1)``. A pinhole sends the chief ray. A thin lens (aperture diameter
+``D = focal_length_mm / f_number``, plane in focus at ``Z_c = s_f``) sends, for every sensor
+point, rays from aperture points ``A`` (antithetic pairs ``A, -A``: a Fibonacci lattice of
+``aperture_samples / 2`` points with a per-pixel random Cranley-Patterson shift from
+``default_rng([aperture_seed, row])``, mapped to the disk by Shirley-Chiu's concentric map,
+and their mirror images through the lens centre, so that a blur that is linear in ``A``
+has its centroid exactly at the chief ray; an odd count adds the centre) through the
+in-focus point
+``F = s_f (x', y', 1)``: all rays of a sensor point meet again at ``F``.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..config import CameraConfig
 from ..geometry import normalize
 
+_GOLDEN = (1.0 + 5.0**0.5) / 2.0
+
+
+def concentric_disk(u1: np.ndarray, u2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Shirley-Chiu concentric map of unit-square points to the unit disk (area preserving)."""
+    a = 2.0 * np.asarray(u1, np.float64) - 1.0
+    b = 2.0 * np.asarray(u2, np.float64) - 1.0
+    big_a = np.abs(a) > np.abs(b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(big_a, a, b)
+        phi = np.where(big_a, (np.pi / 4) * b / a, np.pi / 2 - (np.pi / 4) * a / b)
+    phi = np.where((a == 0) & (b == 0), 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
 
 @dataclass(frozen=True)
 class Camera:
-    """Pinhole camera; ``rotation`` columns are the camera axes (x right, y down, z forward)
-    in world coordinates; pixel (row, col) centres at integer indices."""
+    """Camera with OpenCV intrinsics; see the module docstring.
+
+    ``focal_px`` is fx; ``focal_px_y`` fy (None = fx). ``distortion`` is OpenCV's
+    (k1, k2, p1, p2, k3). ``aperture_mm`` is the thin lens's aperture diameter (None =
+    pinhole), ``focus_distance_mm`` its plane in focus (None until resolved against the
+    surface, :meth:`focused_on`).
+    """
 
     width: int
     height: int
@@ -21,11 +62,23 @@ class Camera:
     principal_point: tuple[float, float]  # (col, row)
     position: np.ndarray  # (3,) mm
     rotation: np.ndarray  # (3, 3)
+    focal_px_y: float | None = None
+    distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    subpixels: int = 1
+    aperture_mm: float | None = None
+    focus_distance_mm: float | None = None
+    aperture_samples: int = 16
+    aperture_seed: int = 0
 
     @classmethod
     def from_config(cls, cfg: CameraConfig) -> "Camera":
         w, h = cfg.resolution
-        pp = cfg.principal_point_px or ((w - 1) / 2.0, (h - 1) / 2.0)
+        if cfg.camera_matrix is not None:
+            k = np.asarray(cfg.camera_matrix, np.float64)
+            fx, fy, pp = k[0, 0], k[1, 1], (k[0, 2], k[1, 2])
+        else:
+            fx = fy = cfg.focal_px
+            pp = cfg.principal_point_px or ((w - 1) / 2.0, (h - 1) / 2.0)
         pos = np.asarray(cfg.position_mm, dtype=np.float64)
         if cfg.rotation is not None:
             rot = np.asarray(cfg.rotation, dtype=np.float64)
@@ -34,10 +87,44 @@ class Camera:
             x = normalize(np.cross(z, cfg.up))
             y = np.cross(z, x)
             rot = np.stack([x, y, z], axis=1)
-        return cls(w, h, cfg.focal_px, (float(pp[0]), float(pp[1])), pos, rot)
+        aperture = None if cfg.f_number is None else float(cfg.focal_length_mm / cfg.f_number)
+        return cls(
+            w, h, float(fx), (float(pp[0]), float(pp[1])), pos, rot,
+            focal_px_y=None if fy == fx else float(fy), distortion=cfg.distortion,
+            subpixels=cfg.subpixels, aperture_mm=aperture, focus_distance_mm=cfg.focus_distance_mm,
+            aperture_samples=cfg.aperture_samples if aperture is not None else 1,
+            aperture_seed=cfg.aperture_seed,
+        )
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def fy(self) -> float:
+        return self.focal_px if self.focal_px_y is None else self.focal_px_y
+
+    @property
+    def camera_matrix(self) -> np.ndarray:
+        """OpenCV's K (3, 3)."""
+        return np.array([[self.focal_px, 0.0, self.principal_point[0]],
+                         [0.0, self.fy, self.principal_point[1]], [0.0, 0.0, 1.0]])
+
+    @property
+    def has_distortion(self) -> bool:
+        return any(c != 0.0 for c in self.distortion)
+
+    @property
+    def is_simple_pinhole(self) -> bool:
+        """One undistorted pinhole ray through each pixel centre, fx = fy (the compiled
+        per-pixel tracer :func:`pmdsim.kernels.primary.geometry_tile`)."""
+        return (self.subpixels == 1 and self.aperture_mm is None and not self.has_distortion
+                and self.fy == self.focal_px)
+
+    @property
+    def rays_per_pixel(self) -> int:
+        """Vision rays (sub-pixel x aperture samples) per pixel."""
+        return self.subpixels**2 * (self.aperture_samples if self.aperture_mm is not None else 1)
 
     def kernel_params(self) -> np.ndarray:
-        """Parameter vector for :mod:`pmdsim.kernels.primary` (layout ``CAM_*``)."""
+        """Parameter vector for :mod:`pmdsim.kernels.primary` (layout ``CAM_*``; pinhole)."""
         from ..kernels import primary as kp
 
         p = np.zeros(kp.CAM_SIZE)
@@ -47,17 +134,134 @@ class Camera:
         p[kp.CAM_CX], p[kp.CAM_CY] = self.principal_point
         return p
 
+    # ------------------------------------------------------------------ distortion
+    def distort(self, x, y):
+        """Normalised undistorted (x', y') -> distorted (x'', y'') (OpenCV)."""
+        k1, k2, p1, p2, k3 = self.distortion
+        x = np.asarray(x, np.float64)
+        y = np.asarray(y, np.float64)
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        return xd, yd
+
+    def undistort(self, xd, yd, iterations: int = 50, tol: float = 1e-15):
+        """Inverse of :meth:`distort` by Newton's method (numerical Jacobian-free: the
+        analytic 2 x 2 Jacobian); converges to ~1e-15 for calibrations of real lenses."""
+        xd = np.asarray(xd, np.float64)
+        yd = np.asarray(yd, np.float64)
+        if not self.has_distortion:
+            return xd.copy(), yd.copy()
+        k1, k2, p1, p2, k3 = self.distortion
+        x, y = xd.copy(), yd.copy()
+        for _ in range(iterations):
+            r2 = x * x + y * y
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
+            fx = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
+            fy = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
+            a = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
+            b = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
+            c = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
+            d = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
+            det = a * d - b * c
+            dx = (d * fx - b * fy) / det
+            dy = (a * fy - c * fx) / det
+            x -= dx
+            y -= dy
+            if np.all(np.abs(dx) + np.abs(dy) < tol):
+                break
+        return x, y
+
+    # ------------------------------------------------------------------ rays
+    def chief_directions_camera(self, rows, cols) -> np.ndarray:
+        """Unnormalised chief-ray directions (x', y', 1) (..., 3) in camera coordinates of
+        sensor points (rows, cols) (fractional pixels allowed)."""
+        xd = (np.asarray(cols, np.float64) - self.principal_point[0]) / self.focal_px
+        yd = (np.asarray(rows, np.float64) - self.principal_point[1]) / self.fy
+        x, y = self.undistort(xd, yd)
+        return np.stack([x, y, np.ones_like(x)], axis=-1)
+
     def ray_directions(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """Unit directions (..., 3) of the vision rays through pixel centres (rows, cols)."""
-        x = (np.asarray(cols, np.float64) - self.principal_point[0]) / self.focal_px
-        y = (np.asarray(rows, np.float64) - self.principal_point[1]) / self.focal_px
-        d = np.stack([x, y, np.ones_like(x)], axis=-1) @ self.rotation.T
-        return normalize(d)
+        """Unit world directions (..., 3) of the chief rays through sensor points (rows, cols)."""
+        return normalize(self.chief_directions_camera(rows, cols) @ self.rotation.T)
 
     def project(self, points: np.ndarray) -> np.ndarray:
-        """Pixel coordinates (..., 2) = (col, row) of world points (mm)."""
+        """Pixel coordinates (..., 2) = (col, row) of world points (mm), OpenCV's model."""
         pc = (np.asarray(points, np.float64) - self.position) @ self.rotation
         with np.errstate(divide="ignore", invalid="ignore"):
-            col = self.focal_px * pc[..., 0] / pc[..., 2] + self.principal_point[0]
-            row = self.focal_px * pc[..., 1] / pc[..., 2] + self.principal_point[1]
-        return np.stack([col, row], axis=-1)
+            x = pc[..., 0] / pc[..., 2]
+            y = pc[..., 1] / pc[..., 2]
+        xd, yd = self.distort(x, y)
+        return np.stack([self.focal_px * xd + self.principal_point[0],
+                         self.fy * yd + self.principal_point[1]], axis=-1)
+
+    def subpixel_offsets(self) -> np.ndarray:
+        """(n^2, 2) (d_col, d_row) offsets of the n x n sub-pixel centres from the pixel centre."""
+        n = self.subpixels
+        o = (np.arange(n) + 0.5) / n - 0.5
+        dr, dc = np.meshgrid(o, o, indexing="ij")
+        return np.stack([dc.ravel(), dr.ravel()], axis=-1)
+
+    def aperture_points(self, row: int, width: int) -> np.ndarray:
+        """(width, m, 2) aperture points (mm, camera x and y) of the pixels of camera row
+        ``row``; (width, 1, 2) zeros for a pinhole."""
+        if self.aperture_mm is None:
+            return np.zeros((width, 1, 2))
+        m = self.aperture_samples
+        half = m // 2
+        j = np.arange(max(half, 1), dtype=np.float64)
+        u1 = (j + 0.5) / max(half, 1)
+        u2 = np.mod(j / _GOLDEN, 1.0)
+        off = np.random.default_rng([self.aperture_seed, int(row)]).random((width, 2))
+        s1 = np.mod(u1[None] + off[:, :1], 1.0)
+        s2 = np.mod(u2[None] + off[:, 1:], 1.0)
+        x, y = concentric_disk(s1, s2)
+        pts = np.stack([x, y], axis=-1)[:, :half]
+        parts = [pts, -pts] + ([np.zeros((width, 1, 2))] if m % 2 else [])
+        return 0.5 * self.aperture_mm * np.concatenate(parts, axis=1)
+
+    def vision_rays(self, rows, cols):
+        """Origins and unit directions (P, S, 3) of every pixel's S vision rays (sub-pixels
+        x aperture samples, sub-pixel major) for pixels (rows[k], cols[k]); rows from the
+        pixel's own camera row seed the aperture samples."""
+        rows = np.asarray(rows, np.int64).ravel()
+        cols = np.asarray(cols, np.int64).ravel()
+        sub = self.subpixel_offsets()  # (n2, 2)
+        chief = self.chief_directions_camera(rows[:, None] + sub[None, :, 1],
+                                             cols[:, None] + sub[None, :, 0])  # (P, n2, 3)
+        if self.aperture_mm is None:
+            d = normalize(chief @ self.rotation.T)
+            o = np.broadcast_to(self.position, d.shape).copy()
+            return o, d
+        if self.focus_distance_mm is None:
+            raise ValueError("camera.focus_distance_mm: not resolved; build the camera through "
+                             "Scene.from_config or Camera.focused_on(surface)")
+        ap = np.empty((rows.size, self.aperture_samples, 2))
+        for r in np.unique(rows):
+            sel = rows == r
+            ap[sel] = self.aperture_points(int(r), self.width)[cols[sel]]
+        focus = chief * self.focus_distance_mm  # (P, n2, 3), Z_c = s_f
+        a3 = np.concatenate([ap, np.zeros(ap.shape[:-1] + (1,))], axis=-1)  # (P, m, 3)
+        dcam = focus[:, :, None, :] - a3[:, None, :, :]  # (P, n2, m, 3)
+        d = normalize(dcam @ self.rotation.T).reshape(rows.size, -1, 3)
+        o = (self.position + a3 @ self.rotation.T)  # (P, m, 3)
+        o = np.broadcast_to(o[:, None], (rows.size, sub.shape[0], self.aperture_samples, 3))
+        return o.reshape(rows.size, -1, 3).copy(), d
+
+    def focused_on(self, surface) -> "Camera":
+        """This camera with ``focus_distance_mm`` resolved: unchanged when given or pinhole;
+        otherwise the depth (Z_c) of the surface point the image centre's chief ray sees."""
+        if self.aperture_mm is None or self.focus_distance_mm is not None:
+            return self
+        r, c = (self.height - 1) / 2.0, (self.width - 1) / 2.0
+        d = self.ray_directions(np.array([r]), np.array([c]))
+        _, p, _, hit = surface.intersect(self.position[None], d)
+        if not bool(hit[0]):
+            raise ValueError(
+                "camera.focus_distance_mm: the image centre does not see the surface, so the "
+                "default focus is undefined; give camera.focus_distance_mm"
+            )
+        z = float((p[0] - self.position) @ self.rotation[:, 2])
+        return replace(self, focus_distance_mm=z)

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..config import MonitorConfig
 from ..geometry import normalize
+from .display import DisplayGeometry, DisplayResponse, display_from_config
 
 
 @dataclass(frozen=True)
@@ -26,6 +27,16 @@ class Monitor:
     black_level: float = 0.0
     white_level: float = 1.0
     pixel_model: str = "nearest"
+    response: DisplayResponse | None = field(default=None, compare=False)
+    display: DisplayGeometry = field(default_factory=DisplayGeometry, compare=False)
+
+    def __post_init__(self):
+        # The response carries gamma and the levels: keep it in step with the fields (also
+        # after dataclasses.replace(monitor, gamma=...)).
+        r = self.response or DisplayResponse()
+        if (r.gamma, r.black_level, r.white_level) != (self.gamma, self.black_level, self.white_level):
+            r = replace(r, gamma=self.gamma, black_level=self.black_level, white_level=self.white_level)
+        object.__setattr__(self, "response", r)
 
     @classmethod
     def from_config(cls, cfg: MonitorConfig) -> "Monitor":
@@ -37,6 +48,7 @@ class Monitor:
         return cls(
             w, h, float(cfg.pixel_pitch_mm), c, e_u, e_v, n, float(cfg.gamma),
             float(cfg.black_level), float(cfg.white_level), cfg.pixel_model,
+            *display_from_config(cfg),
         )
 
     @property
@@ -93,7 +105,18 @@ class Monitor:
         v = np.where(hit, v, np.nan)
         return u, v, hit
 
+    @property
+    def is_linear(self) -> bool:
+        """The luminance is exactly affine in the pattern level (gamma 1, no LUT, no
+        quantisation)."""
+        return self.response.is_linear
+
+    def correction_params(self) -> np.ndarray | None:
+        """``mon_corr`` of the render kernels (flatness, cover glass, falloff); None when the
+        display is the nominal flat, bare, Lambertian plane."""
+        return self.display.kernel_params(self.pitch, self.width, self.height)
+
     def luminance(self, value: np.ndarray) -> np.ndarray:
-        """Displayed luminance of pattern values in [0, 1]: black + (white - black) value**gamma."""
-        value = np.clip(np.asarray(value, np.float64), 0.0, 1.0)
-        return self.black_level + (self.white_level - self.black_level) * value**self.gamma
+        """Displayed luminance of pattern values in [0, 1] (:mod:`pmdsim.scene.display`:
+        pre-compensation, drive quantisation, gamma or LUT, black and white levels)."""
+        return self.response.luminance(value)

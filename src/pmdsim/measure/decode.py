@@ -1,0 +1,770 @@
+"""Decoding of phase-shifted fringe images: wrapped phase, temporal unwrapping, monitor coordinate.
+
+Works on plain arrays, so it serves simulated and real camera images alike. Conventions
+(``docs/conventions.md``): images are ``(frames, height, width)``; a fringe of width (period)
+``w`` monitor px with shift ``delta_k = 2 pi k / K`` shows ``0.5 + 0.5 cos(2 pi u / w + delta_k)``
+at monitor pixel centre ``u`` (0-based, centres at integers); frames
+``I_k = A + B cos(phi + delta_k)`` decode as
+
+    Z = sum_k I_k exp(-i delta_k),  phi = arg Z in (-pi, pi],
+    B = 2 |Z| / K (amplitude),  A = sum_k I_k / K (offset),  modulation = B / A,
+
+and the absolute phase ``Phi = 2 pi u / w`` gives ``u = Phi w / (2 pi)``.
+
+Names: ``amplitude`` is the fringe amplitude ``B`` (intensity units), ``modulation`` is
+``B / A`` as in the conventions (NaN where ``A <= 0``), ``offset`` is ``A``.
+
+Unwrapping methods (one fringe direction at a time; ``widths`` in any order):
+
+``"hierarchical"`` (multi-frequency, Zuo et al. 2016)
+    Needs distinct widths, the widest ``>= extent_px``: its phase is already absolute. Each
+    finer width takes the order ``m = round((Phi_c w_c / w_f - phi_f) / (2 pi))`` from the
+    next coarser one. Robust while the coarse phase error times ``w_c / w_f`` stays well
+    below ``pi / 2`` (ratios of about 8 are common).
+``"heterodyne"`` (multi-wavelength beat)
+    Needs at least two distinct widths; sorted ascending, adjacent phases are subtracted into
+    beat phases of synthetic wavelength ``w_a w_b / |w_a - w_b|``, level after level, until one
+    beat is left, whose wavelength must be ``>= extent_px``; every beat must be longer than
+    the finer of its two parents (widths within a factor < 2 of each other). The beats then
+    unwrap each other down to the finest width. Noise is amplified by each beat ratio.
+``"number_theoretic"`` (coprime periods)
+    Needs integer widths ``w_j = p_j * g`` (``g`` their greatest common divisor) with
+    pairwise coprime ``p_j``, and ``lcm(widths) = g * prod(p_j) >= extent_px``. The orders are
+    the unique solution of the remainder equations (Chinese remainder theorem), computed
+    exactly; a rounding residual measures the consistency. Tolerates phase errors up to
+    about ``pi / (2 max p_j)``.
+
+For every method the widest (synthetic) period ``L`` is cut where no monitor pixel lies: its
+positions are wrapped into ``[(extent_px - L - 1) / 2, (extent_px + L - 1) / 2)`` (with
+``L == extent_px`` this is exactly the monitor, ``[-0.5, extent_px - 0.5)``). When ``L`` is a
+multiple of the finest width (number-theoretic: always) the cut is applied to the final, precise
+position, so pixels at the monitor edges do not alias by ``L`` even when the coarse phase is
+noisy; otherwise keep ``L`` clearly larger than ``extent_px``.
+
+What flags can and cannot catch: an unwrapping step whose order error is ``e`` orders has the
+residual ``|e|`` for ``|e| < 0.5`` and ``1 - |e|`` beyond, so with ``max_order_residual = 0.25``
+every order error between 0.25 and 0.75 is flagged; a larger one (a gross phase error, or a far
+Gaussian tail) cannot be told from a correct order by that step. A phase error that makes the
+phases of all widths consistent with another position is invisible to every method: e.g. for
+heterodyne widths ``[48, 54, 60]`` a contrast reversal (phase pi) of the 48 px fringes is exactly
+the pattern at ``u + 1080`` (1080 = 22.5 * 48 = 20 * 54 = 18 * 60); it is flagged only when
+that position is off the monitor. To be safe against contrast reversal, no multiple of the
+least common multiple of the other widths (below ``L``) should be an odd multiple of half the
+finest width (true for ``[50, 400, 3200]`` and ``[96, 128, 160]``).
+
+Reliability flags (``uint8`` bit field, :class:`DecodeFlag`; ``valid = flags == 0``):
+
+=====  ====================  ===========================================================
+bit    name                  meaning
+=====  ====================  ===========================================================
+1      ``NAN_INPUT``         a frame (or input phase) of the pixel is NaN or infinite;
+                             all outputs of the pixel are NaN
+2      ``LOW_AMPLITUDE``     the amplitude ``B`` of some width is below
+                             ``max(min_amplitude, min_relative_amplitude * median B)``
+4      ``ORDER_RESIDUAL``    an unwrapping step's order residual exceeded
+                             ``max_order_residual`` (0 = perfect, 0.5 = ambiguous)
+8      ``OUT_OF_RANGE``      the monitor coordinate lies outside the monitor,
+                             ``[-0.5, extent_px - 0.5)`` monitor px
+16     ``SATURATED``         a frame of the pixel reached ``saturation_level`` (the camera's
+                             full well or ADC maximum): its phase is biased
+=====  ====================  ===========================================================
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..kernels import decode as _k
+from .images import load_image_stack  # noqa: F401  (pmdsim.decode.load_image_stack)
+
+__all__ = [
+    "METHODS",
+    "DecodeFlag",
+    "DecodeResult",
+    "PhaseShiftResult",
+    "UnwrapResult",
+    "decode_sequence",
+    "monitor_px_to_mm",
+    "phase_shift",
+    "phase_to_monitor_px",
+    "unambiguous_range_px",
+    "unwrap_phase",
+]
+
+METHODS = ("hierarchical", "heterodyne", "number_theoretic")
+
+# median of the amplitude is taken over a regular grid of at most this many pixels
+_MEDIAN_SAMPLES = 1 << 16
+
+
+class DecodeFlag(enum.IntFlag):
+    """Bits of the per-pixel ``flags`` (uint8); a pixel is valid when no bit is set."""
+
+    NAN_INPUT = int(_k.FLAG_NAN_INPUT)
+    LOW_AMPLITUDE = int(_k.FLAG_LOW_AMPLITUDE)
+    ORDER_RESIDUAL = int(_k.FLAG_ORDER_RESIDUAL)
+    OUT_OF_RANGE = int(_k.FLAG_OUT_OF_RANGE)
+    SATURATED = 16
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseShiftResult:
+    """Phase shifting of one fringe width.
+
+    Attributes
+    ----------
+    wrapped_phase : (H, W) ndarray, rad
+        ``phi`` in (-pi, pi]; NaN where an input frame is not finite.
+    amplitude : (H, W) ndarray, intensity units
+        Fringe amplitude ``B = 2 |Z| / K``.
+    offset : (H, W) ndarray, intensity units
+        ``A = mean_k I_k``.
+    modulation : (H, W) ndarray, 1
+        ``B / A``; NaN where ``A <= 0``.
+    valid : (H, W) ndarray of bool
+        All K frames finite.
+    """
+
+    wrapped_phase: np.ndarray
+    amplitude: np.ndarray
+    offset: np.ndarray
+    modulation: np.ndarray
+    valid: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class UnwrapResult:
+    """Temporal unwrapping of one direction.
+
+    Attributes
+    ----------
+    absolute_phase : (H, W) ndarray of float64, rad
+        Absolute phase ``Phi`` of the finest width.
+    monitor_coord_px : (H, W) ndarray of float64, monitor px
+        ``u = Phi w_finest / (2 pi)`` (0-based, pixel centres at integers).
+    order_residual : (H, W) ndarray of float64, 1
+        Largest order residual of the unwrapping steps (0 = perfect, 0.5 = ambiguous).
+    flags : (H, W) ndarray of uint8
+        :class:`DecodeFlag` bits.
+    valid : (H, W) ndarray of bool
+        ``flags == 0``.
+    finest_width_px : float
+        Width whose absolute phase is returned, monitor px.
+    """
+
+    absolute_phase: np.ndarray
+    monitor_coord_px: np.ndarray
+    order_residual: np.ndarray
+    flags: np.ndarray
+    valid: np.ndarray
+    finest_width_px: float
+
+
+@dataclass(frozen=True, eq=False)
+class DecodeResult:
+    """Everything decoded from the fringe images of one direction.
+
+    Per-width arrays follow the order of ``widths_px`` (the order the caller gave).
+
+    Attributes
+    ----------
+    absolute_phase : (H, W) ndarray of float64, rad
+        Absolute phase of the finest width.
+    monitor_coord_px : (H, W) ndarray of float64, monitor px
+        Monitor coordinate ``u = Phi w_finest / (2 pi)`` (0-based, centres at integers).
+    wrapped_phase : (n_widths, H, W) ndarray, rad
+        Wrapped phase of each width, in (-pi, pi].
+    modulation : (n_widths, H, W) ndarray, 1
+        ``B / A`` of each width (NaN where ``A <= 0``).
+    amplitude : (n_widths, H, W) ndarray, intensity units
+        Fringe amplitude ``B`` of each width.
+    offset : (n_widths, H, W) ndarray, intensity units
+        Offset ``A`` of each width.
+    order_residual : (H, W) ndarray of float64, 1
+        Largest order residual of the unwrapping steps.
+    flags : (H, W) ndarray of uint8
+        :class:`DecodeFlag` bits.
+    valid : (H, W) ndarray of bool
+        ``flags == 0``.
+    widths_px : tuple of float
+        The fringe widths, monitor px, in the caller's order.
+    finest_width_px : float
+        Width of ``absolute_phase``, monitor px.
+    method : str
+        Unwrapping method used.
+    """
+
+    absolute_phase: np.ndarray
+    monitor_coord_px: np.ndarray
+    wrapped_phase: np.ndarray
+    modulation: np.ndarray
+    amplitude: np.ndarray
+    offset: np.ndarray
+    order_residual: np.ndarray
+    flags: np.ndarray
+    valid: np.ndarray
+    widths_px: tuple
+    finest_width_px: float
+    method: str
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _check_frames(frames, name: str, ndim: int, layout: str) -> np.ndarray:
+    arr = np.asarray(frames)
+    if arr.ndim != ndim:
+        raise ValueError(f"{name} must have the layout {layout}, got shape {arr.shape}")
+    if arr.dtype.kind in "ui":
+        arr = arr.astype(np.float64 if arr.dtype.itemsize > 2 else np.float32)
+    elif arr.dtype not in (np.float32, np.float64):
+        raise ValueError(
+            f"{name} must be a float32, float64 or integer array, got dtype {arr.dtype}"
+        )
+    if min(arr.shape) == 0:
+        raise ValueError(f"{name} must not be empty, got shape {arr.shape}")
+    return np.ascontiguousarray(arr)
+
+
+def _check_out_dtype(dtype) -> np.dtype:
+    dt = np.dtype(dtype)
+    if dt not in (np.float32, np.float64):
+        raise ValueError(f"dtype must be float32 or float64, got {dt}")
+    return dt
+
+
+def _check_positive(value, name: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return v
+
+
+def _check_thresholds(min_amplitude, min_relative_amplitude, max_order_residual):
+    a = float(min_amplitude)
+    if not (math.isfinite(a) and a >= 0):
+        raise ValueError(f"min_amplitude must be a finite number >= 0, got {min_amplitude!r}")
+    rel = float(min_relative_amplitude)
+    if not (math.isfinite(rel) and rel >= 0):
+        raise ValueError(
+            f"min_relative_amplitude must be a finite number >= 0, got {min_relative_amplitude!r}"
+        )
+    res = float(max_order_residual)
+    if not (0 < res <= 0.5):
+        raise ValueError(
+            f"max_order_residual must lie in (0, 0.5] (0.5 = ambiguous order), "
+            f"got {max_order_residual!r}"
+        )
+    return a, rel, res
+
+
+def _check_shifts(shifts) -> int:
+    """K from an integer K or from the K shift angles (which must be 2 pi k / K)."""
+    if np.ndim(shifts) == 1:
+        try:
+            deltas = np.asarray(shifts, dtype=np.float64)
+        except (TypeError, ValueError):
+            deltas = np.full(1, np.nan)
+        n = deltas.size
+        expected = 2.0 * np.pi * np.arange(n) / n
+        if n < 3 or not np.allclose(deltas, expected, rtol=0.0, atol=1e-9):
+            raise ValueError(
+                "shifts given as angles must be the K >= 3 equal shifts 2 pi k / K, "
+                f"k = 0..K-1 (rad), got {np.asarray(shifts).tolist()}"
+            )
+        return n
+    if isinstance(shifts, bool) or not isinstance(shifts, (int, np.integer)) or shifts < 3:
+        raise ValueError(
+            f"shifts must be an integer K >= 3 (number of phase shifts) or the K shift "
+            f"angles 2 pi k / K, got {shifts!r}"
+        )
+    return int(shifts)
+
+
+def _check_widths(widths) -> np.ndarray:
+    try:
+        w = np.atleast_1d(np.asarray(widths, dtype=np.float64))
+    except (TypeError, ValueError):
+        w = np.empty((0, 0))
+    if w.ndim != 1 or w.size == 0:
+        raise ValueError(
+            f"widths must be a non-empty 1-D sequence of fringe widths (monitor px), got {widths!r}"
+        )
+    if not np.all(np.isfinite(w) & (w > 0)):
+        raise ValueError(f"widths must be positive finite monitor px, got {w.tolist()}")
+    if np.unique(w).size != w.size:
+        raise ValueError(f"widths must be distinct (each width unwraps the next), got {w.tolist()}")
+    return w
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """Kernel arguments of one unwrapping method for given widths and extent."""
+
+    method: str
+    n_widths: int
+    finest_index: int
+    finest_width: float
+    range_px: float
+    window_lo: float
+    rewrap_period: float = 0.0
+    # chain methods
+    coef: np.ndarray | None = None
+    chain_w: np.ndarray | None = None
+    # number-theoretic
+    order: np.ndarray | None = None
+    widths: np.ndarray | None = None
+    step_factor: np.ndarray | None = None
+    step_inverse: np.ndarray | None = None
+    step_period: np.ndarray | None = None
+    unit: float = 0.0
+
+
+def _heterodyne_chain(w: np.ndarray):
+    """Beat tree of widths ``w``: chain coefficients and wavelengths, coarse to fine."""
+    idx = np.argsort(w)
+    n = w.size
+    lam = w[idx].copy()
+    coef = np.eye(n)[idx]  # row i: phase of level-0 element i as a combination
+    chain_coef = [coef[0].copy()]
+    chain_w = [lam[0]]
+    for _level in range(1, n):
+        new_lam = np.empty(lam.size - 1)
+        new_coef = np.empty((lam.size - 1, n))
+        for i in range(lam.size - 1):
+            a, b = lam[i], lam[i + 1]
+            if abs(a - b) <= 1e-12 * max(a, b):
+                raise ValueError(
+                    f"widths {w.tolist()} give two equal wavelengths ({a:g} monitor px) in the "
+                    "heterodyne beat tree, whose beat is constant; choose widths whose "
+                    "successive beats differ, or use method='hierarchical'"
+                )
+            sign = 1.0 if a < b else -1.0
+            new_lam[i] = a * b / abs(a - b)
+            new_coef[i] = sign * (coef[i] - coef[i + 1])
+        lam, coef = new_lam, new_coef
+        if lam[0] <= chain_w[-1]:
+            raise ValueError(
+                f"widths {w.tolist()}: the heterodyne beat of wavelength {lam[0]:g} monitor px "
+                f"is not longer than the width it must unwrap ({chain_w[-1]:g}); heterodyne "
+                "needs widths within a factor < 2 of each other (e.g. [48, 54, 60]); "
+                "otherwise use method='hierarchical'"
+            )
+        chain_coef.append(coef[0].copy())
+        chain_w.append(lam[0])
+    return np.array(chain_coef[::-1]), np.array(chain_w[::-1])
+
+
+def _plan(widths, extent_px, method: str) -> _Plan:
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    w = _check_widths(widths)
+    extent = _check_positive(extent_px, "extent_px")
+    fine = int(np.argmin(w))
+
+    def window(period):
+        return 0.5 * (extent - period - 1.0)
+
+    def rewrap(chain_w):
+        ratio = chain_w[0] / chain_w[-1]
+        return float(chain_w[0]) if abs(ratio - round(ratio)) <= 1e-9 * ratio else 0.0
+
+    if method == "hierarchical":
+        order = np.argsort(-w)
+        if w[order[0]] < extent:
+            raise ValueError(
+                f"widths: hierarchical unwrapping needs the widest width >= extent_px so that its "
+                f"phase is absolute, but max(widths) = {w.max():g} < extent_px = {extent:g}; "
+                f"add a width of at least {extent:g} monitor px"
+            )
+        coef = np.eye(w.size)[order]
+        return _Plan(method, w.size, fine, float(w[fine]), float(w.max()), window(w.max()),
+                     rewrap(w[order]), coef=np.ascontiguousarray(coef), chain_w=w[order].copy())
+
+    if w.size < 2:
+        raise ValueError(f"widths: method={method!r} needs at least two widths, got {w.tolist()}")
+
+    if method == "heterodyne":
+        coef, chain_w = _heterodyne_chain(w)
+        if chain_w[0] < extent:
+            raise ValueError(
+                f"widths {w.tolist()}: the longest heterodyne synthetic wavelength is "
+                f"{chain_w[0]:g} monitor px < extent_px = {extent:g}; choose widths closer "
+                "together (longer beats) or add a width"
+            )
+        return _Plan(method, w.size, fine, float(w[fine]), float(chain_w[0]), window(chain_w[0]),
+                     rewrap(chain_w), coef=np.ascontiguousarray(coef), chain_w=chain_w)
+
+    # number-theoretic
+    rounded = np.round(w)
+    if not np.all(np.abs(w - rounded) <= 1e-9 * w):
+        raise ValueError(
+            f"widths must be integer monitor px for method='number_theoretic', got {w.tolist()}"
+        )
+    ints = [int(x) for x in rounded]
+    unit = math.gcd(*ints)
+    factors = [x // unit for x in ints]
+    for i in range(len(factors)):
+        for j in range(i + 1, len(factors)):
+            if math.gcd(factors[i], factors[j]) != 1:
+                raise ValueError(
+                    f"widths {ints}: with g = gcd = {unit}, widths/g = {factors} must be pairwise "
+                    f"coprime for method='number_theoretic', but {factors[i]} and {factors[j]} "
+                    f"share the factor {math.gcd(factors[i], factors[j])}; choose e.g. "
+                    "[96, 128, 160] (g = 32, 3:4:5)"
+                )
+    period = unit * math.prod(factors)
+    if period < extent:
+        raise ValueError(
+            f"widths {ints}: the number-theoretic unambiguous range lcm(widths) = {period} "
+            f"monitor px < extent_px = {extent:g}; use larger or more coprime widths"
+        )
+    order = np.argsort(w)
+    step_factor = np.zeros(w.size)
+    step_inverse = np.zeros(w.size)
+    step_period = np.zeros(w.size)
+    prod = factors[order[0]]
+    step_factor[0] = prod
+    for s in range(1, w.size):
+        b = factors[order[s]]
+        step_factor[s] = b
+        step_inverse[s] = pow(prod % b, -1, b) if b > 1 else 0
+        step_period[s] = prod * unit
+        prod *= b
+    return _Plan(method, w.size, fine, float(w[fine]), float(period), window(period),
+                 order=order.astype(np.int64), widths=w, step_factor=step_factor,
+                 step_inverse=step_inverse, step_period=step_period, unit=float(unit))
+
+
+def unambiguous_range_px(widths: Sequence[float], method: str = "hierarchical") -> float:
+    """Longest monitor extent a set of widths can unwrap.
+
+    Parameters
+    ----------
+    widths : sequence of float, monitor px
+        Fringe widths (periods), any order.
+    method : {"hierarchical", "heterodyne", "number_theoretic"}
+        Unwrapping method.
+
+    Returns
+    -------
+    range_px : float, monitor px
+        ``max(widths)`` (hierarchical), the longest synthetic wavelength (heterodyne) or
+        ``lcm(widths)`` (number-theoretic).
+
+    Raises
+    ------
+    ValueError
+        If the widths do not fit the method (see the module docstring).
+    """
+    return _plan(widths, 1.0, method).range_px
+
+
+# --------------------------------------------------------------------------- phase shifting
+
+
+def _shift_tables(n_shifts: int):
+    delta = 2.0 * np.pi * np.arange(n_shifts) / n_shifts
+    return np.cos(delta), np.sin(delta)
+
+
+def phase_shift(frames, *, dtype=np.float64) -> PhaseShiftResult:
+    """Wrapped phase, amplitude, offset and modulation of K equally shifted frames.
+
+    Parameters
+    ----------
+    frames : (K, H, W) ndarray, intensity units
+        ``I_k = A + B cos(phi + 2 pi k / K)``, ``K >= 3``; float32, float64 or integer
+        (converted to float). Not modified.
+    dtype : {float64, float32}, optional
+        Dtype of the returned maps (sums are always accumulated in float64).
+
+    Returns
+    -------
+    PhaseShiftResult
+        ``wrapped_phase`` (H, W) rad in (-pi, pi], ``amplitude`` ``B``, ``offset`` ``A``,
+        ``modulation`` ``B / A``, ``valid`` (all frames finite). Pixels with a non-finite
+        frame are NaN and invalid.
+
+    Raises
+    ------
+    ValueError
+        If ``frames`` is not (K, H, W) with ``K >= 3``, or ``dtype`` is not a float dtype.
+    """
+    arr = _check_frames(frames, "frames", 3, "(K, H, W)")
+    dt = _check_out_dtype(dtype)
+    n_shifts, height, width = arr.shape
+    if n_shifts < 3:
+        raise ValueError(f"frames needs K >= 3 phase shifts along axis 0, got K = {n_shifts}")
+    cos_d, sin_d = _shift_tables(n_shifts)
+    out = [np.empty((height, width), dt) for _ in range(4)]
+    _k.phase_shift(arr, cos_d, sin_d, *out)
+    return PhaseShiftResult(out[0], out[1], out[2], out[3], np.isfinite(out[0]))
+
+
+# --------------------------------------------------------------------------- unwrapping
+
+
+def _amplitude_thresholds(amplitude: np.ndarray, min_amplitude: float, min_relative: float):
+    """max(absolute, relative * median) per width; median over a regular pixel grid."""
+    n, height, width = amplitude.shape
+    thresholds = np.full(n, min_amplitude)
+    if min_relative > 0:
+        step = max(1, math.ceil(math.sqrt(height * width / _MEDIAN_SAMPLES)))
+        for j in range(n):
+            sample = amplitude[j, ::step, ::step]
+            sample = sample[np.isfinite(sample)]
+            if sample.size:
+                thresholds[j] = max(min_amplitude, min_relative * float(np.median(sample)))
+    return thresholds
+
+
+def _run_unwrap(plan: _Plan, phase, extent, max_residual, abs_phase, coord, residual, flags):
+    if plan.method == "number_theoretic":
+        _k.unwrap_coprime(phase, plan.order, plan.widths, plan.step_factor, plan.step_inverse,
+                          plan.step_period, plan.unit, plan.window_lo, extent, max_residual,
+                          abs_phase, coord, residual, flags)
+    else:
+        _k.unwrap_chain(phase, plan.coef, plan.chain_w, plan.window_lo, plan.rewrap_period,
+                        extent, max_residual, abs_phase, coord, residual, flags)
+
+
+def unwrap_phase(
+    wrapped_phase,
+    widths: Sequence[float],
+    extent_px: float,
+    method: str = "hierarchical",
+    *,
+    amplitude=None,
+    min_amplitude: float = 0.0,
+    min_relative_amplitude: float = 0.1,
+    max_order_residual: float = 0.25,
+) -> UnwrapResult:
+    """Temporal unwrapping of the wrapped phases of several fringe widths (one direction).
+
+    Parameters
+    ----------
+    wrapped_phase : (n_widths, H, W) ndarray, rad
+        Wrapped phase of each width, in the order of ``widths``. Not modified.
+    widths : sequence of float, monitor px
+        Fringe widths (periods), any order; what each method needs is described in the
+        module docstring.
+    extent_px : float, monitor px
+        Monitor extent along this direction (number of monitor pixels).
+    method : {"hierarchical", "heterodyne", "number_theoretic"}
+        Unwrapping method.
+    amplitude : (n_widths, H, W) ndarray, intensity units, optional
+        Fringe amplitude ``B`` of each width; without it no pixel gets ``LOW_AMPLITUDE``.
+    min_amplitude : float, intensity units
+        Absolute amplitude threshold.
+    min_relative_amplitude : float, 1
+        Threshold relative to the median amplitude of each width (median over a regular grid
+        of at most 65536 pixels); the larger of the two thresholds applies.
+    max_order_residual : float, 1
+        Order residual above which a pixel is flagged, in (0, 0.5].
+
+    Returns
+    -------
+    UnwrapResult
+        Absolute phase of the finest width (rad), monitor coordinate (monitor px), order
+        residual, flags and valid mask, all (H, W).
+
+    Raises
+    ------
+    ValueError
+        If the shapes disagree, or the widths do not fit the method (the message names the
+        argument and the fix).
+    """
+    phase = _check_frames(wrapped_phase, "wrapped_phase", 3, "(n_widths, H, W)")
+    plan = _plan(widths, extent_px, method)
+    extent = float(extent_px)
+    a_min, rel, res = _check_thresholds(min_amplitude, min_relative_amplitude, max_order_residual)
+    if phase.shape[0] != plan.n_widths:
+        raise ValueError(
+            f"wrapped_phase has {phase.shape[0]} widths along axis 0 but widths has "
+            f"{plan.n_widths} entries"
+        )
+    amp = None
+    if amplitude is not None:
+        amp = _check_frames(amplitude, "amplitude", 3, "(n_widths, H, W)")
+        if amp.shape != phase.shape:
+            raise ValueError(
+                f"amplitude must have the shape of wrapped_phase {phase.shape}, got {amp.shape}"
+            )
+    height, width = phase.shape[1:]
+    abs_phase = np.empty((height, width))
+    coord = np.empty((height, width))
+    residual = np.empty((height, width))
+    flags = np.empty((height, width), np.uint8)
+    _run_unwrap(plan, phase, extent, res, abs_phase, coord, residual, flags)
+    if amp is not None:
+        _k.flag_low_amplitude(amp, _amplitude_thresholds(amp, a_min, rel), flags)
+    return UnwrapResult(abs_phase, coord, residual, flags, flags == 0, plan.finest_width)
+
+
+def decode_sequence(
+    frames,
+    widths: Sequence[float],
+    shifts: int,
+    extent_px: float,
+    method: str = "hierarchical",
+    *,
+    min_amplitude: float = 0.0,
+    min_relative_amplitude: float = 0.1,
+    max_order_residual: float = 0.25,
+    dtype=np.float64,
+    saturation_level: float | None = None,
+) -> DecodeResult:
+    """Decode the fringe images of one direction to absolute phase and monitor coordinate.
+
+    One fused pass over the frames (parallel over rows) computes the wrapped phase, amplitude,
+    offset and modulation of every width, unwraps, and flags the pixels.
+
+    Parameters
+    ----------
+    frames : (n_widths, K, H, W) ndarray, intensity units
+        Frame ``[j, k]`` shows width ``widths[j]`` with shift ``2 pi k / K``; float32,
+        float64 or integer. Not modified.
+    widths : sequence of float, monitor px
+        Fringe widths (periods), any order (the order of ``frames``).
+    shifts : int or (K,) array_like, rad
+        Number K >= 3 of equal phase shifts per width, or the shifts themselves (they must be
+        ``2 pi k / K``, k = 0..K-1); K must equal ``frames.shape[1]``.
+    extent_px : float, monitor px
+        Monitor extent along this direction (number of monitor pixels).
+    method : {"hierarchical", "heterodyne", "number_theoretic"}
+        Unwrapping method; see the module docstring for the widths each needs.
+    min_amplitude : float, intensity units
+        Absolute amplitude threshold for ``LOW_AMPLITUDE``.
+    min_relative_amplitude : float, 1
+        Amplitude threshold relative to the median amplitude of each width; the larger of
+        the two thresholds applies.
+    max_order_residual : float, 1
+        Order residual above which a pixel gets ``ORDER_RESIDUAL``, in (0, 0.5].
+    dtype : {float64, float32}, optional
+        Dtype of the per-width maps (wrapped phase, amplitude, offset, modulation). Absolute
+        phase, monitor coordinate and order residual are always float64.
+    saturation_level : float, optional
+        Grey value at which the camera saturates (e.g. ``2**bits - 1``): pixels with a frame
+        at or above it get ``SATURATED``. None: no check.
+
+    Returns
+    -------
+    DecodeResult
+        Named fields; see :class:`DecodeResult`.
+
+    Raises
+    ------
+    ValueError
+        If shapes, ``shifts`` or thresholds are inconsistent, or the widths do not fit the
+        method (the message names the argument and the fix).
+    """
+    arr = _check_frames(frames, "frames", 4, "(n_widths, K, H, W)")
+    dt = _check_out_dtype(dtype)
+    plan = _plan(widths, extent_px, method)
+    extent = float(extent_px)
+    a_min, rel, res = _check_thresholds(min_amplitude, min_relative_amplitude, max_order_residual)
+    w = _check_widths(widths)
+    n, n_shifts, height, width = arr.shape
+    if n != w.size:
+        raise ValueError(
+            f"frames has {n} widths along axis 0 but widths has {w.size} entries ({w.tolist()})"
+        )
+    shifts = _check_shifts(shifts)
+    if n_shifts != shifts:
+        raise ValueError(
+            f"shifts = {shifts} but frames has {n_shifts} phase-shifted frames along axis 1"
+        )
+    cos_d, sin_d = _shift_tables(n_shifts)
+    wrapped = np.empty((n, height, width), dt)
+    amplitude = np.empty((n, height, width), dt)
+    offset = np.empty((n, height, width), dt)
+    modulation = np.empty((n, height, width), dt)
+    abs_phase = np.empty((height, width))
+    coord = np.empty((height, width))
+    residual = np.empty((height, width))
+    flags = np.empty((height, width), np.uint8)
+    if plan.method == "number_theoretic":
+        _k.decode_coprime(arr, cos_d, sin_d, plan.order, plan.widths, plan.step_factor,
+                          plan.step_inverse, plan.step_period, plan.unit, plan.window_lo,
+                          extent, res, wrapped, amplitude, offset, modulation,
+                          abs_phase, coord, residual, flags)
+    else:
+        _k.decode_chain(arr, cos_d, sin_d, plan.coef, plan.chain_w, plan.window_lo,
+                        plan.rewrap_period, extent, res, wrapped, amplitude, offset, modulation,
+                        abs_phase, coord, residual, flags)
+    if a_min > 0 or rel > 0:
+        _k.flag_low_amplitude(amplitude, _amplitude_thresholds(amplitude, a_min, rel), flags)
+    if saturation_level is not None:
+        sat = np.any(arr >= saturation_level, axis=(0, 1))
+        flags[sat] |= np.uint8(DecodeFlag.SATURATED)
+    return DecodeResult(
+        absolute_phase=abs_phase,
+        monitor_coord_px=coord,
+        wrapped_phase=wrapped,
+        modulation=modulation,
+        amplitude=amplitude,
+        offset=offset,
+        order_residual=residual,
+        flags=flags,
+        valid=flags == 0,
+        widths_px=tuple(float(x) for x in w),
+        finest_width_px=plan.finest_width,
+        method=plan.method,
+    )
+
+
+# --------------------------------------------------------------------------- coordinates
+
+
+def phase_to_monitor_px(absolute_phase, width_px: float) -> np.ndarray:
+    """Monitor coordinate of an absolute phase: ``u = Phi w / (2 pi)``.
+
+    Parameters
+    ----------
+    absolute_phase : (H, W) ndarray, rad
+        Absolute phase ``Phi`` of fringe width ``width_px``.
+    width_px : float, monitor px
+        Fringe width (period).
+
+    Returns
+    -------
+    coord : (H, W) ndarray of float64, monitor px
+        0-based, monitor pixel centres at integers.
+    """
+    w = _check_positive(width_px, "width_px")
+    return np.asarray(absolute_phase, dtype=np.float64) * (w / (2.0 * np.pi))
+
+
+def monitor_px_to_mm(coord_px, pixel_pitch_mm: float) -> np.ndarray:
+    """Monitor coordinate in mm from the centre of monitor pixel 0: ``x = u * pitch``.
+
+    Parameters
+    ----------
+    coord_px : (H, W) ndarray, monitor px
+        Monitor coordinate (0-based, centres at integers).
+    pixel_pitch_mm : float, mm
+        Monitor pixel pitch along this direction.
+
+    Returns
+    -------
+    coord_mm : (H, W) ndarray of float64, mm
+    """
+    pitch = _check_positive(pixel_pitch_mm, "pixel_pitch_mm")
+    return np.asarray(coord_px, dtype=np.float64) * pitch
+
+
+# --------------------------------------------------------------------------- file input
+
+
+
+
+

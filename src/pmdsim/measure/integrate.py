@@ -1,0 +1,553 @@
+"""Slopes to height: zonal least squares (Southwell), Frankot-Chellappa, modal fits.
+
+Plain functions on arrays; they serve simulated runs and real measurements alike.
+
+Grid convention
+---------------
+Slope maps are (H, W) arrays on a regular grid: column ``c`` is at
+``x = (c - (W - 1) / 2) * dx``, row ``r`` at ``y = (r - (H - 1) / 2) * dy`` (mm, origin at
+the array centre unless ``origin_mm`` says otherwise). ``slope_x`` = dz/dx and
+``slope_y`` = dz/dy (dimensionless, i.e. rad for small slopes); heights come back in the
+unit of ``dx`` (mm). Masks are boolean, ``True`` = measured; heights outside are NaN.
+
+Methods
+-------
+- :func:`southwell`: zonal least squares on the Southwell grid (slopes and heights at the
+  same points). ``order=2`` is the classic scheme (trapezoidal rule between neighbours,
+  exact for quadratic surfaces, second-order in the grid step); ``order=4`` adds the
+  Euler-Maclaurin end correction ``-h^2/12 (s'_j - s'_i)`` with ``s'`` from finite
+  differences of the measured slopes (the higher-order finite-difference scheme of Li et
+  al. 2013), fourth-order in the interior and still exact for quadratics. Any mask
+  (circles, annuli, islands: piston is set per connected part). Full rectangles are
+  solved exactly with a DCT (the normal matrix of the scheme is the Neumann Laplacian);
+  masked ones with a sparse direct solver or, for large maps, algebraic multigrid (PyAMG).
+- :func:`frankot_chellappa`: the Fourier projection onto integrable fields for full
+  rectangles (periodic FFT, optionally on the mirror-extended field). Documented edge error:
+  see ``docs/reconstruction.md``.
+- :func:`modal_fit`: least squares of the slopes onto the gradients of Zernike polynomials
+  (Noll ordering and normalisation, unit disc) or Legendre products (unit square); returns
+  the coefficients and the height.
+- :func:`remove_terms` / :func:`height_stats`: piston, tilt, power (and astigmatism)
+  removal as metrologists name them, and RMS/PV/P95 over the aperture.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft
+import scipy.sparse as sp
+import scipy.sparse.csgraph
+import scipy.sparse.linalg
+
+__all__ = [
+    "grid_coordinates",
+    "southwell",
+    "frankot_chellappa",
+    "modal_fit",
+    "ModalFit",
+    "zernike_noll_index",
+    "zernike",
+    "legendre_terms",
+    "remove_terms",
+    "height_stats",
+    "HeightStats",
+    "TERM_LEVELS",
+]
+
+
+def _lstsq(a, b):
+    """Least squares via the normal equations (Cholesky): our design matrices are tall and
+    well conditioned (orthogonal bases, scaled coordinates), and LAPACK's QR/SVD drivers
+    are needlessly slow on tall matrices with threaded BLAS. Falls back to lstsq when the
+    normal matrix is not positive definite."""
+    import scipy.linalg
+
+    ata = a.T @ a
+    try:
+        return scipy.linalg.solve(ata, a.T @ b, assume_a="pos")
+    except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
+        return np.linalg.lstsq(a, b, rcond=None)[0]
+
+
+# --------------------------------------------------------------------------------- grid
+def grid_coordinates(shape, spacing, origin_mm=None):
+    """(x, y) coordinate arrays (H, W) in mm of the grid convention above.
+
+    ``origin_mm``: the (x, y) of pixel (0, 0); default: the array centre is (0, 0).
+    """
+    h, w = shape
+    dx, dy = _spacing(spacing)
+    if origin_mm is None:
+        x0, y0 = -(w - 1) / 2 * dx, -(h - 1) / 2 * dy
+    else:
+        x0, y0 = float(origin_mm[0]), float(origin_mm[1])
+    x = x0 + np.arange(w) * dx
+    y = y0 + np.arange(h) * dy
+    return np.meshgrid(x, y)
+
+
+def _spacing(spacing):
+    if np.isscalar(spacing):
+        return float(spacing), float(spacing)
+    dx, dy = spacing
+    return float(dx), float(dy)
+
+
+def _prepare(slope_x, slope_y, mask):
+    sx = np.asarray(slope_x, np.float64)
+    sy = np.asarray(slope_y, np.float64)
+    if sx.shape != sy.shape or sx.ndim != 2:
+        raise ValueError(f"slope_x and slope_y must be (H, W) arrays of one shape, got {sx.shape} and {sy.shape}")
+    m = np.isfinite(sx) & np.isfinite(sy)
+    if mask is not None:
+        mask = np.asarray(mask, bool)
+        if mask.shape != sx.shape:
+            raise ValueError(f"mask shape {mask.shape} differs from the slopes' {sx.shape}")
+        m &= mask
+    return np.where(m, sx, 0.0), np.where(m, sy, 0.0), m
+
+
+# --------------------------------------------------------------------------- Southwell
+def _derivative_along(s, m, axis, h):
+    """ds/d(axis) from valid neighbours: central where both exist, one-sided 3-point
+    (2nd order) where two on one side exist, 2-point otherwise, 0 for isolated points."""
+    s = np.moveaxis(s, axis, -1)
+    m = np.moveaxis(m, axis, -1)
+    n = s.shape[-1]
+    d = np.zeros_like(s)
+    if n < 2:
+        return np.moveaxis(d, -1, axis)
+
+    def sh(a, k, fill):
+        # value at index i + k (fill outside)
+        out = np.full_like(a, fill)
+        if k > 0:
+            out[..., :-k] = a[..., k:]
+        elif k < 0:
+            out[..., -k:] = a[..., :k]
+        else:
+            out[...] = a
+        return out
+
+    mp1, mm1 = sh(m, 1, False), sh(m, -1, False)
+    mp2, mm2 = sh(m, 2, False), sh(m, -2, False)
+    sp1, sm1, sp2, sm2 = sh(s, 1, 0.0), sh(s, -1, 0.0), sh(s, 2, 0.0), sh(s, -2, 0.0)
+    central = m & mp1 & mm1
+    fwd3 = m & ~central & mp1 & mp2
+    bwd3 = m & ~central & ~fwd3 & mm1 & mm2
+    fwd2 = m & ~central & ~fwd3 & ~bwd3 & mp1
+    bwd2 = m & ~central & ~fwd3 & ~bwd3 & ~fwd2 & mm1
+    d = np.where(central, (sp1 - sm1) / (2 * h), d)
+    d = np.where(fwd3, (-3 * s + 4 * sp1 - sp2) / (2 * h), d)
+    d = np.where(bwd3, (3 * s - 4 * sm1 + sm2) / (2 * h), d)
+    d = np.where(fwd2, (sp1 - s) / h, d)
+    d = np.where(bwd2, (s - sm1) / h, d)
+    return np.moveaxis(d, -1, axis)
+
+
+def _southwell_differences(sx, sy, m, dx, dy, order):
+    """Right-hand sides of the neighbour equations z_j - z_i = b along x and y, and the
+    masks of valid pairs ((H, W-1) and (H-1, W))."""
+    px = m[:, :-1] & m[:, 1:]
+    py = m[:-1, :] & m[1:, :]
+    bx = dx * 0.5 * (sx[:, :-1] + sx[:, 1:])
+    by = dy * 0.5 * (sy[:-1, :] + sy[1:, :])
+    if order == 4:
+        dsx = _derivative_along(sx, m, 1, dx)
+        dsy = _derivative_along(sy, m, 0, dy)
+        bx = bx - dx * dx / 12.0 * (dsx[:, 1:] - dsx[:, :-1])
+        by = by - dy * dy / 12.0 * (dsy[1:, :] - dsy[:-1, :])
+    elif order != 2:
+        raise ValueError(f"order must be 2 (classic Southwell) or 4 (higher-order), got {order!r}")
+    return np.where(px, bx, 0.0), np.where(py, by, 0.0), px, py
+
+
+def _dct_poisson(rhs):
+    """Solve L z = rhs for the Neumann grid Laplacian L = Dx^T Dx + Dy^T Dy (forward
+    differences, unit step) on a full rectangle; the zero-mean solution."""
+    h, w = rhs.shape
+    lx = 2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w)
+    ly = 2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h)
+    lam = ly[:, None] + lx[None, :]
+    c = scipy.fft.dctn(rhs, type=2, norm="ortho")
+    lam[0, 0] = 1.0
+    c = c / lam
+    c[0, 0] = 0.0
+    return scipy.fft.idctn(c, type=2, norm="ortho")
+
+
+def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", remove="piston"):
+    """Height (H, W) in mm from slopes by zonal least squares (Southwell grid).
+
+    Parameters
+    ----------
+    slope_x, slope_y : (H, W) ndarray
+        dz/dx and dz/dy at the grid points (NaN = not measured).
+    spacing : float or (dx, dy)
+        Grid step in mm.
+    mask : (H, W) bool ndarray, optional
+        Measured points (``True``); combined with the finite slopes.
+    order : {2, 4}
+        2: classic Southwell (trapezoid between neighbours); 4: with the Euler-Maclaurin
+        correction from slope derivatives (default; exact for quadratics either way).
+    solver : {"auto", "dct", "direct", "amg"}
+        ``dct`` needs a full rectangle (exact, O(N log N)); ``direct`` = SciPy's sparse LU;
+        ``amg`` = PyAMG smoothed-aggregation CG; ``auto``: ``dct`` on full rectangles,
+        ``direct`` below 300 000 points, ``amg`` above.
+    remove : str or sequence
+        Terms removed from the result (:func:`remove_terms`); default: piston (mean zero
+        per connected part of the aperture). Piston is always undetermined by slopes.
+
+    Returns
+    -------
+    height : (H, W) ndarray, mm; NaN outside the mask.
+    """
+    dx, dy = _spacing(spacing)
+    sx, sy, m = _prepare(slope_x, slope_y, mask)
+    h, w = m.shape
+    bx, by, px, py = _southwell_differences(sx, sy, m, dx, dy, order)
+    full = bool(m.all())
+    if solver == "auto":
+        solver = "dct" if full else ("direct" if m.sum() < 300_000 else "amg")
+    if solver == "dct":
+        if not full:
+            raise ValueError("solver='dct' needs a full rectangle (no mask, all slopes finite); use 'direct' or 'amg'")
+        rhs = np.zeros((h, w))
+        rhs[:, :-1] -= bx
+        rhs[:, 1:] += bx
+        rhs[:-1, :] -= by
+        rhs[1:, :] += by
+        z = _dct_poisson(rhs)
+    elif solver in ("direct", "amg"):
+        z = _southwell_sparse(bx, by, px, py, m, solver)
+    else:
+        raise ValueError(f"solver must be 'auto', 'dct', 'direct' or 'amg', got {solver!r}")
+    z = np.where(m, z, np.nan)
+    return remove_terms(z, m, *grid_coordinates(m.shape, (dx, dy)), terms=remove, _components=True)
+
+
+def _southwell_sparse(bx, by, px, py, m, solver):
+    h, w = m.shape
+    n = int(m.sum())
+    idx = np.full((h, w), -1, np.int64)
+    idx[m] = np.arange(n)
+    ix0, ix1 = idx[:, :-1][px], idx[:, 1:][px]
+    iy0, iy1 = idx[:-1, :][py], idx[1:, :][py]
+    i0 = np.concatenate([ix0, iy0])
+    i1 = np.concatenate([ix1, iy1])
+    b = np.concatenate([bx[px], by[py]])
+    k = len(b)
+    rows = np.repeat(np.arange(k), 2)
+    cols = np.stack([i0, i1], axis=1).ravel()
+    vals = np.tile([-1.0, 1.0], k)
+    a = sp.csr_matrix((vals, (rows, cols)), shape=(k, n))
+    lap = (a.T @ a).tocsr()
+    rhs = a.T @ b
+    # pin one point per connected part (piston is free), restored to zero mean afterwards
+    ncomp, labels = scipy.sparse.csgraph.connected_components(lap, directed=False)
+    first = np.unique(labels, return_index=True)[1]
+    pin = np.zeros(n)
+    pin[first] = 1.0
+    lap = (lap + sp.diags(pin)).tocsr()
+    if solver == "direct":
+        z = scipy.sparse.linalg.spsolve(lap.tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
+    else:
+        try:
+            import pyamg
+        except ImportError as e:  # pragma: no cover - pyamg is a dependency
+            raise ImportError("solver='amg' needs PyAMG (pip install pyamg)") from e
+        ml = pyamg.smoothed_aggregation_solver(lap, symmetry="hermitian")
+        z = ml.solve(rhs, tol=1e-13, accel="cg", maxiter=500)
+    out = np.zeros((h, w))
+    out[m] = z
+    return out
+
+
+# ------------------------------------------------------------------ Frankot-Chellappa
+def frankot_chellappa(slope_x, slope_y, spacing, *, extend="mirror", remove="piston"):
+    """Height (H, W) in mm by projecting the slopes onto integrable Fourier fields.
+
+    ``extend="mirror"``: the slopes are extended to a (2H, 2W) field by mirroring (slope_x odd
+    across vertical edges, even across horizontal ones; Bon et al. 2012), which removes the
+    periodic wrap-around jump; ``"none"``: the classic periodic Frankot-Chellappa. Spectral
+    derivatives ``i k``. Needs a full rectangle of finite slopes. The error concentrates at
+    the edges (``docs/reconstruction.md`` gives the measured size); for exact least squares
+    on a rectangle use :func:`southwell` (its DCT path is as fast).
+    """
+    dx, dy = _spacing(spacing)
+    sx = np.asarray(slope_x, np.float64)
+    sy = np.asarray(slope_y, np.float64)
+    if not (np.isfinite(sx).all() and np.isfinite(sy).all()):
+        raise ValueError("frankot_chellappa needs a full rectangle of finite slopes; use southwell() for masked apertures")
+    h, w = sx.shape
+    if extend == "mirror":
+        sx_e = np.block([[sx, -sx[:, ::-1]], [sx[::-1, :], -sx[::-1, ::-1]]])
+        sy_e = np.block([[sy, sy[:, ::-1]], [-sy[::-1, :], -sy[::-1, ::-1]]])
+    elif extend == "none":
+        sx_e, sy_e = sx, sy
+    else:
+        raise ValueError(f"extend must be 'mirror' or 'none', got {extend!r}")
+    he, we = sx_e.shape
+    kx = 2 * np.pi * scipy.fft.fftfreq(we, d=dx)
+    ky = 2 * np.pi * scipy.fft.fftfreq(he, d=dy)
+    kxx, kyy = np.meshgrid(kx, ky)
+    fx = scipy.fft.fft2(sx_e)
+    fy = scipy.fft.fft2(sy_e)
+    den = kxx**2 + kyy**2
+    den[0, 0] = 1.0
+    fz = (-1j * kxx * fx - 1j * kyy * fy) / den
+    fz[0, 0] = 0.0
+    z = scipy.fft.ifft2(fz).real[:h, :w]
+    m = np.ones((h, w), bool)
+    return remove_terms(z, m, *grid_coordinates(m.shape, (dx, dy)), terms=remove)
+
+
+# ---------------------------------------------------------------------------- modal
+def zernike_noll_index(j: int):
+    """(n, m) of Noll's index j >= 1; m > 0 cos, m < 0 sin (even j cos, odd j sin)."""
+    if j < 1:
+        raise ValueError("Noll indices start at 1")
+    n = int((-1 + math.isqrt(8 * (j - 1) + 1)) // 2)
+    p = j - n * (n + 1) // 2
+    k = n % 2
+    m = 2 * ((p + k) // 2) - k
+    if m != 0 and j % 2 == 1:
+        m = -m
+    return n, m
+
+
+def _radial(n, m, rho):
+    """R_n^|m|(rho), dR/drho, R/rho (the last for |m| >= 1, else zeros)."""
+    m = abs(m)
+    r = np.zeros_like(rho)
+    dr = np.zeros_like(rho)
+    rr = np.zeros_like(rho)
+    for k in range((n - m) // 2 + 1):
+        c = (-1) ** k * math.factorial(n - k) / (
+            math.factorial(k) * math.factorial((n + m) // 2 - k) * math.factorial((n - m) // 2 - k)
+        )
+        p = n - 2 * k
+        r += c * rho**p
+        if p >= 1:
+            dr += c * p * rho ** (p - 1)
+            rr += c * rho ** (p - 1)
+    return r, dr, rr
+
+
+def zernike(j, x, y):
+    """Noll-normalised Zernike Z_j on the unit disc at (x, y) and its gradient:
+    (Z, dZ/dx, dZ/dy). RMS over the unit disc is 1 for every j."""
+    n, m = zernike_noll_index(j)
+    x = np.asarray(x, np.float64)
+    y = np.asarray(y, np.float64)
+    rho = np.hypot(x, y)
+    th = np.arctan2(y, x)
+    r, dr, rr = _radial(n, m, rho)
+    if m == 0:
+        norm = math.sqrt(n + 1)
+        z = norm * r
+        # dZ/dx = R'(rho) x/rho; R' has only odd powers for m = 0 -> R'/rho is a polynomial
+        rp_over_rho = np.zeros_like(rho)
+        for k in range(n // 2 + 1):
+            c = (-1) ** k * math.factorial(n - k) / (math.factorial(k) * math.factorial(n // 2 - k) ** 2)
+            p = n - 2 * k
+            if p >= 2:
+                rp_over_rho += c * p * rho ** (p - 2)
+        return z, norm * rp_over_rho * x, norm * rp_over_rho * y
+    norm = math.sqrt(2 * (n + 1))
+    am = abs(m)
+    if m > 0:
+        ang, dang = np.cos(am * th), -am * np.sin(am * th)
+    else:
+        ang, dang = np.sin(am * th), am * np.cos(am * th)
+    z = norm * r * ang
+    # grad = R' ang rho_hat + (R/rho) dang theta_hat
+    c, s = np.cos(th), np.sin(th)
+    gx = norm * (dr * ang * c - rr * dang * s)
+    gy = norm * (dr * ang * s + rr * dang * c)
+    return z, gx, gy
+
+
+def legendre_terms(n_terms):
+    """(i, j) degrees of the first ``n_terms`` Legendre products P_i(x) P_j(y), by total
+    degree, then by the y degree j ascending: (0,0), (1,0), (0,1), (2,0), (1,1), (0,2), ..."""
+    out = []
+    d = 0
+    while len(out) < n_terms:
+        for j in range(d + 1):
+            out.append((d - j, j))
+        d += 1
+    return out[:n_terms]
+
+
+def _legendre(i, j, u, v):
+    """sqrt((2i+1)(2j+1)) P_i(u) P_j(v) (RMS 1 on [-1, 1]^2) and its (u, v) gradient."""
+    from numpy.polynomial import legendre as L
+
+    ci = np.zeros(i + 1)
+    ci[i] = 1.0
+    cj = np.zeros(j + 1)
+    cj[j] = 1.0
+    norm = math.sqrt((2 * i + 1) * (2 * j + 1))
+    pu, pv = L.legval(u, ci), L.legval(v, cj)
+    du = L.legval(u, L.legder(ci)) if i > 0 else np.zeros_like(u)
+    dv = L.legval(v, L.legder(cj)) if j > 0 else np.zeros_like(v)
+    return norm * pu * pv, norm * du * pv, norm * pu * dv
+
+
+@dataclass(frozen=True)
+class ModalFit:
+    """Result of :func:`modal_fit`.
+
+    ``coefficients`` (mm) of the ``names`` terms (index 0 = piston, always 0: slopes do not
+    see it); ``height`` (H, W) mm (NaN outside the mask); ``residual_rms`` the RMS slope
+    residual (rad); ``radius_mm`` / ``half_size_mm`` the normalisation."""
+
+    basis: str
+    names: tuple
+    coefficients: np.ndarray
+    height: np.ndarray
+    residual_rms: float
+    centre_mm: tuple
+    scale_mm: tuple
+
+
+def modal_fit(slope_x, slope_y, spacing, mask=None, *, basis="zernike", n_terms=36,
+              centre_mm=(0.0, 0.0), radius_mm=None, half_size_mm=None, origin_mm=None):
+    """Least-squares fit of slopes onto the gradients of a polynomial basis.
+
+    ``basis="zernike"``: Noll-ordered, Noll-normalised Zernikes Z_1..Z_n on the disc of
+    ``radius_mm`` about ``centre_mm`` (default: the smallest disc holding the mask);
+    ``"legendre"``: Legendre products on the rectangle ``centre_mm +- half_size_mm`` (default:
+    the mask's bounding box). Returns a :class:`ModalFit`.
+    """
+    dx, dy = _spacing(spacing)
+    sx, sy, m = _prepare(slope_x, slope_y, mask)
+    x, y = grid_coordinates(m.shape, (dx, dy), origin_mm)
+    xm, ym = x[m] - centre_mm[0], y[m] - centre_mm[1]
+    if basis == "zernike":
+        rad = float(np.max(np.hypot(xm, ym))) if radius_mm is None else float(radius_mm)
+        scale = (rad, rad)
+        u, v = xm / rad, ym / rad
+        terms = list(range(1, n_terms + 1))
+        names = tuple(f"Z{j}" for j in terms)
+        funcs = [lambda uu, vv, j=j: zernike(j, uu, vv) for j in terms]
+    elif basis == "legendre":
+        if half_size_mm is None:
+            scale = (float(np.max(np.abs(xm))), float(np.max(np.abs(ym))))
+        else:
+            scale = (float(half_size_mm[0]), float(half_size_mm[1]))
+        u, v = xm / scale[0], ym / scale[1]
+        terms = legendre_terms(n_terms)
+        names = tuple(f"L{i}{j}" for i, j in terms)
+        funcs = [lambda uu, vv, i=i, j=j: _legendre(i, j, uu, vv) for i, j in terms]
+    else:
+        raise ValueError(f"basis must be 'zernike' or 'legendre', got {basis!r}")
+    gx = np.empty((len(u), len(funcs)))
+    gy = np.empty_like(gx)
+    for k, f in enumerate(funcs):
+        _, a, b = f(u, v)
+        gx[:, k] = a / scale[0]
+        gy[:, k] = b / scale[1]
+    a = np.vstack([gx[:, 1:], gy[:, 1:]])
+    rhs = np.concatenate([sx[m], sy[m]])
+    coef = _lstsq(a, rhs)
+    coef = np.concatenate([[0.0], coef])
+    res = a @ coef[1:] - rhs
+    # height on the grid; piston chosen so the fitted terms have zero mean on the aperture
+    zval = np.zeros(len(u))
+    for k, f in enumerate(funcs):
+        if k:
+            zval += coef[k] * f(u, v)[0]
+    zval -= zval.mean()
+    height = np.full(m.shape, np.nan)
+    height[m] = zval
+    return ModalFit(basis, names, coef, height, float(np.sqrt(np.mean(res**2))), tuple(centre_mm), scale)
+
+
+# --------------------------------------------------------------------- term removal
+TERM_LEVELS = {
+    "none": (),
+    "piston": ("piston",),
+    "tilt": ("piston", "tilt"),
+    "power": ("piston", "tilt", "power"),
+    "astigmatism": ("piston", "tilt", "power", "astigmatism"),
+}
+
+
+def _term_columns(terms, x, y):
+    cols = []
+    for t in terms:
+        if t == "piston":
+            cols.append(np.ones_like(x))
+        elif t == "tilt":
+            cols += [x, y]
+        elif t == "power":
+            cols.append(x * x + y * y)
+        elif t == "astigmatism":
+            cols += [x * x - y * y, 2 * x * y]
+        else:
+            raise ValueError(f"unknown term {t!r}: use piston, tilt, power, astigmatism")
+    return cols
+
+
+def remove_terms(height, mask, x, y, terms="piston", _components=False):
+    """Height minus its least-squares fit of the named low-order terms over ``mask``.
+
+    ``terms``: a level name — ``"none"``, ``"piston"``, ``"tilt"`` (piston and tilt),
+    ``"power"`` (piston, tilt and power, i.e. the best-fit sphere's paraxial part x^2+y^2),
+    ``"astigmatism"`` (also x^2-y^2 and 2xy) — or a sequence of those term names.
+    Returns a new array, NaN outside ``mask``.
+    """
+    h = np.asarray(height, np.float64)
+    m = np.asarray(mask, bool) & np.isfinite(h)
+    names = TERM_LEVELS[terms] if isinstance(terms, str) and terms in TERM_LEVELS else tuple(
+        [terms] if isinstance(terms, str) else terms
+    )
+    out = np.where(m, h, np.nan)
+    if not names or not m.any():
+        return out
+    if _components and names == ("piston",):
+        # piston per connected part (zonal integration cannot relate separate parts)
+        from scipy import ndimage
+
+        lab, n = ndimage.label(m)
+        if n > 1:
+            means = ndimage.mean(np.where(m, h, 0.0), lab, index=np.arange(1, n + 1))
+            out[m] = h[m] - np.asarray(means)[lab[m] - 1]
+            return out
+    xm, ym = np.asarray(x, np.float64)[m], np.asarray(y, np.float64)[m]
+    xc, yc = xm.mean(), ym.mean()
+    scale = max(np.abs(xm - xc).max(), np.abs(ym - yc).max(), 1e-300)
+    # centred, scaled coordinates keep the normal equations well conditioned (same span)
+    cols = _term_columns(names, (xm - xc) / scale, (ym - yc) / scale)
+    a = np.stack(cols, axis=1)
+    coef = _lstsq(a, h[m])
+    out[m] = h[m] - a @ coef
+    return out
+
+
+@dataclass(frozen=True)
+class HeightStats:
+    """RMS (about the mean), PV (max - min) and P95 (95th percentile of |h - mean|) of a
+    height map over its finite points, in the map's unit; ``n`` points."""
+
+    rms: float
+    pv: float
+    p95: float
+    n: int
+
+    def as_dict(self):
+        return dict(self.__dict__)
+
+
+def height_stats(values, mask=None) -> HeightStats:
+    v = np.asarray(values, np.float64)
+    m = np.isfinite(v) if mask is None else (np.asarray(mask, bool) & np.isfinite(v))
+    if not m.any():
+        return HeightStats(float("nan"), float("nan"), float("nan"), 0)
+    d = v[m] - v[m].mean()
+    return HeightStats(float(np.sqrt(np.mean(d * d))), float(np.ptp(v[m])), float(np.percentile(np.abs(d), 95)), int(m.sum()))

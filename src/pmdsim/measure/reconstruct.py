@@ -1,0 +1,360 @@
+"""Monocular PMD reconstruction: decoded monitor coordinates -> slopes -> height.
+
+What a real single-camera deflectometer does, from the decoded monitor coordinates (u, v)
+of every camera pixel, the calibrated camera and monitor poses and a nominal shape (the
+configured surface or a user prior):
+
+1. a regular grid (x, y) in the nominal surface's local frame (its vertex frame, mm);
+2. at each grid node the current surface point S = (x, y, z(x, y)) (z starts as the
+   nominal sag), projected into the camera: the vision ray C -> S and the camera pixel
+   that sees S;
+3. the decoded monitor point M at that (fractional) pixel, by cubic-spline interpolation of
+   the decoded (u, v) maps in camera pixel space;
+4. the normal as the bisector of the unit directions S -> C and S -> M, and the slopes
+   dz/dx = -n_x / n_z, dz/dy = -n_y / n_z in the local frame (full 3-D geometry: no
+   per-direction scalar);
+5. the slopes integrated to z (:func:`pmdsim.measure.integrate.southwell`), anchored to
+   the nominal shape at one point (the height-normal ambiguity: slopes fix the shape, the
+   anchor fixes the distance; a real system registers the part mechanically);
+6. repeat from 2 until z stops changing (each height error changes the normals by about
+   height / distance, so the loop contracts).
+
+Plain arrays in, plain arrays out; the camera needs ``position`` and ``project(points)``,
+the monitor ``pixel_to_world(u, v)``, the prior ``centre``, ``x_axis``, ``y_axis``,
+``normal`` and optionally ``sag(x, y)``, ``in_aperture(x, y)`` and ``bounds()`` (a flat
+rectangle with ``size`` works as well).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from .integrate import _lstsq, southwell
+
+__all__ = [
+    "Reconstruction",
+    "reconstruct",
+    "bisector_normals",
+    "slopes_in_frame",
+    "prior_frame",
+    "PriorFrame",
+    "slope_deviation_3d",
+    "SurfaceErrors",
+    "surface_errors",
+]
+
+
+@dataclass(frozen=True)
+class PriorFrame:
+    """The nominal shape as reconstruction needs it: local frame (rotation columns = local
+    x, y, z), sag, aperture test and local bounds (x_min, x_max, y_min, y_max)."""
+
+    centre: np.ndarray
+    rotation: np.ndarray
+    sag: object
+    in_aperture: object
+    bounds: tuple
+    aperture_centre: tuple
+
+    def to_world(self, x, y, z):
+        return self.centre + np.stack([x, y, z], axis=-1) @ self.rotation.T
+
+    def to_local(self, points):
+        return (np.asarray(points, np.float64) - self.centre) @ self.rotation
+
+
+def prior_frame(surface) -> PriorFrame:
+    """A :class:`PriorFrame` from a scene surface (SagSurface, FlatRectangle or alike)."""
+    rot = np.stack([surface.x_axis, surface.y_axis, surface.normal], axis=1).astype(np.float64)
+    if hasattr(surface, "sag"):
+        def sag(x, y):
+            return surface.sag(x, y)[0]
+        in_ap = surface.in_aperture
+        bounds = tuple(surface.bounds())
+        ap = surface.aperture
+        ap_centre = (ap[1], ap[2])
+    else:  # flat rectangle
+        hx, hy = surface.size[0] / 2, surface.size[1] / 2
+
+        def sag(x, y):
+            return np.zeros(np.broadcast(x, y).shape)
+
+        def in_ap(x, y):
+            return (np.abs(x) <= hx) & (np.abs(y) <= hy)
+        bounds = (-hx, hx, -hy, hy)
+        ap_centre = (0.0, 0.0)
+    return PriorFrame(np.asarray(surface.centre, np.float64), rot, sag, in_ap, bounds, ap_centre)
+
+
+def bisector_normals(points, camera_position, monitor_points):
+    """Unit normals (..., 3): bisector of the directions from ``points`` to the camera and
+    to the monitor points (the law of reflection)."""
+    a = np.asarray(camera_position, np.float64) - points
+    b = np.asarray(monitor_points, np.float64) - points
+    n = a / np.linalg.norm(a, axis=-1, keepdims=True) + b / np.linalg.norm(b, axis=-1, keepdims=True)
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def slopes_in_frame(normals, rotation):
+    """(dz/dx, dz/dy) of the surface with world ``normals`` in the local frame whose axes are
+    the columns of ``rotation`` (x, y, z)."""
+    nl = np.asarray(normals, np.float64) @ rotation
+    return -nl[..., 0] / nl[..., 2], -nl[..., 1] / nl[..., 2]
+
+
+@dataclass(frozen=True)
+class Reconstruction:
+    """Result of :func:`reconstruct`, on the grid ``x_mm`` (W,) x ``y_mm`` (H,) of the
+    prior's local frame. ``height_mm`` and slopes NaN outside ``mask``; ``nominal_mm`` the
+    prior's sag on the grid; ``history`` max |change of z| (mm) per iteration."""
+
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    mask: np.ndarray
+    height_mm: np.ndarray
+    slope_x: np.ndarray
+    slope_y: np.ndarray
+    nominal_mm: np.ndarray
+    iterations: int
+    history: tuple
+    converged: bool
+
+    @property
+    def spacing(self):
+        return (float(self.x_mm[1] - self.x_mm[0]), float(self.y_mm[1] - self.y_mm[0]))
+
+
+def _smooth_fill(a, valid, idx, degree=6, max_samples=50_000):
+    """``a`` with invalid pixels filled smoothly: a 2-D polynomial fitted to the valid
+    pixels plus the nearest valid pixel's residual (continuous at the boundary, so the
+    spline's prefilter does not ring into the valid region)."""
+    h, w = a.shape
+    rows, cols = np.nonzero(valid)
+    step = max(1, len(rows) // max_samples)
+    rs, cs = rows[::step], cols[::step]
+
+    terms = [(i, j) for i in range(degree + 1) for j in range(degree + 1 - i)]
+
+    def vander(r, c):
+        vx = np.polynomial.legendre.legvander(2.0 * c / max(w - 1, 1) - 1.0, degree)
+        vy = np.polynomial.legendre.legvander(2.0 * r / max(h - 1, 1) - 1.0, degree)
+        return vx, vy
+
+    vx, vy = vander(rs, cs)
+    a_mat = np.stack([vx[:, i] * vy[:, j] for i, j in terms], axis=1)
+    coef = _lstsq(a_mat, a[rs, cs])
+    cmat = np.zeros((degree + 1, degree + 1))
+    for (i, j), c in zip(terms, coef):
+        cmat[i, j] = c
+    # the fit on the whole grid, separably: fit[r, c] = sum_ij C_ij Px_i(c) Py_j(r)
+    gx, _ = vander(np.zeros(w), np.arange(w))
+    _, gy = vander(np.arange(h), np.zeros(h))
+    fit = gy @ cmat.T @ gx.T
+    bad = ~valid
+    near = tuple(i[bad] for i in idx)
+    out = a.copy()
+    out[bad] = fit[bad] + (a[near] - fit[near])
+    return out
+
+
+def _spline_maps(u, v, valid):
+    """Cubic-spline coefficients of u and v with the invalid pixels filled smoothly."""
+    if not valid.any():
+        raise ValueError("no valid decoded pixel: nothing to reconstruct")
+    if valid.all():
+        uf, vf = u, v
+    else:
+        idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
+        uf = _smooth_fill(u, valid, idx)
+        vf = _smooth_fill(v, valid, idx)
+    cu = ndimage.spline_filter(uf, order=3, mode="mirror")
+    cv = ndimage.spline_filter(vf, order=3, mode="mirror")
+    return cu, cv
+
+
+def _support_ok(valid, col, row):
+    """Nodes whose fractional pixel lies in a cell of 2 x 2 valid pixels (the invalid
+    pixels around were filled smoothly, so the spline's wider support may use them)."""
+    h, w = valid.shape
+    c0 = np.floor(col).astype(np.int64)
+    r0 = np.floor(row).astype(np.int64)
+    inside = (c0 >= 0) & (c0 <= w - 2) & (r0 >= 0) & (r0 <= h - 2)
+    c0 = np.where(inside, c0, 0)
+    r0 = np.where(inside, r0, 0)
+    return inside & valid[r0, c0] & valid[r0 + 1, c0] & valid[r0, c0 + 1] & valid[r0 + 1, c0 + 1]
+
+
+def _anchor(z, nominal, ok, anchor_idx):
+    """Tie each connected part of the measured grid to the nominal shape: the part holding
+    the anchor node (or, when that node is not measured, the measured node nearest to it)
+    at that node, every other part (and all with ``anchor_idx`` None) by its mean."""
+    if not ok.any():
+        return z
+    labels, n = ndimage.label(ok)
+    out = z.copy()
+    if anchor_idx is not None and not ok[anchor_idx]:
+        rr, cc = np.nonzero(ok)
+        k = np.argmin((rr - anchor_idx[0]) ** 2 + (cc - anchor_idx[1]) ** 2)
+        anchor_idx = (int(rr[k]), int(cc[k]))
+    anchored = labels[anchor_idx] if anchor_idx is not None else 0
+    for lab in range(1, n + 1):
+        part = labels == lab
+        if lab == anchored:
+            out[part] = z[part] - z[anchor_idx] + nominal[anchor_idx]
+        else:
+            out[part] = z[part] - z[part].mean() + nominal[part].mean()
+    return out
+
+
+def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, grid=None,
+                anchor="centre", order=4, max_iter=30, tol_mm=1e-9, solver="auto") -> Reconstruction:
+    """Surface height and slopes from decoded monitor coordinates (monocular PMD).
+
+    Parameters
+    ----------
+    u, v : (H, W) ndarray, monitor px
+        Decoded monitor coordinates of every camera pixel (NaN = not decoded).
+    camera : object with ``position`` (3,) mm and ``project(points) -> (..., 2)`` (col, row)
+    monitor : object with ``pixel_to_world(u, v) -> (..., 3)`` mm
+    prior : the nominal surface (:func:`prior_frame` input) or a :class:`PriorFrame`
+    valid : (H, W) bool ndarray, optional — pixels to use (default: finite u and v)
+    spacing_mm : float — grid step (mm) when ``grid`` is not given
+    grid : (x_mm, y_mm), optional — 1-D local coordinates of the grid columns / rows
+    anchor : "centre" | "mean" | (x, y)
+        Where the height is tied to the prior: the grid node nearest the aperture centre
+        (default) or (x, y) (the nearest measured node when that one is not measured), or
+        the mean over the aperture. Separate measured parts are each tied by their mean.
+    order, solver : passed to :func:`~pmdsim.measure.integrate.southwell`
+    max_iter, tol_mm : the height-normal iteration stops when max |dz| < tol_mm.
+    """
+    u = np.asarray(u, np.float64)
+    v = np.asarray(v, np.float64)
+    ok_pix = np.isfinite(u) & np.isfinite(v)
+    if valid is not None:
+        ok_pix &= np.asarray(valid, bool)
+    pf = prior if isinstance(prior, PriorFrame) else prior_frame(prior)
+    if grid is None:
+        x0, x1, y0, y1 = pf.bounds
+        cx, cy = pf.aperture_centre
+        nxl, nxr = int(np.floor((cx - x0) / spacing_mm + 1e-9)), int(np.floor((x1 - cx) / spacing_mm + 1e-9))
+        nyl, nyr = int(np.floor((cy - y0) / spacing_mm + 1e-9)), int(np.floor((y1 - cy) / spacing_mm + 1e-9))
+        xs = cx + spacing_mm * np.arange(-nxl, nxr + 1)
+        ys = cy + spacing_mm * np.arange(-nyl, nyr + 1)
+    else:
+        xs, ys = (np.asarray(g, np.float64) for g in grid)
+    dx, dy = float(xs[1] - xs[0]), float(ys[1] - ys[0])
+    x, y = np.meshgrid(xs, ys)
+    nominal = np.asarray(pf.sag(x, y), np.float64)
+    mask = np.asarray(pf.in_aperture(x, y), bool) & np.isfinite(nominal)
+    cu, cv = _spline_maps(u, v, ok_pix)
+    cam_pos = np.asarray(camera.position, np.float64)
+
+    if anchor == "centre":
+        ax, ay = pf.aperture_centre
+        anchor_idx = (int(np.argmin(np.abs(ys - ay))), int(np.argmin(np.abs(xs - ax))))
+    elif anchor == "mean":
+        anchor_idx = None
+    else:
+        anchor_idx = (int(np.argmin(np.abs(ys - anchor[1]))), int(np.argmin(np.abs(xs - anchor[0]))))
+
+    z = np.where(mask, nominal, 0.0)
+    history = []
+    converged = False
+    node_ok = mask
+    sx = sy = None
+    it = 0
+    for it in range(1, max_iter + 1):
+        s = pf.to_world(x, y, z)
+        pix = camera.project(s)
+        col, row = pix[..., 0], pix[..., 1]
+        fin = np.isfinite(col) & np.isfinite(row)
+        col = np.where(fin, col, -10.0)
+        row = np.where(fin, row, -10.0)
+        node_ok = node_ok & fin & _support_ok(ok_pix, col, row)
+        coords = np.stack([row[node_ok], col[node_ok]])
+        mu = ndimage.map_coordinates(cu, coords, order=3, mode="mirror", prefilter=False)
+        mv = ndimage.map_coordinates(cv, coords, order=3, mode="mirror", prefilter=False)
+        m3 = monitor.pixel_to_world(mu, mv)
+        n = bisector_normals(s[node_ok], cam_pos, m3)
+        a, b = slopes_in_frame(n, pf.rotation)
+        sx = np.full(x.shape, np.nan)
+        sy = np.full(x.shape, np.nan)
+        sx[node_ok] = a
+        sy[node_ok] = b
+        zi = southwell(sx, sy, (dx, dy), node_ok, order=order, solver=solver, remove="none")
+        zi = _anchor(zi, nominal, node_ok, anchor_idx)
+        znew = np.where(node_ok, zi, nominal)
+        change = float(np.max(np.abs(znew - z)[node_ok])) if node_ok.any() else 0.0
+        history.append(change)
+        z = np.where(mask, znew, 0.0)
+        if change < tol_mm:
+            converged = True
+            break
+    height = np.where(node_ok, z, np.nan)
+    return Reconstruction(xs, ys, node_ok, height, sx, sy, np.where(mask, nominal, np.nan), it,
+                          tuple(history), converged)
+
+
+def slope_deviation_3d(points, camera_position, monitor, u_ref, v_ref, u, v):
+    """Signed surface tilt (rad) that moves the decoded monitor point from the reference
+    (u_ref, v_ref) to (u, v), from the full 3-D geometry at the surface ``points`` (..., 3).
+
+    The angle between the bisector normals of S -> camera with S -> M_ref and with S -> M,
+    signed by the larger monitor-coordinate change. Replaces the scalar coord / (2 d), which
+    holds in the plane of incidence but is cos(theta_i) too small across it (a tilt delta
+    across the plane turns the reflected ray by 2 delta cos(theta_i)). For one fringe
+    direction pass the other coordinate unchanged (``v = v_ref`` for X fringes).
+    """
+    m_ref = monitor.pixel_to_world(u_ref, v_ref)
+    m = monitor.pixel_to_world(u, v)
+    n0 = bisector_normals(points, camera_position, m_ref)
+    n1 = bisector_normals(points, camera_position, m)
+    ang = np.arctan2(np.linalg.norm(np.cross(n0, n1), axis=-1), np.sum(n0 * n1, axis=-1))
+    du = np.asarray(u, np.float64) - u_ref
+    dv = np.asarray(v, np.float64) - v_ref
+    sign = np.where(np.abs(du) >= np.abs(dv), np.sign(du), np.sign(dv))
+    return sign * ang
+
+
+@dataclass(frozen=True)
+class SurfaceErrors:
+    """Reconstructed minus true surface on the reconstruction grid.
+
+    ``height_nm`` after removing ``removed`` (see :func:`~pmdsim.measure.integrate.remove_terms`),
+    ``slope_x_urad`` / ``slope_y_urad`` the slope errors dz/dx, dz/dy in the surface's local
+    frame; ``stats``: RMS/PV/P95 of each (:func:`~pmdsim.measure.integrate.height_stats`)."""
+
+    height_nm: np.ndarray
+    slope_x_urad: np.ndarray
+    slope_y_urad: np.ndarray
+    removed: str
+    stats: dict
+
+
+def surface_errors(rec: Reconstruction, truth, remove="piston") -> SurfaceErrors:
+    """Errors of a :class:`Reconstruction` against the true surface (a scene surface or a
+    :class:`PriorFrame`; its sag and gradient are evaluated on the grid)."""
+    from .integrate import height_stats, remove_terms
+
+    x, y = np.meshgrid(rec.x_mm, rec.y_mm)
+    if hasattr(truth, "sag") and not isinstance(truth, PriorFrame):
+        z, gx, gy, _ = truth.sag(x, y)
+    else:  # flat rectangle / prior frame: numerical gradient of its sag is zero for a plane
+        pf = truth if isinstance(truth, PriorFrame) else prior_frame(truth)
+        z = np.asarray(pf.sag(x, y), np.float64)
+        gx = np.zeros_like(z)
+        gy = np.zeros_like(z)
+    m = rec.mask
+    dh = remove_terms(rec.height_mm - z, m, x, y, remove) * 1e6
+    ex = np.where(m, rec.slope_x - gx, np.nan) * 1e6
+    ey = np.where(m, rec.slope_y - gy, np.nan) * 1e6
+    stats = {"height_error_nm": height_stats(dh).as_dict(),
+             "slope_error_x_urad": height_stats(ex).as_dict(),
+             "slope_error_y_urad": height_stats(ey).as_dict()}
+    # slope statistics are about zero, not the mean: report the RMS about zero too
+    for k, a in (("slope_error_x_urad", ex), ("slope_error_y_urad", ey)):
+        stats[k]["rms_about_zero"] = float(np.sqrt(np.nanmean(a**2))) if np.isfinite(a).any() else float("nan")
+    return SurfaceErrors(dh, ex, ey, remove if isinstance(remove, str) else "+".join(remove), stats)

@@ -1,0 +1,513 @@
+"""Rendering camera images through the traced light transport, tile by tile on Dask.
+
+The camera is split into tiles of ``tile_rows`` rows. For each tile the vision rays are
+traced (:mod:`pmdsim.trace`) and the compiled bundle kernel
+(:func:`pmdsim.kernels.bundle.render_tile`) accumulates, per pixel, the weighted sums that
+any number of patterns need in one pass over the scattered rays:
+
+- fringes (:meth:`Simulation.render_fringes`): for each direction and width the complex
+  sum ``sum_p f_p exp(i k u_p)``; every phase shift follows exactly from
+  ``Re(exp(i delta) sum_p f_p exp(i k u_p))``, so K shifts cost one pass;
+- arbitrary monitor images (:meth:`Simulation.render_images`), dots
+  (:meth:`Simulation.render_dots`), and the rays themselves (:meth:`Simulation.transport`).
+
+Memory is bounded by the tile size, not by N. Tiles are Dask tasks: the local threaded
+scheduler by default (the kernels release the GIL), or a ``dask.distributed`` cluster when a
+client is active and ``scheduler="distributed"``.
+
+Estimators (``Scene.estimator``):
+
+- ``paper``: I_C = (1/N) sum_p f_p L_p (N = rays per pixel, P included);
+- ``weighted_mean``: I_C = sum_p f_p L_p / sum_p f_p;
+- ``radiometric``: I_C = (1/N) sum_p w_p L_p, w_p = f_p cos(theta_p) / pdf_p, over N
+  directions importance-sampled from the BRDF lobe (no cone, no P;
+  :func:`pmdsim.kernels.bundle.render_tile_lobe`): the rendering integral of f L cos over
+  the hemisphere. Its ``f_total`` is the directional albedo estimate.
+
+Rays that miss the monitor see black (L = 0) but keep their weight in sum f.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..kernels import bundle as kb
+from ..patterns import DIRECTIONS, Dot, phase_shifts
+from ..scene import Scene
+from ..kernels import primary as kprim
+from ..kernels.synth import shifted_images
+from ..trace import bundle_geometry, cone_basis, trace_pixels
+
+ProgressFn = Callable[[int, int], None]
+
+
+def scene_geometry_rows(scene: Scene, row0: int, row1: int):
+    """Compiled vision-ray trace of camera rows ``row0:row1``, one pinhole ray per pixel
+    centre (cameras with sub-pixels, a lens or distortion: :func:`vision_geometry_rows`).
+
+    Returns the bundle geometry rows ((row1-row0)*W, G_SIZE) and the exact monitor
+    coordinates of P ((row1-row0)*W, 2), NaN where P misses the monitor.
+    """
+    if not scene.camera.is_simple_pinhole:
+        rows, cols = np.mgrid[row0:row1, 0 : scene.camera.width]
+        o = np.broadcast_to(scene.camera.position, (rows.size, 3))
+        d = scene.camera.ray_directions(rows.ravel(), cols.ravel())
+        return _rays_geometry(scene, o, d)
+    n = (row1 - row0) * scene.camera.width
+    geo = np.empty((n, kb.G_SIZE))
+    spec = np.empty((n, 2))
+    kprim.geometry_tile(
+        scene.camera.kernel_params(), scene.surface.kernel_params(),
+        scene.anisotropy.kernel_params(), scene.monitor.kernel_params(),
+        row0, row1, scene.camera.width, geo, spec,
+    )
+    return geo, spec
+
+def _rays_geometry(scene: Scene, origins, dirs):
+    n = origins.shape[0]
+    geo = np.empty((n, kb.G_SIZE))
+    spec = np.empty((n, 2))
+    kprim.geometry_rays(
+        np.ascontiguousarray(origins, np.float64), np.ascontiguousarray(dirs, np.float64),
+        scene.surface.kernel_params(), scene.anisotropy.kernel_params(),
+        scene.monitor.kernel_params(), geo, spec,
+    )
+    return geo, spec
+
+
+def vision_geometry_rows(scene: Scene, row: int):
+    """Geometry rows (W * S, G_SIZE) and exact monitor hits (W * S, 2) of the S vision rays
+    (sub-pixels x aperture samples, :meth:`pmdsim.scene.Camera.vision_rays`) of every pixel
+    of camera row ``row``, pixel-major."""
+    w = scene.camera.width
+    o, d = scene.camera.vision_rays(np.full(w, row), np.arange(w))
+    return _rays_geometry(scene, o.reshape(-1, 3), d.reshape(-1, 3))
+
+
+def reduce_subrays(out: np.ndarray, estimator: str) -> np.ndarray:
+    """Pixel sums (P, C) from the kernel sums of their S vision rays (P, S, C).
+
+    A pixel integrates radiance over its footprint and the aperture: its value is the mean
+    over its S rays of each ray's estimate. The ``paper`` and ``radiometric`` estimators
+    share the factor 1/N, so the raw sums are averaged; ``weighted_mean`` normalises every
+    ray by its own sum of weights first (the pixel's ``OUT_FTOTAL`` becomes 1). Rays that
+    miss the surface (NaN) see a black background; a pixel none of whose rays hits is NaN.
+    """
+    s = out.shape[1]
+    hit = np.isfinite(out[..., kb.OUT_FTOTAL])
+    if estimator == "weighted_mean":
+        ft = out[..., kb.OUT_FTOTAL]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scaled = out / ft[..., None]
+        hit &= ft > 0
+        out = scaled
+    summed = np.where(hit[..., None], out, 0.0).sum(axis=1) / s
+    if estimator == "weighted_mean":
+        summed[:, kb.OUT_FTOTAL] = 1.0
+    summed[~hit.any(axis=1)] = np.nan
+    return summed
+
+
+#: Harmonics used for analytic fringes on a continuous monitor with gamma != 1.
+GAMMA_HARMONICS = 16
+
+
+@dataclass(frozen=True)
+class FringeResult:
+    """Camera fringe images and the sums they come from.
+
+    Attributes
+    ----------
+    images : (n_directions, n_widths, K, H, W) float32
+        Camera values (estimator units); NaN where the vision ray misses the surface.
+    sums : (n_directions, n_widths, H, W) complex128 or None
+        Normalised ``sum_p f_p exp(i k c_p)`` (c = u or v, the fringe coordinate): its
+        argument is the phase a K >= 3 phase-shift decoder returns (gamma = 1 only).
+    f_total, f_hit : (H, W) float64
+        Normalised sum of all weights / of the weights of rays that hit the monitor.
+    """
+
+    directions: tuple[str, ...]
+    widths: tuple[float, ...]
+    shifts: np.ndarray
+    images: np.ndarray
+    sums: np.ndarray | None
+    f_total: np.ndarray
+    f_hit: np.ndarray
+
+    def image(self, direction: str, width: float, k: int) -> np.ndarray:
+        return self.images[self.directions.index(direction), self.widths.index(width), k]
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Per-pixel results of the vision rays alone.
+
+    ``surface_mask``: the vision ray hits the front of the surface. ``monitor_mask``: P hits
+    the monitor as well. ``specular_u``/``specular_v``: exact monitor coordinates (monitor
+    px) of P (NaN where it misses), ``specular_u_px``/``..._v_px`` the nearest monitor pixel.
+    """
+
+    surface_mask: np.ndarray
+    monitor_mask: np.ndarray
+    specular_u: np.ndarray
+    specular_v: np.ndarray
+
+    @property
+    def specular_u_px(self) -> np.ndarray:
+        return np.floor(self.specular_u + 0.5)
+
+    @property
+    def specular_v_px(self) -> np.ndarray:
+        return np.floor(self.specular_v + 0.5)
+
+
+class Simulation:
+    """Render patterns of one :class:`~pmdsim.scene.Scene` through its light transport.
+
+    Parameters
+    ----------
+    scene : Scene
+    tile_rows : int
+        Camera rows per tile (memory ~ tile_rows x width x n_outputs x 8 bytes per task).
+    scheduler : {"threads", "synchronous", "processes", "distributed"}
+        Dask scheduler for the tiles; ``distributed`` uses the active ``dask.distributed``
+        client.
+    num_workers : int, optional
+        Threads/processes for local schedulers (default: all cores).
+    """
+
+    def __init__(self, scene: Scene, tile_rows: int = 32, scheduler: str = "threads",
+                 num_workers: int | None = None):
+        if tile_rows < 1:
+            raise ValueError(f"tile_rows must be >= 1, got {tile_rows}")
+        if scheduler not in ("threads", "synchronous", "processes", "distributed"):
+            raise ValueError(f"scheduler: unknown Dask scheduler {scheduler!r}")
+        self.scene = scene
+        self.tile_rows = tile_rows
+        self.scheduler = scheduler
+        self.num_workers = num_workers
+
+    @classmethod
+    def from_config(cls, cfg) -> "Simulation":
+        return cls(Scene.from_config(cfg), cfg.compute.tile_rows, cfg.compute.scheduler,
+                   cfg.compute.num_workers)
+
+    # ------------------------------------------------------------------ plumbing
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.scene.camera.height, self.scene.camera.width)
+
+    def _tiles(self):
+        h = self.scene.camera.height
+        return [(r, min(r + self.tile_rows, h)) for r in range(0, h, self.tile_rows)]
+
+    def _compute(self, fn, tiles, progress: ProgressFn | None):
+        import dask
+        from dask.callbacks import Callback
+
+        tasks = [dask.delayed(fn, pure=False)(r0, r1, dask_key_name=f"pmdsim-tile-{r0}") for r0, r1 in tiles]
+        kwargs = {}
+        if self.scheduler != "distributed":
+            kwargs["scheduler"] = self.scheduler
+            if self.num_workers is not None and self.scheduler != "synchronous":
+                kwargs["num_workers"] = self.num_workers
+        if progress is None or self.scheduler == "distributed":
+            return dask.compute(*tasks, **kwargs)
+        total = len(tasks)
+        done = [0]
+
+        class _Progress(Callback):
+            def _posttask(self, key, result, dsk, state, worker_id):
+                done[0] += 1
+                progress(min(done[0], total), total)
+
+        with _Progress():
+            return dask.compute(*tasks, **kwargs)
+
+    @property
+    def _lobe(self) -> bool:
+        """True when the radiometric estimator samples the BRDF lobe (not for the mirror)."""
+        return self.scene.estimator == "radiometric" and not self.scene.brdf.is_delta
+
+    def _render(self, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
+                images=None, dots=None, progress=None):
+        scene = self.scene
+        delta = scene.brdf.is_delta
+        samp = scene.sampling
+        lobe = self._lobe
+        if delta:
+            u1 = u2 = np.zeros(0)
+        elif lobe:
+            u1, u2 = samp.lobe_unit_points()
+        else:
+            u1, u2 = samp.unit_points()
+        brdf = scene.brdf.kernel_params()
+        mshape = np.array(scene.monitor.shape, dtype=np.int64)
+        e1 = np.zeros((0, 1))
+        table_u = e1 if table_u is None else np.ascontiguousarray(table_u, np.float64)
+        table_v = e1 if table_v is None else np.ascontiguousarray(table_v, np.float64)
+        k_u = np.zeros(0) if k_u is None else np.asarray(k_u, np.float64)
+        k_v = np.zeros(0) if k_v is None else np.asarray(k_v, np.float64)
+        images = np.zeros((0, 1, 1), np.float32) if images is None else images
+        dots = np.zeros((0, 4)) if dots is None else np.asarray(dots, np.float64)
+        width = scene.camera.width
+        none = np.zeros((0, 0))
+        mc = scene.monitor.correction_params()
+        extra = () if mc is None else (mc,)
+        cam = scene.camera
+        simple = cam.is_simple_pinhole
+        n_sub = cam.rays_per_pixel
+
+        def kernel(geo, rot):
+            out = np.empty((geo.shape[0], ncols))
+            if lobe:
+                kb.render_tile_lobe(
+                    geo, brdf, u1, u2, rot, mshape, mode,
+                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
+                )
+            else:
+                kb.render_tile(
+                    geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, True, mshape, mode,
+                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
+                )
+            return out
+
+        def tile(r0, r1):
+            if simple:
+                geo, _ = scene_geometry_rows(scene, r0, r1)
+                rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
+                return kernel(geo, rot).reshape(r1 - r0, width, ncols)
+            # camera optics: S vision rays per pixel, each with its own scattered bundle,
+            # one camera row per kernel call; the pixel's sums are the mean over its rays
+            res = np.empty((r1 - r0, width, ncols))
+            for r in range(r0, r1):
+                geo, _ = vision_geometry_rows(scene, r)
+                if delta or samp.mode == "stratified":
+                    rot = np.zeros((0, 2))
+                else:
+                    rot = np.random.default_rng([samp.seed, r]).random((geo.shape[0], 2))
+                out = kernel(geo, rot).reshape(width, n_sub, ncols)
+                res[r - r0] = reduce_subrays(out, scene.estimator)
+            return res
+
+        parts = self._compute(tile, self._tiles(), progress)
+        return np.concatenate(parts, axis=0)
+
+    def _normalise(self, out):
+        """(H, W) factor turning weighted sums into estimator values."""
+        ftot = out[..., kb.OUT_FTOTAL]
+        if self.scene.estimator in ("paper", "radiometric"):
+            return np.full(ftot.shape, 1.0 / self.scene.rays_per_pixel)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(ftot > 0, 1.0 / ftot, np.nan)
+
+    # ------------------------------------------------------------------ public API
+    def footprint_specular(self) -> tuple[np.ndarray, np.ndarray]:
+        """(u, v) (H, W): the exact monitor coordinates of the principal reflections averaged
+        over each pixel's vision rays (sub-pixels x aperture; NaN where any misses)."""
+        h, w = self.shape
+        u = np.empty((h, w))
+        v = np.empty((h, w))
+        n = self.scene.camera.rays_per_pixel
+        for r in range(h):
+            _, spec = vision_geometry_rows(self.scene, r)
+            spec = spec.reshape(w, n, 2)
+            u[r] = spec[..., 0].mean(axis=1)
+            v[r] = spec[..., 1].mean(axis=1)
+        return u, v
+
+    def geometry(self) -> Geometry:
+        """Vision-ray results for the whole camera: the chief ray through each pixel centre
+        (no bundle)."""
+        h, w = self.shape
+        geo, spec = scene_geometry_rows(self.scene, 0, h)
+        valid = geo[:, kb.G_VALID].reshape(h, w) > 0
+        u = spec[:, 0].reshape(h, w)
+        v = spec[:, 1].reshape(h, w)
+        return Geometry(valid, valid & np.isfinite(u), u, v)
+
+    def render_fringes(
+        self,
+        widths: Sequence[float] = (50.0,),
+        directions: Sequence[str] = DIRECTIONS,
+        shifts: int = 4,
+        progress: ProgressFn | None = None,
+    ) -> FringeResult:
+        """Camera images of X/Y fringes of the given widths (periods, monitor px), K shifts.
+
+        One pass over the scattered rays gives all widths, directions and shifts.
+        """
+        widths = tuple(float(w) for w in widths)
+        directions = tuple(directions)
+        if not widths or any(not np.isfinite(w) or w <= 0 for w in widths):
+            raise ValueError(f"widths: fringe widths must be positive monitor px, got {widths}")
+        for d in directions:
+            if d not in DIRECTIONS:
+                raise ValueError(f"directions: must be 'x' or 'y', got {d!r}")
+        deltas = phase_shifts(shifts)
+        mon = self.scene.monitor
+        black, white, gamma = mon.black_level, mon.white_level, mon.gamma
+        nw, nd = len(widths), len(directions)
+        coords = {"x": np.arange(mon.width, dtype=np.float64), "y": np.arange(mon.height, dtype=np.float64)}
+        linear = mon.is_linear
+        continuous = mon.pixel_model == "continuous"
+        # Build the per-direction work lists: each entry is a profile table (nearest) or a
+        # frequency (continuous).
+        per_dir: dict[str, list] = {"x": [], "y": []}
+        if not continuous:
+            for d in directions:
+                c = coords[d]
+                for w in widths:
+                    if linear:
+                        ph = 2 * np.pi * c / w
+                        per_dir[d] += [np.cos(ph), np.sin(ph)]
+                    else:
+                        for delta in deltas:
+                            per_dir[d].append(mon.luminance(0.5 + 0.5 * np.cos(2 * np.pi * c / w + delta)))
+            tu = np.array(per_dir["x"]).reshape(-1, mon.width)
+            tv = np.array(per_dir["y"]).reshape(-1, mon.height)
+            ncols = kb.OUT_FIRST + tu.shape[0] + tv.shape[0]
+            out = self._render(kb.MODE_TABLES, ncols, table_u=tu, table_v=tv, progress=progress)
+        else:
+            harm = 1 if linear else GAMMA_HARMONICS
+            for d in directions:
+                for w in widths:
+                    per_dir[d] += [2 * np.pi * m / w for m in range(1, harm + 1)]
+            ku, kv = np.array(per_dir["x"]), np.array(per_dir["y"])
+            ncols = kb.OUT_FIRST + 2 * (ku.size + kv.size)
+            out = self._render(kb.MODE_HARMONIC, ncols, k_u=ku, k_v=kv, progress=progress)
+
+        norm = self._normalise(out)
+        f_total = out[..., kb.OUT_FTOTAL] * norm
+        f_hit = out[..., kb.OUT_FHIT] * norm
+        h, w_ = self.shape
+        images = np.empty((nd, nw, len(deltas), h, w_), np.float32)
+        sums = np.empty((nd, nw, h, w_), np.complex128) if linear else None
+        # Column offsets of each direction's block.
+        n_u = sum(1 for d in directions if d == "x")
+        per_width = (2 if linear else len(deltas)) if not continuous else 2 * (1 if linear else GAMMA_HARMONICS)
+        base = {"x": kb.OUT_FIRST, "y": kb.OUT_FIRST + n_u * nw * per_width}
+        if not linear and continuous:
+            theta = 2 * np.pi * np.arange(4096) / 4096
+            g = mon.luminance(0.5 + 0.5 * np.cos(theta))
+            coef = np.fft.rfft(g).real / theta.size
+            coef[1:] *= 2  # g(theta) = sum_m coef_m cos(m theta)
+        for di, d in enumerate(directions):
+            for wi in range(nw):
+                col = base[d] + wi * per_width
+                if linear:
+                    shifted_images(
+                        out.reshape(h * w_, -1), col, norm.reshape(-1), f_hit.reshape(-1),
+                        np.cos(deltas), np.sin(deltas), black, white,
+                        sums[di, wi].reshape(-1), images[di, wi].reshape(len(deltas), -1),
+                    )
+                elif not continuous:
+                    for k in range(len(deltas)):
+                        images[di, wi, k] = out[..., col + k] * norm
+                else:
+                    zs = [(out[..., col + 2 * m] + 1j * out[..., col + 2 * m + 1]) * norm
+                          for m in range(GAMMA_HARMONICS)]
+                    for k, delta in enumerate(deltas):
+                        acc = coef[0] * f_hit
+                        for m, z in enumerate(zs, start=1):
+                            acc = acc + coef[m] * (z * np.exp(1j * m * delta)).real
+                        images[di, wi, k] = acc
+        return FringeResult(directions, widths, deltas, images, sums, f_total, f_hit)
+
+    def render_images(self, levels: np.ndarray, progress: ProgressFn | None = None) -> np.ndarray:
+        """Camera images (Q, H, W) float32 of monitor images ``levels`` (Q, Hm, Wm) in [0, 1].
+
+        The monitor shows each level as luminance (gamma, black/white); each monitor pixel is
+        a flat square emitter (the ray takes the value of the pixel it lands in).
+        """
+        levels = np.asarray(levels)
+        if levels.ndim == 2:
+            levels = levels[None]
+        mon = self.scene.monitor
+        if levels.shape[1:] != mon.shape:
+            raise ValueError(
+                f"levels: monitor images must be (Q, {mon.height}, {mon.width}), got {levels.shape}"
+            )
+        lum = np.ascontiguousarray(mon.luminance(levels), dtype=np.float32)
+        out = self._render(kb.MODE_IMAGES, kb.OUT_FIRST + lum.shape[0], images=lum, progress=progress)
+        norm = self._normalise(out)
+        return np.moveaxis(out[..., kb.OUT_FIRST:] * norm[..., None], -1, 0).astype(np.float32)
+
+    def render_dots(self, dots: Sequence[Dot], progress: ProgressFn | None = None) -> np.ndarray:
+        """Camera images (Q, H, W) float32 of white square dots on a black monitor."""
+        if len(dots) == 0:
+            raise ValueError("dots: give at least one dot")
+        rows = np.array([d.as_row() for d in dots])
+        mon = self.scene.monitor
+        out = self._render(kb.MODE_DOTS, kb.OUT_FIRST + len(dots), dots=rows, progress=progress)
+        norm = self._normalise(out)
+        hit = out[..., kb.OUT_FIRST:]
+        lum = mon.black_level * out[..., kb.OUT_FHIT][..., None] + (mon.white_level - mon.black_level) * hit
+        return np.moveaxis(lum * norm[..., None], -1, 0).astype(np.float32)
+
+    def transport(self, rows: Sequence[int], cols: Sequence[int]):
+        """The scattered rays of selected pixels.
+
+        Returns
+        -------
+        u, v : (P, R) float64
+            Monitor coordinates (monitor px) of every ray; NaN where it misses the monitor.
+        weight : (P, R) float64
+            Weight of every ray that hits the monitor (0 for misses): the BRDF value f for
+            the cone estimators, ``f cos(theta_o) / pdf`` for ``radiometric``.
+        directions : (P, R, 3) float64
+            World unit directions of the rays.
+        origin : (P, 3) float64
+            Hit point on the surface (mm).
+        """
+        scene = self.scene
+        rows = np.atleast_1d(np.asarray(rows, int))
+        cols = np.atleast_1d(np.asarray(cols, int))
+        hits = trace_pixels(scene, rows, cols)
+        geo = bundle_geometry(scene, hits)
+        samp = scene.sampling
+        lobe = self._lobe
+        if scene.brdf.is_delta:
+            u1 = u2 = np.zeros(0)
+            local = np.array([[0.0, 0.0, 1.0]])
+            rot = np.zeros((0, 2))
+        else:
+            u1, u2 = samp.lobe_unit_points() if lobe else samp.unit_points()
+            rot = (np.concatenate([samp.rotations(int(r), int(r) + 1, scene.camera.width)[[c]]
+                                   for r, c in zip(rows, cols)])
+                   if samp.mode == "random" else np.zeros((0, 2)))
+        n = u1.size if lobe else u1.size + 1
+        ou, ov, of = (np.empty((len(rows), n)) for _ in range(3))
+        out = np.empty((len(rows), kb.OUT_FIRST))
+        args = (np.array(scene.monitor.shape, np.int64), kb.MODE_TRANSPORT,
+                np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0), np.zeros(0),
+                np.zeros((0, 1, 1), np.float32), np.zeros((0, 4)), out, ou, ov, of)
+        if lobe:
+            kb.render_tile_lobe(geo, scene.brdf.kernel_params(), u1, u2, rot, *args)
+        else:
+            kb.render_tile(geo, scene.brdf.kernel_params(), u1, u2, rot, samp.scheme_id,
+                           samp.theta_max, True, *args)
+        dirs = np.empty((len(rows), n, 3))
+        origin = np.empty((len(rows), 3))
+        cone = cone_basis(hits)
+        for p in range(len(rows)):
+            origin[p] = hits.point[0, p]
+            if lobe:
+                frame = (hits.x_axis[0, p], hits.y_axis[0, p], hits.normal[0, p])
+                i_loc = np.array([hits.to_camera[0, p] @ b for b in frame])
+                off = rot[p] if rot.shape[0] else (0.0, 0.0)
+                loc = scene.brdf.sample(np.mod(u1 + off[0], 1.0), np.mod(u2 + off[1], 1.0), i_loc)
+                e1, e2, e3 = frame
+            else:
+                e1, e2, e3 = (b[0, p] for b in cone)
+                if scene.brdf.is_delta:
+                    loc = local
+                else:
+                    off = tuple(rot[p]) if rot.shape[0] else (0.0, 0.0)
+                    loc = samp.local_directions(off)
+            dirs[p] = loc[:, :1] * e1 + loc[:, 1:2] * e2 + loc[:, 2:3] * e3
+        return ou, ov, of, dirs, origin

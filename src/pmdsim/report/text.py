@@ -1,0 +1,148 @@
+"""Text summaries of a run: the measurement chain's table and the diagnostics account
+(``summary.txt``), warning lines as the command line prints them."""
+
+from __future__ import annotations
+
+
+def _num(v, digits=4) -> str:
+    if v is None:
+        return "nan"
+    if isinstance(v, int):
+        return str(v)
+    return f"{v:.{digits}g}"
+
+
+def summary_text(stats: dict, timings: dict | None = None) -> str:
+    """A short human-readable summary of :func:`statistics` (for ``summary.txt``)."""
+    lines = [f"pmdsim measurement chain: {stats['name']}",
+             f"decoding: {stats['method']} unwrapping, widths {stats['widths_px']} monitor px, "
+             f"K = {stats['shifts']} shifts; deviation of the finest width "
+             f"({stats['finest_width_px']:g} px) from the ideal specular reference",
+             f"pixels masked when the modulation ratio < {stats['min_modulation_ratio']:g} "
+             "(counted below, never hidden)", ""]
+    head = f"{'dir':<4}{'deviation':<20}{'mean':>11}{'RMS':>11}{'P95':>11}{'max':>11}"
+    lines.append(head)
+    lines.append("-" * len(head))
+    for d, s in stats["directions"].items():
+        for q, unit in stats["units"].items():
+            r = s[q]
+            label = q.rsplit("_", 1)[0] + f" ({unit})"
+            lines.append(f"{d.upper():<4}{label:<20}" + "".join(
+                f"{_num(r[k]):>11}" for k in ("mean", "rms", "p95", "max")))
+        p = s["pixels"]
+        frac = s["phase_mrad"]["valid_fraction"]
+        lines.append(f"    valid {p['valid']} of {p['considered']} considered pixels "
+                     f"({100 * frac:.2f} %); masked: low modulation {p['low_modulation']}, "
+                     f"decode flags {p['decode_flagged']}")
+        mr = ", ".join(_num(x, 3) for x in s["modulation"]["ratio_median_by_width"])
+        lines.append(f"    median modulation ratio by width {stats['widths_px']}: {mr}")
+        rq = s["reference_vs_exact_px"]
+        lines.append(f"    reference vs exact specular point: RMS {_num(rq['rms'])} px "
+                     f"(monitor pixel quantisation of the reference)")
+        lines.append("")
+    if timings:
+        lines.append("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _fmt(x, spec: str = ".3g") -> str:
+    return "nan" if x is None else format(x, spec)
+
+
+
+def warning_text(message: str, setting: str, suggested=None) -> str:
+    """A diagnostics warning as printed: its message, followed by the setting that fixes
+    it (``[setting: sampling.theta_max_deg = 4]``) unless the message names it already."""
+    if not setting or setting in message:
+        return message
+    if suggested is None:
+        return f"{message} [setting: {setting}]"
+    value = format(suggested, "g") if isinstance(suggested, float) else str(suggested)
+    return f"{message} [setting: {setting} = {value}]"
+
+
+
+def diagnostics_text(name: str, d: dict) -> str:
+    """A short human-readable account of the ``"diagnostics"`` of statistics.json."""
+    g = d.get("grid", {})
+    lines = [f"pmdsim run diagnostics: {name}",
+             f"{d['estimator']} estimator, N = {d['n_rays']}"
+             + (f", theta_max {d['theta_max_deg']:g} deg" if "energy" in d else "")
+             + f"; {g.get('columns', '?')} x {g.get('rows', '?')} camera-pixel grid", ""]
+    e = d.get("energy")
+    if e and "fraction_median" in e:
+        pc = lambda x: _fmt(None if x is None else 100 * x, ".1f")  # noqa: E731
+        lines.append(f"lobe energy inside theta_max: median {pc(e['fraction_median'])} %, "
+                     f"min {pc(e['fraction_min'])} %; {100 * e['target']:g} % needs "
+                     f"theta_max {_fmt(e['theta_needed_deg_max'], '.2f')} deg (largest over the grid)")
+    if "ess_median" in d:
+        lines.append(f"effective sample size: median {_fmt(d['ess_median'], '.1f')}, "
+                     f"min {_fmt(d['ess_min'], '.1f')} of {d['n_rays']} rays")
+    if "phase_se_rad" in d:
+        lines.append(f"phase standard error ({d['phase_se_method']} method: N independent rays, "
+                     "an upper bound for the lattice), mrad, median / P95; fringe modulation:")
+        for key, v in d["phase_se_rad"].items():
+            direction, width = key.split("/")
+            med = None if v["median"] is None else 1e3 * v["median"]
+            p95 = None if v["p95"] is None else 1e3 * v["p95"]
+            mod = d.get("modulation_median", {}).get(key)
+            lines.append(f"  {direction.upper()} {width:>6} px  {_fmt(med):>8} / {_fmt(p95):<8}"
+                         f"  modulation {_fmt(mod)}")
+    warnings = d.get("warnings", [])
+    b = d.get("bounds", {})
+    lines.append("")
+    if warnings:
+        lines += [f"warning: {warning_text(w['message'], w['setting'], w['suggested'])}"
+                  for w in warnings]
+    else:
+        lines.append("no warnings (bounds: energy fraction >= "
+                     f"{b.get('min_energy_fraction')}, phase error <= "
+                     f"{b.get('max_phase_error_mrad')} mrad, ESS >= "
+                     f"{b.get('min_ess_fraction')} N)")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+
+def summary_text_of(statistics: dict) -> str:
+    """summary.txt of one run: the chain's table (when decoded), then the diagnostics."""
+    parts = []
+    if "directions" in statistics:
+        parts.append(summary_text(statistics))
+    if "diagnostics" in statistics:
+        parts.append(diagnostics_text(statistics.get("name", ""), statistics["diagnostics"]))
+    if "reconstruction" in statistics:
+        parts.append(reconstruction_text(statistics.get("name", ""), statistics["reconstruction"]))
+    return "\n".join(parts)
+
+
+def reconstruction_text(name: str, rec: dict) -> str:
+    """The surface-error lines of summary.txt (reconstructed minus true surface)."""
+    if "error" in rec:
+        return f"reconstruction ({name}): not possible: {rec['error']}\n"
+    h, sx, sy = rec["height_error_nm"], rec["slope_error_x_urad"], rec["slope_error_y_urad"]
+    lines = [
+        f"reconstruction ({name}): {rec['grid_points']} points on a {rec['spacing_mm']:g} mm grid "
+        f"({100 * rec['aperture_fraction']:.1f} % of the aperture), {rec['removed']} removed, "
+        f"{rec['iterations']} iterations" + ("" if rec["converged"] else " (NOT converged)"),
+        f"  height error  RMS {h['rms']:.3g} nm  PV {h['pv']:.3g} nm  P95 {h['p95']:.3g} nm",
+        f"  slope error x RMS {sx['rms_about_zero']:.3g} urad  PV {sx['pv']:.3g} urad;  "
+        f"y RMS {sy['rms_about_zero']:.3g} urad  PV {sy['pv']:.3g} urad",
+    ]
+    if "reference_height_error_nm" in rec:
+        r = rec["reference_height_error_nm"]
+        lines.append(f"  specular reference (the chain's floor): height RMS {r['rms']:.3g} nm  PV {r['pv']:.3g} nm")
+    return "\n".join(lines) + "\n"
+
+
+
+def description(cfg) -> str:
+    b = cfg.brdf
+    text = f"BRDF {b.model}"
+    if hasattr(b, "alphas"):
+        ax, ay = b.alphas
+        names = (("tangential", "radial") if cfg.anisotropy.frame == "rotational"
+                 else ("x", "y"))
+        text += f" alpha_{names[0]} {ax:g}, alpha_{names[1]} {ay:g}"
+    s = cfg.sampling
+    return (text + f"; {s.estimator} estimator, N = {s.n_rays}, theta_max {s.theta_max_deg:g} "
+            f"deg, {s.mode}; monitor pixel model {cfg.monitor.pixel_model}")

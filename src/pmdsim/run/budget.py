@@ -1,0 +1,51 @@
+"""``pmdsim budget``: write the error budget of a configuration (table and figure).
+
+OUT/budget.csv, budget.json (rows and settings) and budget.png; the folder is created
+atomically (:func:`pmdsim.run.files.atomic_run_dir`, marker ``pmdsim-budget.json``).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from ..config import RunConfig
+from ..studies.budget import TABLE_COLUMNS, budget
+from . import files as pio
+
+MARKER = "pmdsim-budget.json"
+
+
+@dataclass(frozen=True)
+class BudgetResult:
+    rows: list
+    outdir: Path
+    table: Path
+    figure: Path | None
+
+
+def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrite: bool = False,
+               progress: Callable[[str], None] | None = None) -> BudgetResult:
+    """Compute :func:`pmdsim.studies.budget.budget` and write it into ``outdir``."""
+    final = Path(outdir).absolute()
+    pio.check_output_dir(final, overwrite, MARKER)
+    rows = budget(cfg, progress)
+    with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
+        with open(tmp / "budget.csv", "w", newline="") as fh:
+            wr = csv.DictWriter(fh, fieldnames=TABLE_COLUMNS, extrasaction="ignore")
+            wr.writeheader()
+            for r in rows:
+                wr.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+        (tmp / "budget.json").write_text(json.dumps(
+            {"name": cfg.name, "rows": rows, "config": cfg.model_dump(mode="json")}, indent=2) + "\n")
+        fig = None
+        if figure:
+            from ..report.budget import plot_budget
+
+            plot_budget(rows, tmp / "budget.png", title=f"{cfg.name}: error budget")
+            fig = final / "budget.png"
+        (tmp / MARKER).write_text(json.dumps({"name": cfg.name, "kind": "budget"}) + "\n")
+    return BudgetResult(rows, final, final / "budget.csv", fig)

@@ -1,0 +1,157 @@
+"""One member of a run (the run itself, or one variant): render, write images and
+dataset, measure, diagnose, draw."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from dataclasses import replace
+
+from ..config import RunConfig
+from ..scene.sensor import Sensor, capture_dn
+from ..measure import chain
+from ..render import Geometry, Simulation
+from . import files as pio
+from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, _encoding
+from ..report.text import description, summary_text_of
+from .dataset import assign_to_dataset, dot_dataset_variables
+from .diagnostics import diagnose_run
+from .result import RunResult, _Steps
+
+
+def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
+                steps: _Steps, figures: bool, inputs, reference=None,
+                standalone: bool = True, diagnostics: bool = True) -> tuple[RunResult, object]:
+    """Render one configuration (no variants) and write its images, dataset, config and
+    figures into ``folder`` (no manifest). Returns its result and its in-memory dataset.
+
+    With a ``reference`` the fringes are decoded and compared with it (statistics.json,
+    summary.txt, chain variables and figures). Dots get their moments (dots.csv); their
+    figures are drawn here only for a ``standalone`` run (a run with variants draws them
+    for all variants together). With ``diagnostics`` (and a lobe) the run diagnostics go
+    into the dataset, statistics.json and summary.txt, and their warnings into the result."""
+    dots, image_files, levels, n_tiles = inputs
+    folder.mkdir(parents=True, exist_ok=True)
+    timings: dict[str, float] = {}
+    fr_cfg = cfg.patterns.fringes
+    n_calls = (fr_cfg is not None) + bool(dots) + (levels is not None)
+
+    t = time.perf_counter()
+    fringes = dot_images = images = None
+    if fr_cfg is not None:
+        base = steps.done
+        fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
+                                     progress=steps.tiles())
+        steps.finish_render(base, n_tiles)
+    if dots:
+        base = steps.done
+        dot_images = sim.render_dots(dots, progress=steps.tiles())
+        steps.finish_render(base, n_tiles)
+    if levels is not None:
+        base = steps.done
+        images = sim.render_images(levels, progress=steps.tiles())
+        steps.finish_render(base, n_tiles)
+    timings["render"] = time.perf_counter() - t
+    sensor = Sensor.from_config(cfg.sensor)
+    if sensor.enabled:  # what the camera writes: digital numbers (docs/system.md)
+        if fringes is not None:
+            fringes = replace(fringes, images=capture_dn(sensor, fringes.images, 0))
+        if dot_images is not None:
+            dot_images = capture_dn(sensor, dot_images, 2)
+        if images is not None:
+            images = capture_dn(sensor, images, 3)
+
+    t = time.perf_counter()
+    out = cfg.output
+    stacks = [a for a in (None if fringes is None else fringes.images, dot_images, images)
+              if a is not None]
+    exposure = (pio.exposure_factor(stacks, out.bit_depth) if not sensor.enabled
+                else 2.0 ** min(0, out.bit_depth - sensor.bit_depth))
+    image_paths = pio.write_images(folder, cfg, fringes, dots, dot_images, image_files, images,
+                                exposure) if out.write_images else []
+    steps.advance()
+    ds = build_dataset(cfg, geometry, fringes, dots, dot_images, image_files, images,
+                       exposure, sim.scene.rays_per_pixel)
+    timings["write"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    stats: dict = {}
+    if reference is not None and fringes is not None:
+        measured = chain.compare(
+            chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
+                                 sensor.saturation_dn if sensor.enabled else None),
+            reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
+            cfg.decode, len(fringes.shifts),
+            slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
+                reference.points_mm, sim.scene.camera.position, sim.scene.monitor))
+        stats = chain.statistics(measured, cfg.name)
+        from . import reconstruction as recon
+
+        if recon.wanted(cfg, measured.directions):
+            rvars, rstats = recon.from_chain(cfg, sim.scene, measured, reference.reconstruction)
+            stats.update(rstats)
+            for name in ("surface_x_mm", "surface_y_mm"):
+                if name in rvars:
+                    dims, data, attrs = rvars.pop(name)
+                    ds = ds.assign_coords({dims[0]: (dims, data, attrs)})
+            for name, var in rvars.items():
+                ds[name] = var
+        ds = assign_to_dataset(ds, measured, stats)
+        del measured
+    dot_table = []
+    if dot_images is not None:
+        dot_table = chain.dot_table(dot_images, dots, cfg.name)
+        for name, var in dot_dataset_variables(dot_table).items():
+            ds[name] = var
+        pio.write_dot_csv(folder / "dots.csv", dot_table)
+    timings["decode"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    statistics = dict(stats)  # statistics.json: the chain's (when decoded) + diagnostics
+    diagnosed = diagnose_run(cfg, sim, geometry) if diagnostics else None
+    if diagnosed is not None:
+        ds = ds.assign_coords(diagnosed.coords)
+        for name, var in diagnosed.variables.items():
+            ds[name] = var
+        statistics.setdefault("name", cfg.name)
+        statistics["diagnostics"] = diagnosed.summary
+        ds.attrs["statistics_json"] = json.dumps(statistics)
+        steps.advance()
+    timings["diagnostics"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    ds.to_zarr(folder / DATASET_NAME, mode="w-", consolidated=False, encoding=_encoding(ds))
+    (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
+    if statistics:
+        (folder / "statistics.json").write_text(json.dumps(statistics, indent=2) + "\n")
+        (folder / "summary.txt").write_text(summary_text_of(statistics))
+    steps.advance()
+    timings["write"] += time.perf_counter() - t
+
+    figure_paths: list[Path] = []
+    t = time.perf_counter()
+    if figures:
+        from .figures import draw_figures, figure_names
+
+        figure_paths = draw_figures(folder, figure_names(ds, out.figure_set), cfg.name,
+                                    description(cfg), ds=ds, sim=sim,
+                                    workers=out.figure_workers)
+        if dot_table and standalone:
+            from ..report import chain as plot_chain
+
+            figure_paths += plot_chain.dot_figures(folder / "figures", {cfg.name: dot_images},
+                                                   {cfg.name: dot_table}, sim, {})
+        steps.advance()
+    timings["figures"] = time.perf_counter() - t
+
+    surface_pixels = int(geometry.surface_mask.sum())
+    result = RunResult(
+        outdir=folder, dataset_path=folder / DATASET_NAME, image_paths=tuple(image_paths),
+        figure_paths=tuple(figure_paths), exposure=exposure, shape=sim.shape,
+        surface_pixels=surface_pixels, rays_per_pixel=sim.scene.rays_per_pixel,
+        rays_traced=surface_pixels * sim.scene.rays_per_pixel * n_calls, timings=timings,
+        config=cfg, statistics=statistics,
+        warnings=() if diagnosed is None else diagnosed.warnings)
+    return result, ds

@@ -1,0 +1,97 @@
+"""Surface reconstruction of a run member: decoded monitor coordinates (x and y fringes)
+-> slopes -> height on the surface grid, against the configured (true) surface.
+
+Computation is :mod:`pmdsim.measure.reconstruct`; this module picks the inputs from the
+measurement chain, and shapes the dataset variables and the statistics."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..measure.reconstruct import reconstruct, surface_errors
+
+
+def wanted(cfg, directions) -> bool:
+    """Reconstruct? ``reconstruct.enabled`` or, when None, whenever x and y are decoded."""
+    have = {"x", "y"} <= set(directions)
+    if cfg.reconstruct.enabled is False:
+        return False
+    if cfg.reconstruct.enabled is True and not have:
+        raise ValueError("reconstruct.enabled = true needs fringes in both directions: "
+                         "set patterns.fringes.directions = ['x', 'y']")
+    return have
+
+
+def reconstruct_coords(cfg, scene, u, v, valid):
+    """:class:`~pmdsim.measure.reconstruct.Reconstruction` and its
+    :class:`~pmdsim.measure.reconstruct.SurfaceErrors` (None, message on failure)."""
+    rc = cfg.reconstruct
+    try:
+        rec = reconstruct(u, v, scene.camera, scene.monitor, scene.surface, valid=valid,
+                          spacing_mm=rc.spacing_mm, anchor=rc.anchor, order=rc.order)
+    except ValueError as err:
+        return None, None, str(err)
+    return rec, surface_errors(rec, scene.surface, rc.remove), None
+
+
+def from_chain(cfg, scene, measured, reference_rec=None):
+    """(dataset variables, statistics) of a member's reconstruction from its chain result.
+
+    ``reference_rec``: the (Reconstruction, SurfaceErrors) of the specular reference, whose
+    height error is the chain's own floor (stored as ``reference_height_error_nm``)."""
+    dx, dy = measured.directions["x"], measured.directions["y"]
+    u = np.where(dx.deviation.valid, dx.decoded.monitor_coord_px, np.nan)
+    v = np.where(dy.deviation.valid, dy.decoded.monitor_coord_px, np.nan)
+    rec, err, problem = reconstruct_coords(cfg, scene, u, v, np.isfinite(u) & np.isfinite(v))
+    if rec is None:
+        return {}, {"reconstruction": {"error": problem}}
+    return variables(rec, err, reference_rec), {"reconstruction": statistics(cfg, rec, err, reference_rec)}
+
+
+def reference_reconstruction(cfg, scene, decoded):
+    """(Reconstruction, SurfaceErrors) of the decoded specular reference, or None."""
+    if not wanted(cfg, decoded):
+        return None
+    u = np.where(decoded["x"].valid, decoded["x"].monitor_coord_px, np.nan)
+    v = np.where(decoded["y"].valid, decoded["y"].monitor_coord_px, np.nan)
+    rec, err, _ = reconstruct_coords(cfg, scene, u, v, np.isfinite(u) & np.isfinite(v))
+    return None if rec is None else (rec, err)
+
+
+def variables(rec, err, reference_rec=None) -> dict:
+    """xarray variables ``{name: (dims, data, attrs)}`` on (surface_y, surface_x)."""
+    dims = ("surface_y", "surface_x")
+    out = {
+        "surface_x_mm": (("surface_x",), rec.x_mm, {"units": "mm", "description": "local x of the surface grid (the surface's vertex frame)"}),
+        "surface_y_mm": (("surface_y",), rec.y_mm, {"units": "mm", "description": "local y of the surface grid"}),
+        "reconstructed_height_mm": (dims, rec.height_mm, {
+            "units": "mm", "description": "monocular reconstruction: sag along the local z axis"}),
+        "height_error_nm": (dims, err.height_nm, {
+            "units": "nm", "description": f"reconstructed minus true height, {err.removed} removed"}),
+        "slope_error_x_urad": (dims, err.slope_x_urad, {
+            "units": "urad", "description": "reconstructed minus true dz/dx (local frame)"}),
+        "slope_error_y_urad": (dims, err.slope_y_urad, {
+            "units": "urad", "description": "reconstructed minus true dz/dy (local frame)"}),
+    }
+    if reference_rec is not None and reference_rec[0].height_mm.shape == rec.height_mm.shape:
+        out["reference_height_error_nm"] = (dims, reference_rec[1].height_nm, {
+            "units": "nm", "description": "the specular reference's reconstruction minus the true "
+                                          f"height, {err.removed} removed (the chain's own floor)"})
+    return out
+
+
+def statistics(cfg, rec, err, reference_rec=None) -> dict:
+    out = {
+        "removed": err.removed,
+        "spacing_mm": cfg.reconstruct.spacing_mm,
+        "order": cfg.reconstruct.order,
+        "anchor": cfg.reconstruct.anchor,
+        "iterations": rec.iterations,
+        "converged": rec.converged,
+        "grid_points": int(rec.mask.sum()),
+        "aperture_fraction": float(rec.mask.sum() / max(np.isfinite(rec.nominal_mm).sum(), 1)),
+        **err.stats,
+    }
+    if reference_rec is not None:
+        out["reference_height_error_nm"] = reference_rec[1].stats["height_error_nm"]
+    return out

@@ -1,0 +1,84 @@
+"""The ideal specular reference of a run's measurement chain (rendered and decoded once,
+shared by the variants)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..config import RunConfig
+from ..measure import chain
+from ..render import Geometry, Simulation
+from ..scene.sensor import Sensor, capture_dn
+from .result import _Steps
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """The decoded ideal specular reference of a run (shared by its variants)."""
+
+    decoded: dict
+    distance_mm: np.ndarray
+    seconds: float
+    notes: tuple = ()
+    points_mm: np.ndarray | None = None  # surface point per pixel, for the 3-D slope conversion
+    reconstruction: object = None  # (Reconstruction, SurfaceErrors) of the reference, or None
+
+
+
+def chain_mode(cfg: RunConfig, decode: bool | None) -> tuple[bool, list[str]]:
+    """(run the measurement chain?, notes). Raises ValueError when decoding is required
+    (``decode.enabled = true`` or ``decode=True``) but impossible."""
+    enabled = cfg.decode.enabled if decode is None else decode
+    if enabled is False:
+        return False, []
+    problem = chain.decode_problem(cfg)
+    if problem is None:
+        return True, []
+    if enabled is True:
+        raise ValueError(f"decoding was requested (decode.enabled = true or --decode), but "
+                         f"{problem}")
+    if cfg.patterns.fringes is None:
+        return False, []  # nothing to decode, nothing to say
+    return False, [f"decoding skipped: {problem}"]
+
+
+
+def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, steps: _Steps,
+               n_tiles: int) -> Reference:
+    """Render and decode the fringes of the ideal specular reference (mirror BRDF, one ray
+    per pixel, the same camera, surface and monitor model)."""
+    t = time.perf_counter()
+    fr_cfg = cfg.patterns.fringes
+    ref_sim = Simulation(sim.scene.specular(), sim.tile_rows, sim.scheduler, sim.num_workers)
+    base = steps.done
+    fr = ref_sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
+                                progress=steps.tiles())
+    steps.finish_render(base, n_tiles)
+    sensor = Sensor.from_config(cfg.sensor)
+    if sensor.enabled:  # the reference is captured too (its own noise: stream 1)
+        fr = replace(fr, images=capture_dn(sensor, fr.images, 1))
+    decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
+                                   sensor.saturation_dn if sensor.enabled else None)
+    del fr
+    points = np.full(sim.shape + (3,), np.nan)
+    distance = chain.surface_to_monitor_mm(sim, geometry, points_out=points)
+    notes = []
+    for d, res in decoded.items():
+        exact = geometry.specular_u if d == "x" else geometry.specular_v
+        q = (res.monitor_coord_px - exact)[res.valid]
+        rms = float(np.sqrt(np.mean(q**2))) if q.size else 0.0
+        if rms > 0.05:
+            notes.append(
+                f"the specular reference decodes {rms:.2f} monitor px RMS ({d.upper()}) away from "
+                "the exact specular points: on a 'nearest' monitor a mirror sees single pixels, "
+                "so every deviation contains that quantisation; monitor.pixel_model = "
+                "'continuous' shows the scattering alone (statistics.json: "
+                "reference_vs_exact_px)")
+            break
+    from . import reconstruction as recon
+
+    rec = recon.reference_reconstruction(cfg, sim.scene, decoded)
+    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes), points, rec)

@@ -1,0 +1,127 @@
+"""The package's imports point one way, along the data flow (docs/architecture.md).
+
+Every module of ``src/pmdsim`` is parsed (``ast``; nothing is imported), every import in it
+(also those inside functions) is resolved to the package's top-level part it names, and
+the part's layer must not be above the importing module's. ``kernels`` import nothing of
+the package but ``kernels``. A module in a top-level part that is not in :data:`LAYERS`
+fails the test until it is given a layer.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "src" / "pmdsim"
+
+#: Layer of each top-level part of the package, in the order the data flows. A module may
+#: import parts of its own layer or below; ``__init__`` (the public facade) and ``cli`` sit
+#: on top.
+LAYERS = {
+    "kernels": 0,
+    "_version": 1, "config": 1, "geometry": 1, "patterns": 1,
+    "brdf": 2,
+    "scene": 3,
+    "trace": 4,
+    "render": 5,
+    "measure": 6,
+    "studies": 7,
+    "report": 8,
+    "run": 9,
+    "cli": 10, "__init__": 10, "__main__": 10,
+}
+
+
+def part_of(module: str) -> str:
+    """``pmdsim.run.files`` -> ``run``; ``pmdsim`` -> ``__init__``."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def imported_modules(source: str, module: str, is_package: bool) -> list[tuple[int, str]]:
+    """(line, absolute module) of every ``pmdsim`` import in ``source``."""
+    package = module if is_package else module.rpartition(".")[0]
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "pmdsim"]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.split(".")[0] != "pmdsim":
+                continue
+            if target == "pmdsim":  # from pmdsim import x: x is a part
+                found += [(node.lineno, f"pmdsim.{a.name}") for a in node.names]
+            elif node.module is None:  # from . import x, inside a part
+                found += [(node.lineno, f"{target}.{a.name}") for a in node.names]
+            else:
+                found.append((node.lineno, target))
+    return found
+
+
+def violations(source: str, module: str, is_package: bool = False) -> list[str]:
+    """What is wrong with the imports of one module (empty: nothing)."""
+    own = part_of(module)
+    if own not in LAYERS:
+        return [f"{module}: top-level part {own!r} has no layer in tests/test_architecture.py"]
+    out = []
+    for line, target in imported_modules(source, module, is_package):
+        other = part_of(target)
+        if other not in LAYERS:
+            out.append(f"{module}:{line} imports {target}: unknown part {other!r}")
+        elif own == "kernels" and other != "kernels":
+            out.append(f"{module}:{line} imports {target}: kernels import only kernels")
+        elif LAYERS[other] > LAYERS[own]:
+            out.append(f"{module}:{line} imports {target} ({other}, layer {LAYERS[other]}) "
+                       f"from {own} (layer {LAYERS[own]}): imports must point down the data flow")
+    return out
+
+
+def all_modules():
+    return sorted(PACKAGE.rglob("*.py"))
+
+
+def test_every_import_points_down_the_data_flow():
+    problems = []
+    for path in all_modules():
+        problems += violations(path.read_text(), module_name(path), path.name == "__init__.py")
+    assert problems == [], "\n".join(problems)
+
+
+@pytest.mark.parametrize("module, source", [
+    ("pmdsim.kernels.bundle", "from ..render import Simulation\n"),
+    ("pmdsim.kernels.bundle", "def f():\n    from pmdsim.config import RunConfig\n"),
+    ("pmdsim.measure.chain", "from ..report import chain as plot_chain\n"),
+    ("pmdsim.measure.chain", "def f():\n    from .. import run\n"),
+    ("pmdsim.studies.diagnostics", "import pmdsim.cli\n"),
+    ("pmdsim.report.text", "from pmdsim.run.dataset import load_run\n"),
+    ("pmdsim.scene.camera", "from ..trace import trace_primary\n"),
+    ("pmdsim.newthing", "import numpy\n"),
+])
+def test_a_wrong_import_is_found(module, source):
+    """The checker itself: each of these imports points up (or comes from an unknown part)."""
+    assert violations(source, module) != []
+
+
+@pytest.mark.parametrize("module, source", [
+    ("pmdsim.kernels.primary", "from .bundle import G_A\nfrom ._jit import fastjit\n"),
+    ("pmdsim.run.member", "from ..report import chain\nfrom ..measure import chain as c\n"),
+    ("pmdsim.cli", "from .run import run_simulation\n"),
+    ("pmdsim.measure.decode", "from ..kernels import decode as _k\n"),
+])
+def test_a_right_import_passes(module, source):
+    assert violations(source, module) == []

@@ -1,0 +1,151 @@
+"""Error budget: each effect alone against its closed form, the surface apart from the
+system, the command line, and the example configuration."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from pmdsim.cli import app
+from pmdsim.config import load_config, parse_config
+from pmdsim.measure.decode import DecodeFlag, decode_sequence
+from pmdsim.scene.sensor import Sensor
+from pmdsim.studies.budget import EFFECTS, budget, ideal_config
+
+from conftest import base_dict, merge
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _cfg(**changes):
+    d = merge(base_dict(), {
+        "patterns": {"fringes": {"widths_px": [24.0, 200.0], "shifts": 4}},
+        "monitor": {"gamma": 2.2, "bit_depth": 8, "cover_glass_thickness_mm": 1.5,
+                    "pixel_model": "nearest"},
+        "camera": {"subpixels": 2},
+        "sensor": {"enabled": True, "exposure_electrons": 20000.0, "full_well_electrons": 30000.0,
+                   "dark_noise_electrons": 5.0},
+        "sampling": {"n_rays": 24},
+    })
+    return parse_config(merge(d, changes))
+
+
+@pytest.fixture(scope="module")
+def rows():
+    return budget(_cfg())
+
+
+def _get(rows, effect, direction):
+    return next(r for r in rows if r["effect"] == effect and r["direction"] == direction)
+
+
+def test_rows_and_parts(rows):
+    effects = {r["effect"] for r in rows}
+    assert {"ideal", "monitor_pixels", "footprint", "display_response", "cover_glass", "sensor",
+            "all_system", "surface_ideal", "surface"} <= effects
+    assert "defocus" not in effects and "flatness" not in effects  # not in the config
+    assert {r["part"] for r in rows if r["effect"].startswith("surface")} == {"surface"}
+    for r in rows:
+        assert r["n_valid"] > 100
+        for q in ("mrad", "px", "mm", "urad"):
+            assert math.isfinite(r[f"rms_{q}"]) and r[f"p95_{q}"] >= 0
+
+
+def test_effects_alone_match_closed_forms(rows):
+    cfg = _cfg()
+    # the ideal system decodes the exact point
+    for d in ("x", "y"):
+        assert _get(rows, "ideal", d)["rms_px"] < 1e-5
+        # one ray per pixel on a nearest monitor: the staircase, 1/sqrt(12) px RMS
+        assert _get(rows, "monitor_pixels", d)["rms_px"] == pytest.approx(1 / math.sqrt(12), rel=0.2)
+        # unit conversions of one row: px -> mm -> mrad
+        r = _get(rows, "sensor", d)
+        assert r["rms_mm"] == pytest.approx(r["rms_px"] * cfg.monitor.pixel_pitch_mm, rel=1e-9)
+        assert r["rms_mrad"] == pytest.approx(r["rms_px"] * 2 * math.pi / 24.0 * 1e3, rel=1e-9)
+    # sensor noise alone: sqrt(2 / K) sigma_I / B (finest width), mean over the pixels' levels
+    s = Sensor.from_config(cfg.sensor)
+    e = 20000.0  # brightest value (1.0) of the mirror's fringes
+    sigma = s.gain * np.sqrt(5.0**2 + 0.5 * e)  # shot noise at the mean level 0.5
+    b = s.gain * 0.5 * e
+    phase = math.sqrt(2 / 4) * sigma / b
+    for d in ("x", "y"):
+        assert _get(rows, "sensor", d)["rms_mrad"] == pytest.approx(phase * 1e3, rel=0.15)
+
+
+def test_surface_is_reported_apart_from_the_system(rows):
+    for d in ("x", "y"):
+        s_ideal = _get(rows, "surface_ideal", d)["rms_px"]
+        assert s_ideal > 0.01  # the Ward lobe biases the decoded point
+        assert _get(rows, "ideal", d)["rms_px"] < s_ideal / 100
+
+
+def test_ideal_config_switches_everything_off():
+    ideal = ideal_config(_cfg(camera={"f_number": 4.0, "focal_length_mm": 20.0}))
+    assert not any(e.present(ideal) and e.name != "monitor_pixels" for e in EFFECTS)
+    assert ideal.monitor.pixel_model == "continuous" and not ideal.sensor.enabled
+
+
+def test_saturated_pixels_are_flagged():
+    phi = np.linspace(-3, 3, 64).reshape(8, 8)
+    d = 2 * np.pi * np.arange(4) / 4
+    frames = (0.5 + 0.5 * np.cos(phi[None] + d[:, None, None]))[None] * 1000.0
+    frames[0, 1, 3, 3] = 4095
+    res = decode_sequence(frames, [100.0], 4, 100.0, saturation_level=4095)
+    assert res.flags[3, 3] & DecodeFlag.SATURATED
+    assert not res.valid[3, 3] and res.valid.sum() == 63
+
+
+def test_cli_budget(tmp_path):
+    d = merge(base_dict(), {"patterns": {"fringes": {"widths_px": [24.0, 200.0]}},
+                            "monitor": {"cover_glass_thickness_mm": 1.0},
+                            "brdf": {"__replace__": {"model": "mirror"}}})
+    cfg_path = tmp_path / "b.toml"
+    _write_toml(cfg_path, d)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["budget", str(cfg_path), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "cover glass" in res.output and "all system effects" in res.output
+    for f in ("budget.csv", "budget.json", "budget.png"):
+        assert (out / f).is_file()
+    rows = json.loads((out / "budget.json").read_text())["rows"]
+    assert not any(r["part"] == "surface" for r in rows)  # a mirror has no surface part
+    res = CliRunner().invoke(app, ["budget", str(cfg_path), "-o", str(out)])
+    assert res.exit_code == 2 and "exists" in res.output
+
+
+def test_realistic_example_runs():
+    cfg = load_config(ROOT / "examples" / "realistic_system.toml")
+    d = cfg.model_dump()
+    d["camera"]["resolution"] = (24, 20)
+    rows = budget(cfg.model_validate(d))
+    effects = {r["effect"] for r in rows}
+    assert {e.name for e in EFFECTS} <= effects  # the example switches every effect on
+    assert {"surface", "surface_ideal", "all_system"} <= effects
+
+
+def _write_toml(path: Path, data: dict) -> None:
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        return repr(v)
+
+    lines = []
+    def section(prefix, d):
+        scalars = {k: v for k, v in d.items() if not isinstance(v, dict)}
+        if prefix:
+            lines.append(f"[{prefix}]")
+        lines.extend(f"{k} = {val(v)}" for k, v in scalars.items())
+        for k, v in d.items():
+            if isinstance(v, dict):
+                section(f"{prefix}.{k}" if prefix else k, v)
+    section("", data)
+    path.write_text("\n".join(lines) + "\n")
