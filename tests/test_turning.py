@@ -38,7 +38,7 @@ def test_texture_parameters_of_the_issue_example():
     spacing = 545e-6 / 0.03
     assert abs(p.order_spacing_monitor_px - spacing * 600 / 0.25) < 1e-9
     assert abs(p.orders_in_lobe - (2 * 0.03 / 0.5) / spacing) < 1e-9
-    assert p.regime == "diffractive"  # 3.3 orders in the lobe, ~44 px apart
+    assert p.regime == "diffractive"  # 6.6 orders in the lobe, ~44 px apart
     assert turning.texture_parameters(300.0, 0.5, wavelength_nm=545.0).regime == "geometric"
     assert turning.texture_parameters(3.0, 5.0, wavelength_nm=545.0).regime == "specular"
     assert "regime" in turning.format_texture(p)
