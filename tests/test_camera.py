@@ -95,3 +95,26 @@ def test_camera_config_errors():
     d["camera"]["dist_coeffs"] = [0.1, 0.2, 0.3]
     with pytest.raises(ConfigError, match="dist_coeffs"):
         parse_config(d)
+
+
+def test_compiled_lens_rays_equal_the_numpy_rays():
+    """kernels.primary.geometry_lens builds the same rays as Camera.vision_rays: compare
+    the geometry rows of both."""
+    from pmdsim.kernels import bundle as kb
+    from pmdsim.kernels import primary as kp
+
+    cfg = _camera_cfg(focal_length_mm=16.0, f_number=2.8, aperture_samples=7, subpixels=3)
+    scene = Scene.from_config(cfg)
+    cam = scene.camera
+    rows, cols = np.array([1500, 1500, 1502]), np.array([2040, 2050, 1990])
+    o, d = cam.vision_rays(rows, cols)
+    args = (scene.surface.kernel_params(), scene.anisotropy.kernel_params(), scene.monitor.kernel_params())
+    n = o.shape[0] * o.shape[1]
+    g1, s1 = np.empty((n, kb.G_SIZE)), np.empty((n, 2))
+    kp.geometry_rays(o.reshape(-1, 3), d.reshape(-1, 3), *args, g1, s1)
+    g2, s2 = np.empty((n, kb.G_SIZE)), np.empty((n, 2))
+    chief, ap, focus = cam.lens_inputs(rows, cols)
+    kp.geometry_lens(cam.position, np.ascontiguousarray(cam.rotation), chief, ap, focus, *args, g2, s2)
+    assert g1[:, kb.G_VALID].sum() > n // 2
+    np.testing.assert_allclose(g2, g1, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(s2, s1, rtol=0, atol=1e-9)

@@ -229,8 +229,9 @@ def test_bad_sweeps_are_refused_at_their_bounds():
     """N = 0, theta_max = 0 or 90 deg, no estimator: a clear error before any rendering.
     Guards against '<' / '<=' / '>=' slips on the bounds (N = 1 and 89.9 deg are fine)."""
     cfg = make_config()
-    for kw, field in (({"n_values": (0,)}, "n_values"), ({"theta_values": (0.0,)}, "theta"),
-                      ({"theta_values": (90.0,)}, "theta"), ({"estimators": ()}, "estimator")):
+    for kw, field in (({"n_values": (0,)}, "n_values"), ({"theta_values": (0.0,)}, "theta_values"),
+                      ({"theta_values": (1.0, 90.0)}, "theta_values"),
+                      ({"estimators": ()}, "estimators")):
         with pytest.raises(ValueError, match=field):
             convergence_study(cfg, camera_size=(4, 4), diagnostics=False, **kw)
     res = convergence_study(cfg, n_values=(1,), theta_values=(89.9,), estimators=("paper",),
@@ -240,9 +241,13 @@ def test_bad_sweeps_are_refused_at_their_bounds():
 
 
 def test_reduced_camera_keeps_at_least_one_pixel_per_axis():
-    """A 400 x 20 px camera reduced to 10 x 10: scale 1/40, so 10 x 1 px (not 10 x 0)."""
+    """A 400 x 20 px camera reduced to 10 x 10: scale 1/40, so 10 x 1 px (not 10 x 0); the
+    tighter axis sets the scale (guards against one axis used for both)."""
     cfg = make_config(camera={"resolution": [400, 20], "focal_length_px": 800.0})
     assert reduced_config(cfg, (10, 10)).camera.resolution == (10, 1)
+    # the tighter axis sets the scale: 40 x 32 into 30 x 12 is 3/8, i.e. 15 x 12
+    assert reduced_config(make_config(), (30, 12)).camera.resolution == (15, 12)
+    assert reduced_config(make_config(), (12, 30)).camera.resolution == (12, 10)
 
 
 def test_study_checks_the_configured_settings_by_default():

@@ -400,6 +400,14 @@ def test_moment_angle_range_over_all_orientations():
         assert min(diff, 180.0 - diff) < 0.01, deg
 
 
+def test_vertical_major_axis_is_plus_ninety_degrees():
+    """The angle interval is (-90, 90]: a spot elongated exactly along the rows reports
+    +90 deg, never -90 (guards against '>' vs '>=' at the interval's upper end)."""
+    for centre in ((20.0, 20.0), (13.0, 20.0)):
+        img = ns.gaussian_spot((41, 41), centre, 6.0, 2.0, math.pi / 2)
+        assert image_moments(img).angle == math.pi / 2
+
+
 def test_chain_flag_counts_finest_width_and_coarse_width_rounding():
     """statistics(): decode flags of the considered pixels counted per flag, the finest width
     is the smallest; the error message's suggested width rounds up to two significant digits

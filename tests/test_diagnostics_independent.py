@@ -229,10 +229,12 @@ def test_seeds_phase_error_equals_a_direct_recomputation_across_the_branch_cut()
 
 
 def test_seeds_error_agrees_with_many_seeds_brute_force():
-    """The 8-seed estimate is an estimate of the spread over *all* seeds: its RMS over 24
-    pixels agrees with the brute-force spread over 64 seeds within the chi distribution's
-    scatter (15 %), both directions. Guards against an error that does not estimate the
-    run-to-run spread (e.g. a standard error of the mean, 1/sqrt(8) = 0.35)."""
+    """The 8-seed estimate is an estimate of the spread over *all* seeds: its RMS over the
+    pixels agrees with the brute-force spread over 64 seeds (two independent 64-seed sets
+    agree to 0.2 %; 8-seed sets scatter by 0.87-1.12 over six first seeds, measured, so
+    the window is 0.75-1.33; the seeds are fixed, the test is deterministic). Guards
+    against an error that does not estimate the run-to-run spread (a standard error of the
+    mean: x 0.35; a variance instead of a deviation)."""
     cfg = make_config(brdf={"alpha_x": 0.02, "alpha_y": 0.01},
                       sampling={"mode": "random", "n_rays": 24, "theta_max_deg": 3.0})
     sim = Simulation.from_config(cfg)
@@ -243,7 +245,7 @@ def test_seeds_error_agrees_with_many_seeds_brute_force():
     ok = np.isfinite(se8) & np.isfinite(se64) & (se64 > 0)
     assert ok.sum() >= 30
     ratio = math.sqrt(np.mean(se8[ok] ** 2) / np.mean(se64[ok] ** 2))
-    assert 0.85 < ratio < 1.15, ratio
+    assert 0.75 < ratio < 1.33, ratio
     assert np.all(np.isnan(se8.reshape(2, 1, -1)[..., ~valid]))
 
 
@@ -391,6 +393,10 @@ def test_full_map_on_a_line_and_beyond_the_nodes():
     g = dg.PixelGrid(np.array([0, 4, 9, 11]), np.array([7]), (12, 21))
     full = dg.full_map(np.array([[1.0], [2.0], [3.0], [4.0]]), g)
     np.testing.assert_array_equal(full[:, 0], [1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 4])  # ties: first
+    stacked = dg.full_map(np.stack([np.array([[1.0, 2.0, 3.0]]), np.array([[4.0, 5.0, 6.0]])]),
+                          dg.PixelGrid(np.array([5]), np.array([0, 10, 20]), (12, 21)))
+    assert stacked.shape == (2, 12, 21)                       # leading axes kept
+    np.testing.assert_array_equal(stacked[1] - stacked[0], 3.0)
     g = dg.PixelGrid(np.array([5, 10]), np.array([5, 15]), (20, 20))
     rr, cc = np.meshgrid(g.rows, g.cols, indexing="ij")
     full = dg.full_map(3.0 * rr - 2.0 * cc + 1.0, g)

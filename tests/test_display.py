@@ -179,3 +179,29 @@ def test_monitor_config_fields():
     d["monitor"]["flatness_coefficients_mm"] = [[0.1, 0]]
     with pytest.raises(ConfigError, match="flatness_coefficients_mm"):
         parse_config(d)
+
+
+def test_height_map_hit_matches_root_finding(tmp_path):
+    """A measured height map (bilinear between nodes) moves the hit to where the ray meets
+    it; the reference interpolates with SciPy and finds the root with brentq."""
+    rng = np.random.default_rng(2)
+    hmap = 0.2 * rng.standard_normal((7, 9))  # mm, a coarse, bumpy grid
+    path = tmp_path / "h.npy"
+    np.save(path, hmap)
+    from pmdsim.scene.display import read_height_map
+
+    size = (400, 300)
+    pitch = 0.5
+    geom = DisplayGeometry(height_map=read_height_map(path), monitor_size=size)
+    theta = np.radians(np.array([5.0, 20.0, 35.0, 30.0]))
+    phi = np.radians(np.array([10.0, 100.0, 220.0, 300.0]))
+    u, v, ub, vb, _ = _kernel_hits(geom, theta, phi, pitch, size)
+    uc, vc = (size[0] - 1) / 2, (size[1] - 1) / 2
+    for k in range(theta.size):
+        d = np.array([np.sin(theta[k]) * np.cos(phi[k]), np.sin(theta[k]) * np.sin(phi[k]), -np.cos(theta[k])])
+        p0 = np.array([(u[k] - uc) * pitch, (v[k] - vc) * pitch, 0.0])
+        h = lambda s: (p0 + s * d)[2] - geom.height(*(p0 + s * d)[:2], pitch=pitch)  # noqa: E731
+        s = optimize.brentq(h, -5, 5, xtol=1e-14)
+        hit = p0 + s * d
+        np.testing.assert_allclose([(ub[k] - uc) * pitch, (vb[k] - vc) * pitch], hit[:2], atol=1e-9)
+        assert np.hypot(*(hit[:2] - p0[:2])) > 1e-3

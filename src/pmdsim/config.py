@@ -208,6 +208,10 @@ class MonitorConfig(_Model):
         (), description="c[i][j]: the emitting surface lies h = sum c[i][j] x^i y^j mm in "
         "front of the nominal plane (towards the viewer), x, y in mm from the centre along "
         "the pixel columns / rows; up to 4 x 4")
+    flatness_map: str | None = Field(
+        None, description="height map (mm, towards the viewer) of the emitting surface: .npy or "
+        "CSV rows, a grid from the centre of pixel (0, 0) to that of (W-1, H-1), interpolated "
+        "bilinearly; adds to the polynomial; path relative to the config file")
 
     _up = field_validator("up")(_nonzero_vector)
 
@@ -1096,8 +1100,10 @@ def load_config(path: str | Path) -> RunConfig:
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
     mon = data.get("monitor")
-    if isinstance(mon, dict) and isinstance(mon.get("response_lut"), str):
-        mon["response_lut"] = str((path.parent / mon["response_lut"]).resolve())
+    if isinstance(mon, dict):
+        for key in ("response_lut", "flatness_map"):
+            if isinstance(mon.get(key), str):
+                mon[key] = str((path.parent / mon[key]).resolve())
     surf = data.get("surface")
     if isinstance(surf, dict) and surf.get("type") == "height_map" and isinstance(surf.get("file"), str):
         surf["file"] = str((path.parent / surf["file"]).resolve())

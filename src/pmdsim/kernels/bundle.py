@@ -120,7 +120,10 @@ MC_VC = 4  # (H - 1) / 2
 MC_FLAT_N = 5  # n: flatness polynomial h(x, y) = sum c[i, j] x^i y^j, n x n coefficients
 MC_FALL_M = 6  # luminance falloff cos(theta)^m (0 = none)
 MC_FALL_N = 7  # falloff table size (0 = none): angles (deg, ascending), then factors
-MC_COEF = 8  # c[i, j] row-major (mm, x and y in mm from the centre along e_u, e_v)
+MC_MAP_R = 8  # height map rows (0 = none): nodes from monitor row 0 to H - 1
+MC_MAP_C = 9  # height map columns: nodes from monitor column 0 to W - 1
+MC_COEF = 10  # c[i, j] row-major (mm, x and y in mm from the centre along e_u, e_v), then
+#               the falloff table, then the height map row-major (mm)
 
 
 @fastjit(inline="always")
@@ -703,8 +706,9 @@ def _n_orders(brdf):
 
 
 @fastjit(inline="always")
-def _flat_height(mc, n, x, y):
-    """h(x, y) = sum_ij c[i, j] x^i y^j (mm) of the display's emitting surface."""
+def _flat_height(mc, n, x, y, map0, mr, mcols, gu, gv):
+    """h(x, y) (mm) of the display's emitting surface: the polynomial sum_ij c[i, j] x^i y^j
+    plus the bilinearly interpolated height map at grid coordinates (gu, gv) (clamped)."""
     h = 0.0
     xi = 1.0
     for i in range(n):
@@ -713,6 +717,20 @@ def _flat_height(mc, n, x, y):
             h += mc[MC_COEF + i * n + j] * xi * yj
             yj *= y
         xi *= x
+    if mr > 0:
+        gu = min(max(gu, 0.0), mcols - 1.0)
+        gv = min(max(gv, 0.0), mr - 1.0)
+        i0 = min(int(gv), mr - 2) if mr > 1 else 0
+        j0 = min(int(gu), mcols - 2) if mcols > 1 else 0
+        fv = gv - i0
+        fu = gu - j0
+        i1 = min(i0 + 1, mr - 1)
+        j1 = min(j0 + 1, mcols - 1)
+        h00 = mc[map0 + i0 * mcols + j0]
+        h01 = mc[map0 + i0 * mcols + j1]
+        h10 = mc[map0 + i1 * mcols + j0]
+        h11 = mc[map0 + i1 * mcols + j1]
+        h += (1.0 - fv) * ((1.0 - fu) * h00 + fu * h01) + fv * ((1.0 - fu) * h10 + fu * h11)
     return h
 
 
@@ -727,8 +745,8 @@ def monitor_correction(g, mc, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
     n_m), ``du = u - G_U0``. Then, per ray, with ``c = -o.n_m = cos(theta)``:
 
     - flatness: the emitting surface lies at height ``h(x, y)`` (mm, towards the viewer)
-      over the plane point (x, y); the ray meets it at ``(x, y) - h (o_u, o_v) / c``
-      (fixed-point iteration, converged for slopes << 1);
+      over the plane point (x, y) (polynomial plus bilinear height map); the ray meets it at
+      ``(x, y) - h (o_u, o_v) / c`` (fixed-point iteration, converged for slopes << 1);
     - cover glass of thickness ``t_g`` and index ``n_g`` in front of the pixels: the ray
       refracts (``sin theta_r = sin theta / n_g``) and reaches the pixels
       ``t_g (tan theta - tan theta_r)`` closer to the point below its entry, i.e. shifted
@@ -750,6 +768,11 @@ def monitor_correction(g, mc, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
     fall_m = mc[MC_FALL_M]
     nfall = int(mc[MC_FALL_N])
     tab0 = MC_COEF + nflat * nflat
+    mr = int(mc[MC_MAP_R])
+    mcols = int(mc[MC_MAP_C])
+    map0 = tab0 + 2 * nfall
+    su = (mcols - 1.0) / max(wm - 1.0, 1.0)  # height-map nodes per monitor px
+    sv = (mr - 1.0) / max(hm - 1.0, 1.0)
     umax = wm - 0.5
     vmax = hm - 0.5
     fhit = 0.0
@@ -765,11 +788,12 @@ def monitor_correction(g, mc, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
         c = -T / norm
         x = (ubuf[j] - uc) * pitch
         y = (vbuf[j] - vc) * pitch
-        if nflat > 0:
+        if nflat > 0 or mr > 0:
             x0 = x
             y0 = y
             for _ in range(8):
-                h = _flat_height(mc, nflat, x, y)
+                h = _flat_height(mc, nflat, x, y, map0, mr, mcols,
+                                 (x / pitch + uc) * su, (y / pitch + vc) * sv)
                 x = x0 - h * ou / c
                 y = y0 - h * ov / c
         if tg > 0.0:

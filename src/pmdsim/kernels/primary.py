@@ -242,3 +242,44 @@ def geometry_rays(origins, dirs, surf, frame, mon, geo, spec):
     for k in range(origins.shape[0]):
         _fill_row(surf, frame, mon, origins[k, 0], origins[k, 1], origins[k, 2],
                   dirs[k, 0], dirs[k, 1], dirs[k, 2], geo[k], spec[k])
+
+
+@fastjit
+def geometry_lens(pos, rot, chief, aperture, focus, surf, frame, mon, geo, spec):
+    """Thin-lens vision rays and their geometry rows in one pass.
+
+    ``pos`` (3,) lens centre, ``rot`` (3, 3) camera axes as columns (world), ``chief``
+    (P, n2, 3) chief-ray directions (x', y', 1) of every pixel's sub-pixel points in camera
+    coordinates, ``aperture`` (P, m, 2) aperture points (mm, camera x, y), ``focus`` the depth
+    of the plane in focus (mm; <= 0: pinhole, the chief rays themselves, m must be 1). Ray
+    (p, s, a) starts at ``pos + rot (A, 0)`` towards the in-focus point ``focus * chief`` and
+    fills row ``(p * n2 + s) * m + a`` of ``geo`` / ``spec``."""
+    npix = chief.shape[0]
+    n2 = chief.shape[1]
+    m = aperture.shape[1]
+    k = 0
+    for p in range(npix):
+        for s in range(n2):
+            cx = chief[p, s, 0]
+            cy = chief[p, s, 1]
+            cz = chief[p, s, 2]
+            for a in range(m):
+                ax = aperture[p, a, 0]
+                ay = aperture[p, a, 1]
+                if focus > 0.0:
+                    lx = focus * cx - ax
+                    ly = focus * cy - ay
+                    lz = focus * cz
+                else:
+                    lx = cx
+                    ly = cy
+                    lz = cz
+                dx = rot[0, 0] * lx + rot[0, 1] * ly + rot[0, 2] * lz
+                dy = rot[1, 0] * lx + rot[1, 1] * ly + rot[1, 2] * lz
+                dz = rot[2, 0] * lx + rot[2, 1] * ly + rot[2, 2] * lz
+                dx, dy, dz, _ = _normalize(dx, dy, dz)
+                ox = pos[0] + rot[0, 0] * ax + rot[0, 1] * ay
+                oy = pos[1] + rot[1, 0] * ax + rot[1, 1] * ay
+                oz = pos[2] + rot[2, 0] * ax + rot[2, 1] * ay
+                _fill_row(surf, frame, mon, ox, oy, oz, dx, dy, dz, geo[k], spec[k])
+                k += 1

@@ -357,4 +357,28 @@ def surface_errors(rec: Reconstruction, truth, remove="piston") -> SurfaceErrors
     # slope statistics are about zero, not the mean: report the RMS about zero too
     for k, a in (("slope_error_x_urad", ex), ("slope_error_y_urad", ey)):
         stats[k]["rms_about_zero"] = float(np.sqrt(np.nanmean(a**2))) if np.isfinite(a).any() else float("nan")
+    stats["terms_nm"] = _error_terms(rec, truth, ex, ey)
     return SurfaceErrors(dh, ex, ey, remove if isinstance(remove, str) else "+".join(remove), stats)
+
+
+def _error_terms(rec, truth, ex, ey, n_zernike=15, n_legendre=10):
+    """Low-order content of the height error (nm) from a modal fit of the slope errors:
+    Noll Zernikes Z2..Z15 on the aperture's disc (circular and annular apertures), else
+    Legendre products on the grid's rectangle; each coefficient is that term's RMS over the
+    disc (rectangle). Empty when too few points."""
+    from .integrate import modal_fit
+
+    m = rec.mask & np.isfinite(ex) & np.isfinite(ey)
+    if m.sum() < 4 * n_zernike:
+        return {}
+    ap = getattr(truth, "aperture", None)
+    x0 = float(rec.x_mm[0])
+    y0 = float(rec.y_mm[0])
+    if isinstance(ap, tuple) and ap[0] in ("circular", "annular"):
+        fit = modal_fit(ex * 1e-6, ey * 1e-6, rec.spacing, m, basis="zernike", n_terms=n_zernike,
+                        centre_mm=(ap[1], ap[2]), radius_mm=ap[3], origin_mm=(x0, y0))
+    else:
+        fit = modal_fit(ex * 1e-6, ey * 1e-6, rec.spacing, m, basis="legendre", n_terms=n_legendre,
+                        origin_mm=(x0, y0),
+                        centre_mm=(0.5 * (rec.x_mm[0] + rec.x_mm[-1]), 0.5 * (rec.y_mm[0] + rec.y_mm[-1])))
+    return {"basis": fit.basis, **{n: float(c * 1e6) for n, c in zip(fit.names[1:], fit.coefficients[1:])}}

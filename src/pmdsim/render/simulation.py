@@ -82,9 +82,18 @@ def vision_geometry_rows(scene: Scene, row: int):
     """Geometry rows (W * S, G_SIZE) and exact monitor hits (W * S, 2) of the S vision rays
     (sub-pixels x aperture samples, :meth:`pmdsim.scene.Camera.vision_rays`) of every pixel
     of camera row ``row``, pixel-major."""
-    w = scene.camera.width
-    o, d = scene.camera.vision_rays(np.full(w, row), np.arange(w))
-    return _rays_geometry(scene, o.reshape(-1, 3), d.reshape(-1, 3))
+    cam = scene.camera
+    w = cam.width
+    chief, aperture, focus = cam.lens_inputs(np.full(w, row), np.arange(w))
+    n = w * cam.rays_per_pixel
+    geo = np.empty((n, kb.G_SIZE))
+    spec = np.empty((n, 2))
+    kprim.geometry_lens(
+        cam.position, np.ascontiguousarray(cam.rotation), chief, aperture, focus,
+        scene.surface.kernel_params(), scene.anisotropy.kernel_params(),
+        scene.monitor.kernel_params(), geo, spec,
+    )
+    return geo, spec
 
 
 def reduce_subrays(out: np.ndarray, estimator: str) -> np.ndarray:
@@ -262,8 +271,13 @@ class Simulation:
         simple = cam.is_simple_pinhole
         n_sub = cam.rays_per_pixel
 
-        def kernel(geo, rot):
-            out = np.empty((geo.shape[0], ncols))
+        # In-process schedulers: the tiles write straight into one (H, W, ncols) array (no
+        # per-tile result arrays, no concatenation copy: half the render's peak memory).
+        full = (np.empty((cam.height, width, ncols))
+                if self.scheduler in ("threads", "synchronous") else None)
+
+        def kernel(geo, rot, out=None):
+            out = np.empty((geo.shape[0], ncols)) if out is None else out
             if lobe:
                 kb.render_tile_lobe(
                     geo, brdf, u1, u2, rot, mshape, mode,
@@ -280,10 +294,13 @@ class Simulation:
             if simple:
                 geo, _ = scene_geometry_rows(scene, r0, r1)
                 rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
+                if full is not None:
+                    kernel(geo, rot, full[r0:r1].reshape(-1, ncols))
+                    return None
                 return kernel(geo, rot).reshape(r1 - r0, width, ncols)
             # camera optics: S vision rays per pixel, each with its own scattered bundle,
             # one camera row per kernel call; the pixel's sums are the mean over its rays
-            res = np.empty((r1 - r0, width, ncols))
+            res = full[r0:r1] if full is not None else np.empty((r1 - r0, width, ncols))
             for r in range(r0, r1):
                 geo, _ = vision_geometry_rows(scene, r)
                 if delta or samp.mode == "stratified":
@@ -292,10 +309,10 @@ class Simulation:
                     rot = np.random.default_rng([samp.seed, r]).random((geo.shape[0], 2))
                 out = kernel(geo, rot).reshape(width, n_sub, ncols)
                 res[r - r0] = reduce_subrays(out, scene.estimator)
-            return res
+            return None if full is not None else res
 
         parts = self._compute(tile, self._tiles(), progress)
-        return np.concatenate(parts, axis=0)
+        return full if full is not None else np.concatenate(parts, axis=0)
 
     def _normalise(self, out):
         """(H, W) factor turning weighted sums into estimator values."""

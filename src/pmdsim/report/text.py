@@ -128,6 +128,12 @@ def reconstruction_text(name: str, rec: dict) -> str:
         f"  slope error x RMS {sx['rms_about_zero']:.3g} urad  PV {sx['pv']:.3g} urad;  "
         f"y RMS {sy['rms_about_zero']:.3g} urad  PV {sy['pv']:.3g} urad",
     ]
+    terms = rec.get("terms_nm") or {}
+    if terms:
+        names = [k for k in terms if k != "basis"]
+        big = sorted(names, key=lambda k: -abs(terms[k]))[:6]
+        lines.append(f"  largest {terms['basis']} terms of the height error (nm RMS each): "
+                     + ", ".join(f"{k} {terms[k]:+.3g}" for k in big))
     if "reference_height_error_nm" in rec:
         r = rec["reference_height_error_nm"]
         lines.append(f"  specular reference (the chain's floor): height RMS {r['rms']:.3g} nm  PV {r['pv']:.3g} nm")

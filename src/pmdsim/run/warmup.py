@@ -6,7 +6,8 @@ after an install would pay for compiling every kernel it calls (about 13 s for t
 run on a 2-core machine). :func:`warmup` runs a few tiny simulations that call every kernel
 path a run can take (the cone and radiometric estimators, Ward, Beckmann and the mirror,
 nearest and continuous monitors, fringes, dots and monitor images, decoding with each
-unwrapping method, the run diagnostics), so that it is paid once, at install time:
+unwrapping method, the run diagnostics, camera optics, curved surfaces, display physics
+and the sensor), so that it is paid once, at install time:
 
     pip install pmdsim && pmdsim warmup
 
@@ -57,6 +58,14 @@ CASES = {
         "brdf": {"model": "beckmann", "alpha_u": 0.02, "alpha_v": 0.004},
         "sampling": {"n_rays": 8, "estimator": "radiometric"},
         "monitor": dict(_BASE["monitor"], pixel_model="continuous", gamma=2.2)},
+    # camera optics (sub-pixels, distortion), a curved surface, display physics, the sensor
+    "optics-sphere-display-sensor": {
+        "camera": dict(_BASE["camera"], subpixels=2, k1=0.01),
+        "surface": {"type": "sphere", "radius_mm": 5000.0,
+                    "aperture": {"shape": "circular", "radius_mm": 110.0}},
+        "monitor": dict(_BASE["monitor"], falloff_exponent=1.0, cover_glass_thickness_mm=1.0,
+                        flatness_coefficients_mm=[[0.0, 0.0], [0.0, 1e-6]]),
+        "sensor": {"enabled": True}},
 }
 
 

@@ -250,6 +250,26 @@ class Camera:
         o = np.broadcast_to(o[:, None], (rows.size, sub.shape[0], self.aperture_samples, 3))
         return o.reshape(rows.size, -1, 3).copy(), d
 
+    def lens_inputs(self, rows, cols):
+        """Inputs of :func:`pmdsim.kernels.primary.geometry_lens` for pixels (rows[k], cols[k]):
+        chief directions (P, n2, 3) in camera coordinates, aperture points (P, m, 2) and the
+        focus depth (0 for a pinhole). The same rays as :meth:`vision_rays`."""
+        rows = np.asarray(rows, np.int64).ravel()
+        cols = np.asarray(cols, np.int64).ravel()
+        sub = self.subpixel_offsets()
+        chief = self.chief_directions_camera(rows[:, None] + sub[None, :, 1],
+                                             cols[:, None] + sub[None, :, 0])
+        if self.aperture_mm is None:
+            return chief, np.zeros((rows.size, 1, 2)), 0.0
+        if self.focus_distance_mm is None:
+            raise ValueError("camera.focus_distance_mm: not resolved; build the camera through "
+                             "Scene.from_config or Camera.focused_on(surface)")
+        ap = np.empty((rows.size, self.aperture_samples, 2))
+        for r in np.unique(rows):
+            sel = rows == r
+            ap[sel] = self.aperture_points(int(r), self.width)[cols[sel]]
+        return chief, ap, float(self.focus_distance_mm)
+
     def focused_on(self, surface) -> "Camera":
         """This camera with ``focus_distance_mm`` resolved: unchanged when given or pinhole;
         otherwise the depth (Z_c) of the surface point the image centre's chief ray sees."""

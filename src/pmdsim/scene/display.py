@@ -54,6 +54,20 @@ def read_response_lut(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return d, lum
 
 
+def read_height_map(path: str | Path) -> np.ndarray:
+    """(rows, cols) heights (mm) of a ``.npy`` file or a CSV of rows; the grid spans the
+    monitor from the centre of pixel (0, 0) to that of pixel (W-1, H-1)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"monitor.flatness_map: no such file: {path}")
+    a = np.load(path) if path.suffix.lower() == ".npy" else np.loadtxt(path, delimiter=",", ndmin=2)
+    a = np.asarray(a, np.float64)
+    if a.ndim != 2 or min(a.shape) < 2 or not np.all(np.isfinite(a)):
+        raise ValueError(f"monitor.flatness_map: {path} must hold a finite 2-D grid of at least "
+                         f"2 x 2 heights (mm), got shape {a.shape}")
+    return a
+
+
 @dataclass(frozen=True)
 class DisplayResponse:
     """Drive -> luminance of the display (module docstring)."""
@@ -109,17 +123,34 @@ class DisplayGeometry:
     flatness: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), compare=False)  # c[i, j], mm
     falloff_exponent: float = 0.0
     falloff_table: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), compare=False)  # deg, factor
+    height_map: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), compare=False)  # mm
+    monitor_size: tuple[int, int] = (1, 1)  # (W, H) monitor px: the map spans their centres
 
     @property
     def is_ideal(self) -> bool:
         return (self.glass_thickness == 0.0 and not np.any(self.flatness)
-                and self.falloff_exponent == 0.0 and self.falloff_table.shape[0] == 0)
+                and self.falloff_exponent == 0.0 and self.falloff_table.shape[0] == 0
+                and self.height_map.size == 0)
 
-    def height(self, x, y) -> np.ndarray:
-        """h(x, y), mm, of the emitting surface in front of the nominal plane."""
-        if self.flatness.size == 0:
-            return np.zeros(np.broadcast(np.asarray(x), np.asarray(y)).shape)
-        return np.polynomial.polynomial.polyval2d(x, y, self.flatness)
+    def height(self, x, y, pitch: float = 1.0) -> np.ndarray:
+        """h(x, y), mm, of the emitting surface in front of the nominal plane (x, y in mm from
+        the monitor centre; ``pitch`` places the height map)."""
+        x = np.asarray(x, np.float64)
+        y = np.asarray(y, np.float64)
+        h = np.zeros(np.broadcast(x, y).shape)
+        if self.flatness.size:
+            h = h + np.polynomial.polynomial.polyval2d(x, y, self.flatness)
+        if self.height_map.size:
+            from scipy.interpolate import RegularGridInterpolator
+
+            w, hh = self.monitor_size
+            rows, cols = self.height_map.shape
+            gv = np.linspace(-(hh - 1) / 2 * pitch, (hh - 1) / 2 * pitch, rows)
+            gu = np.linspace(-(w - 1) / 2 * pitch, (w - 1) / 2 * pitch, cols)
+            f = RegularGridInterpolator((gv, gu), self.height_map, method="linear")
+            pts = np.stack([np.clip(y, gv[0], gv[-1]), np.clip(x, gu[0], gu[-1])], axis=-1)
+            h = h + f(pts.reshape(-1, 2)).reshape(h.shape)
+        return h
 
     def glass_shift(self, theta) -> np.ndarray:
         """t (tan theta - tan theta_r), mm: how much closer to the entry point's foot a ray
@@ -145,7 +176,8 @@ class DisplayGeometry:
         n = self.flatness.shape[0]
         tab = self.falloff_table
         nf = tab.shape[0]
-        p = np.zeros(kb.MC_COEF + n * n + 2 * nf)
+        hm = self.height_map
+        p = np.zeros(kb.MC_COEF + n * n + 2 * nf + hm.size)
         p[kb.MC_GLASS_T] = self.glass_thickness
         p[kb.MC_GLASS_N] = self.glass_index
         p[kb.MC_PITCH] = pitch
@@ -155,10 +187,13 @@ class DisplayGeometry:
         p[kb.MC_FALL_M] = self.falloff_exponent
         p[kb.MC_FALL_N] = nf
         p[kb.MC_COEF : kb.MC_COEF + n * n] = self.flatness.reshape(-1)
+        t0 = kb.MC_COEF + n * n
         if nf:
-            t0 = kb.MC_COEF + n * n
             p[t0 : t0 + nf] = tab[:, 0]
             p[t0 + nf : t0 + 2 * nf] = tab[:, 1]
+        if hm.size:
+            p[kb.MC_MAP_R], p[kb.MC_MAP_C] = hm.shape
+            p[t0 + 2 * nf :] = hm.reshape(-1)
         return p
 
 
@@ -173,8 +208,12 @@ def display_from_config(cfg) -> tuple[DisplayResponse, DisplayGeometry]:
     )
     flat = np.asarray(cfg.flatness_coefficients_mm, np.float64).reshape(
         len(cfg.flatness_coefficients_mm), len(cfg.flatness_coefficients_mm))
+    hmap = np.zeros((0, 0))
+    if cfg.flatness_map is not None:
+        hmap = read_height_map(cfg.flatness_map)
     geom = DisplayGeometry(
         float(cfg.cover_glass_thickness_mm), float(cfg.cover_glass_index), flat,
         float(cfg.falloff_exponent), np.asarray(cfg.falloff_table, np.float64).reshape(-1, 2),
+        hmap, tuple(cfg.resolution),
     )
     return resp, geom

@@ -77,8 +77,9 @@ EFFECTS: tuple[Effect, ...] = (
            lambda c: c.monitor.cover_glass_thickness_mm > 0,
            _copy_fields("monitor", ("cover_glass_thickness_mm", "cover_glass_index"))),
     Effect("flatness", "display flatness",
-           lambda c: any(v != 0 for row in c.monitor.flatness_coefficients_mm for v in row),
-           _copy_fields("monitor", ("flatness_coefficients_mm",))),
+           lambda c: (any(v != 0 for row in c.monitor.flatness_coefficients_mm for v in row)
+                      or c.monitor.flatness_map is not None),
+           _copy_fields("monitor", ("flatness_coefficients_mm", "flatness_map"))),
     Effect("falloff", "display angular falloff",
            lambda c: c.monitor.falloff_exponent != 0 or len(c.monitor.falloff_table) > 0,
            _copy_fields("monitor", ("falloff_exponent", "falloff_table"))),
@@ -97,7 +98,8 @@ def ideal_config(cfg: RunConfig) -> RunConfig:
     mon = d["monitor"]
     mon.update(pixel_model="continuous", gamma=1.0, response_lut=None, bit_depth=None,
                precompensate_gamma=False, black_level=0.0, white_level=1.0,
-               cover_glass_thickness_mm=0.0, flatness_coefficients_mm=(), falloff_exponent=0.0,
+               cover_glass_thickness_mm=0.0, flatness_coefficients_mm=(), flatness_map=None,
+               falloff_exponent=0.0,
                falloff_table=())
     d["sensor"] = {"enabled": False}
     d["variants"] = ()

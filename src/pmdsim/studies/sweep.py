@@ -111,8 +111,8 @@ class SweepPlan:
 
     def identity(self) -> str:
         """JSON of what determines the results (the base configuration without ``compute``
-        and the sweep): a resumed sweep must have the same."""
-        d = self.base.model_dump(mode="json", exclude={"compute"})
+        and ``output``, and the sweep): a resumed sweep must have the same."""
+        d = self.base.model_dump(mode="json", exclude={"compute", "output"})
         return json.dumps(d, sort_keys=True)
 
 

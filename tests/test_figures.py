@@ -1,0 +1,70 @@
+"""Run figures: the default summary, pmdsim report re-drawing any figure from a run folder,
+and the thinned imshow drawing the same picture as matplotlib's own nearest resampling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from typer.testing import CliRunner
+
+from pmdsim import run as pipeline
+from pmdsim.cli import app
+from pmdsim.config import parse_config
+from pmdsim.report.scene import MAX_IMAGE_PX, imshow
+from test_pipeline import tiny_config_dict
+
+
+def _pixels(draw) -> np.ndarray:
+    fig = Figure(figsize=(4.0, 3.0), dpi=130)
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.1, 0.1, 0.85, 0.85))
+    draw(ax)
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[..., :3].astype(int)
+
+
+def test_thinned_image_draws_like_matplotlib_nearest():
+    h, w = 1000, 1400  # thinned by 3 (> MAX_IMAGE_PX)
+    assert -(-max(h, w) // MAX_IMAGE_PX) == 3
+    r, c = np.mgrid[0:h, 0:w]
+    image = np.sin(c / 90.0) * np.cos(r / 70.0) + r / h  # smooth at the panel's resolution
+    image[400:600, 500:900] = np.nan  # a masked block stays where it is
+    full = _pixels(lambda ax: ax.imshow(image, cmap="viridis", interpolation="nearest"))
+    thin = _pixels(lambda ax: imshow(ax, image, cmap="viridis", interpolation="nearest"))
+    diff = np.abs(full - thin).max(axis=-1)
+    assert np.mean(diff <= 12) > 0.98, np.mean(diff <= 12)
+    fig = Figure()
+    ax = fig.add_subplot()
+    imshow(ax, image)
+    assert ax.get_xlim() == (-0.5, w - 0.5) and ax.get_ylim() == (h - 0.5, -0.5)
+
+
+@pytest.fixture(scope="module")
+def decoded_run(tmp_path_factory):
+    d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
+    d["output"] = {"figures": True, "write_images": False}
+    out = tmp_path_factory.mktemp("figures") / "run"
+    return pipeline.run_simulation(parse_config(d), out)
+
+
+def test_default_figures_are_the_summary(decoded_run):
+    assert sorted(p.name for p in (decoded_run.outdir / "figures").iterdir()) == [
+        "overview.png", "setup.png"]
+
+
+def test_report_redraws_any_figure_from_the_run_folder(decoded_run, tmp_path):
+    runner = CliRunner()
+    res = runner.invoke(app, ["report", str(decoded_run.outdir), "--figure", "deviation",
+                              "--figure", "setup", "-o", str(tmp_path / "a")])
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["deviation.png", "setup.png"]
+    res = runner.invoke(app, ["report", str(decoded_run.outdir), "--all", "--workers", "1",
+                              "-o", str(tmp_path / "b")])
+    assert res.exit_code == 0, res.output
+    assert len(list((tmp_path / "b").iterdir())) == 9
+    bad = runner.invoke(app, ["report", str(decoded_run.outdir), "--figure", "nonsense"])
+    assert bad.exit_code == 2 and "unknown figure" in bad.output
+    missing = runner.invoke(app, ["report", str(tmp_path)])
+    assert missing.exit_code == 2 and "no run.zarr" in missing.output
