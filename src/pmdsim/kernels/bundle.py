@@ -534,14 +534,16 @@ def _table_density(brdf, sx, sy):
 
 
 @fastjit(inline="always")
-def _order_centres(brdf, ix, iy, iz, osx, osy, ow):
+def _order_centres(brdf, ix, iy, iz, osx, osy, ow, ocum):
     """Slope centres (s_x, s_y) and weights of the grating orders for the local incident
     direction i: order k leaves along o_k = (-i_x, -i_y + q_k, sqrt(1 - ..)) (the grating
     equation in direction cosines); its centre is the slope of the half vector of i and o_k.
-    Evanescent orders get weight 0. Returns the sum of the propagating weights."""
+    Evanescent orders get weight 0; ``ocum`` (K + 1) receives the cumulative weights.
+    Returns the sum of the propagating weights."""
     b = B_TAB
     k = int(brdf[b + ORD_K])
     wsum = 0.0
+    ocum[0] = 0.0
     for q in range(k):
         qk = brdf[b + ORD_DATA + 2 * q]
         wk = brdf[b + ORD_DATA + 2 * q + 1]
@@ -552,12 +554,13 @@ def _order_centres(brdf, ix, iy, iz, osx, osy, ow):
             osx[q] = 0.0
             osy[q] = 0.0
             ow[q] = 0.0
-            continue
-        hz = iz + math.sqrt(oz2)
-        osx[q] = -(ix + ox) / hz
-        osy[q] = -(iy + oy) / hz
-        ow[q] = wk
-        wsum += wk
+        else:
+            hz = iz + math.sqrt(oz2)
+            osx[q] = -(ix + ox) / hz
+            osy[q] = -(iy + oy) / hz
+            ow[q] = wk
+            wsum += wk
+        ocum[q + 1] = wsum
     return wsum
 
 
@@ -657,7 +660,7 @@ def _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wm, hm, ubuf, vbuf, 
 
 
 @fastjit
-def _micronormals_slopes(u1, u2, r1, r2, brdf, osx, osy, ow, wsum, mx, my, mz, mz3):
+def _micronormals_slopes(u1, u2, r1, r2, brdf, osx, osy, ow, ocum, wsum, mx, my, mz, mz3):
     """Micro-normals m = (-s_x, -s_y, 1) / |.| of slopes drawn from a slope-density model
     for the unit-square points rotated by (r1, r2) mod 1. MODEL_SLOPE_TABLE: the table
     sampler; MODEL_SLOPE_ORDERS: s1 picks an order by weight (its remainder drives the
@@ -676,14 +679,17 @@ def _micronormals_slopes(u1, u2, r1, r2, brdf, osx, osy, ow, wsum, mx, my, mz, m
             sa, sb = _table_slopes(brdf, s1, s2)
         else:
             target = s1 * wsum
-            acc = 0.0
-            k = -1
-            for q in range(nord):
-                if ow[q] > 0.0:
-                    k = q
-                    if acc + ow[q] > target:
-                        break
-                    acc += ow[q]
+            # the order k with ocum[k] <= target < ocum[k + 1] (binary search)
+            lo = 0
+            hi = nord
+            while hi - lo > 1:
+                mid = (lo + hi) >> 1
+                if ocum[mid] <= target:
+                    lo = mid
+                else:
+                    hi = mid
+            k = lo
+            acc = ocum[k]
             t = (target - acc) / ow[k]
             t = min(max(t, 0.0), 1.0)
             r = math.sqrt(-math.log(max(1.0 - t, 1e-300)))
@@ -1010,6 +1016,7 @@ def render_tile(
     osx = np.zeros(nord)
     osy = np.zeros(nord)
     ow = np.zeros(nord)
+    ocum = np.zeros(nord + 1)
     a = np.empty(n)
     b = np.empty(n)
     c = np.empty(n)
@@ -1044,7 +1051,7 @@ def render_tile(
         elif slopes:
             wsum = 1.0
             if nord > 0:
-                wsum = _order_centres(brdf, g[G_X], g[G_Y], g[G_Z], osx, osy, ow)
+                wsum = _order_centres(brdf, g[G_X], g[G_Y], g[G_Z], osx, osy, ow, ocum)
             ftot, fhit = _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wm, hm, ubuf,
                                         vbuf, iubuf, ivbuf, fbuf)
         else:
@@ -1116,6 +1123,7 @@ def render_tile_lobe(
     osx = np.zeros(nord)
     osy = np.zeros(nord)
     ow = np.zeros(nord)
+    ocum = np.zeros(nord + 1)
     mx = np.empty(n)
     my = np.empty(n)
     mz = np.empty(n)
@@ -1129,7 +1137,7 @@ def render_tile_lobe(
     table_vt = np.ascontiguousarray(table_v.T)
     if shared and nord == 0:
         if slopes:
-            _micronormals_slopes(u1, u2, 0.0, 0.0, brdf, osx, osy, ow, 1.0, mx, my, mz, mz3)
+            _micronormals_slopes(u1, u2, 0.0, 0.0, brdf, osx, osy, ow, ocum, 1.0, mx, my, mz, mz3)
         else:
             _micronormals(u1, u2, 0.0, 0.0, ax, ay, mx, my, mz, mz3)
     for p in range(npix):
@@ -1145,14 +1153,14 @@ def render_tile_lobe(
             continue
         wsum = 1.0
         if nord > 0:  # the orders' centres depend on the pixel's incident direction
-            wsum = _order_centres(brdf, g[G_X], g[G_Y], g[G_Z], osx, osy, ow)
+            wsum = _order_centres(brdf, g[G_X], g[G_Y], g[G_Z], osx, osy, ow, ocum)
             r1 = 0.0 if shared else rotation[p, 0]
             r2 = 0.0 if shared else rotation[p, 1]
-            _micronormals_slopes(u1, u2, r1, r2, brdf, osx, osy, ow, wsum, mx, my, mz, mz3)
+            _micronormals_slopes(u1, u2, r1, r2, brdf, osx, osy, ow, ocum, wsum, mx, my, mz, mz3)
         elif not shared:
             if slopes:
                 _micronormals_slopes(u1, u2, rotation[p, 0], rotation[p, 1], brdf, osx, osy, ow,
-                                     1.0, mx, my, mz, mz3)
+                                     ocum, 1.0, mx, my, mz, mz3)
             else:
                 _micronormals(u1, u2, rotation[p, 0], rotation[p, 1], ax, ay, mx, my, mz, mz3)
         ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
