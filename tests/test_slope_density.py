@@ -58,7 +58,7 @@ def test_gaussian_density_is_beckmann(smith):
     np.testing.assert_allclose(sd.sample(u1, u2, i), ref.sample(u1, u2, i), rtol=0, atol=1e-12)
     np.testing.assert_array_equal(sd.kernel_params(), ref.kernel_params())
     cfg = make_config(brdf={"__replace__": {"model": "slope_density", "density": "gaussian",
-                                            "alpha_tangential": 0.3, "alpha_radial": 0.12,
+                                            "alpha_x": 0.3, "alpha_y": 0.12,
                                             "rho_s": 0.7}})
     np.testing.assert_array_equal(brdf_from_config(cfg.brdf).kernel_params(),
                                   Beckmann(0.3, 0.12, 0.7, True).kernel_params())

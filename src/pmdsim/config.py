@@ -1035,7 +1035,8 @@ class RunConfig(_Model):
 
 
 def _check_alpha_frame(brdf, anisotropy, where: str) -> None:
-    if isinstance(brdf, (WardConfig, BeckmannConfig)) and brdf.alpha_tangential is not None:
+    if (isinstance(brdf, (WardConfig, BeckmannConfig, SlopeDensityConfig))
+            and brdf.alpha_tangential is not None):
         if anisotropy.frame != "rotational":
             raise ValueError(
                 f"{where}.alpha_tangential/alpha_radial need anisotropy.frame = 'rotational'; "

@@ -313,7 +313,7 @@ class GratingOrders:
         k = np.minimum(k, last)
         acc = np.where(k > 0, np.take_along_axis(cum, np.maximum(k - 1, 0)[..., None], -1)[..., 0], 0.0)
         wk = np.take_along_axis(w, k[..., None], -1)[..., 0]
-        t = np.clip((target - acc) / wk, 0.0, 1.0)
+        t = np.clip(np.where(wk > 0, (target - acc) / np.where(wk > 0, wk, 1.0), 0.0), 0.0, 1.0)
         r = np.sqrt(-np.log(np.maximum(1.0 - t, 1e-300)))
         sx = np.take_along_axis(cx, k[..., None], -1)[..., 0] + self.alpha_x * r * np.cos(2 * np.pi * u2)
         sy = np.take_along_axis(cy, k[..., None], -1)[..., 0] + self.alpha_y * r * np.sin(2 * np.pi * u2)
