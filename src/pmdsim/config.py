@@ -1195,10 +1195,8 @@ def load_config(path: str | Path) -> RunConfig:
     if isinstance(images, dict) and isinstance(images.get("files"), list):
         images["files"] = [_resolve_file(path.parent, f) for f in images["files"]]
     brdf = data.get("brdf")
-    if isinstance(brdf, dict):
-        brdf["file"] = _resolve_file(path.parent, brdf.get("file")) if "file" in brdf else None
-        if brdf["file"] is None:
-            del brdf["file"]
+    if isinstance(brdf, dict) and "file" in brdf:
+        brdf["file"] = _resolve_file(path.parent, brdf["file"])
     return parse_config(data, str(path))
 
 
