@@ -621,15 +621,14 @@ class SlopeDensityConfig(_RoughnessFields):
 
     @property
     def alphas(self) -> tuple[float, float]:
-        """(alpha along local x, alpha along local y): sqrt(2) x RMS slope (gaussian) or the
-        equivalent alphas of the density."""
-        if self.density == "gaussian":
-            if self.alpha_x is not None:
-                return float(self.alpha_x), float(self.alpha_y)
-            return float(self.alpha_tangential), float(self.alpha_radial)
-        from .brdf import brdf_from_config
-
-        return brdf_from_config(self).smith_alphas
+        """(alpha along local x, alpha along local y) of the ``gaussian`` density: sqrt(2) x
+        RMS slope. Other densities: :func:`pmdsim.brdf.equivalent_alphas`."""
+        if self.density != "gaussian":
+            raise AttributeError("alphas: only the gaussian density is given by alphas; "
+                                 "use pmdsim.brdf.equivalent_alphas")
+        if self.alpha_x is not None:
+            return float(self.alpha_x), float(self.alpha_y)
+        return float(self.alpha_tangential), float(self.alpha_radial)
 
 
 class TurnedConfig(_RoughnessFields):
@@ -660,13 +659,6 @@ class TurnedConfig(_RoughnessFields):
                              "a positive sum of weights")
         self._check_roughness()
         return self
-
-    @property
-    def alphas(self) -> tuple[float, float]:
-        """Equivalent (tangential, radial) alphas: sqrt(2) x RMS slope per axis."""
-        from .brdf import brdf_from_config
-
-        return brdf_from_config(self).smith_alphas
 
 
 BrdfConfig = Annotated[WardConfig | BeckmannConfig | MirrorConfig | SlopeDensityConfig
