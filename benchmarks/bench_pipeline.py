@@ -37,6 +37,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 FIG3 = ROOT / "examples" / "paper_fig3.toml"
+CONFIG = FIG3
 
 RENDER_CODE = r"""
 import json, sys, time
@@ -103,12 +104,12 @@ def measure(name: str, src: Path, tmp: Path, repeat: int, rss: bool) -> dict:
     work.mkdir()
     cache = work / "numba-cache"
     print(f"[{name}] first run after install (empty NUMBA_CACHE_DIR) ...", flush=True)
-    out["first_run_s"], _ = _run(CLI_CODE, ["simulate", str(FIG3), "-o", str(work / "r0")],
+    out["first_run_s"], _ = _run(CLI_CODE, ["simulate", str(CONFIG), "-o", str(work / "r0")],
                                  src, cache, work)
     walls = []
     for k in range(repeat):
         print(f"[{name}] warm run {k + 1}/{repeat} ...", flush=True)
-        w, _ = _run(CLI_CODE, ["simulate", str(FIG3), "-o", str(work / f"r{k + 1}")],
+        w, _ = _run(CLI_CODE, ["simulate", str(CONFIG), "-o", str(work / f"r{k + 1}")],
                     src, cache, work)
         walls.append(w)
     out["warm_run_s"] = min(walls)
@@ -119,9 +120,9 @@ def measure(name: str, src: Path, tmp: Path, repeat: int, rss: bool) -> dict:
         print(f"[{name}] pmdsim warmup, then the first run ...", flush=True)
         out["warmup_s"], _ = _run(CLI_CODE, ["warmup"], src, cache2, work)
         out["first_run_after_warmup_s"], _ = _run(
-            CLI_CODE, ["simulate", str(FIG3), "-o", str(work / "rw")], src, cache2, work)
+            CLI_CODE, ["simulate", str(CONFIG), "-o", str(work / "rw")], src, cache2, work)
     print(f"[{name}] render of the Fig. 3 sequence ...", flush=True)
-    _, text = _run(RENDER_CODE, [str(FIG3), str(repeat)], src, cache, work)
+    _, text = _run(RENDER_CODE, [str(CONFIG), str(repeat)], src, cache, work)
     r = json.loads(text.strip().splitlines()[-1])
     out["render_wall_s"] = r["wall"]
     out["render_mrays_per_cpu_s"] = r["rays"] / r["cpu"] / 1e6
@@ -151,7 +152,12 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--skip-rss", action="store_true", help="skip the 5 MP memory run")
     ap.add_argument("--skip-baseline", action="store_true")
+    ap.add_argument("--config", type=Path, default=FIG3,
+                    help="run configuration (default examples/paper_fig3.toml; the 5 MP "
+                    "variant is always derived from Fig. 3)")
     args = ap.parse_args()
+    global CONFIG
+    CONFIG = args.config.resolve()
     print(f"load average before: {os.getloadavg()}, cores: {os.cpu_count()}")
     results = {}
     with tempfile.TemporaryDirectory(prefix="pmdsim-bench-") as tmp:

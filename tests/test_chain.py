@@ -360,6 +360,12 @@ def test_statistics_json_values_follow_from_the_stored_maps(variant_run):
     keys and units, so a mrad/rad slip or a sample std passed)."""
     import naive_stats as ns
 
+    from pmdsim.run.dataset import KEEP_BITS
+
+    # the statistics are of the float64 maps; the run stores them with KEEP_BITS significant
+    # bits (docs/outputs.md), so they agree to that relative precision
+    STORED = 2.0 ** -KEEP_BITS
+
     out = variant_run.outdir
     ds = pipeline.load_run(out, variant="wide")
     stats = json.loads((out / "wide" / "statistics.json").read_text())["directions"]
@@ -368,18 +374,19 @@ def test_statistics_json_values_follow_from_the_stored_maps(variant_run):
         assert ok.sum() > 100
         dphi = ds["phase_deviation"].values[di][ok]
         s = stats[d]
-        assert s["phase_mrad"]["rms"] == pytest.approx(1e3 * ns.rms(dphi), rel=1e-9)
-        assert s["phase_mrad"]["std"] == pytest.approx(1e3 * ns.population_std(dphi), rel=1e-9)
+        assert s["phase_mrad"]["rms"] == pytest.approx(1e3 * ns.rms(dphi), rel=STORED)
+        assert s["phase_mrad"]["std"] == pytest.approx(1e3 * ns.population_std(dphi), rel=STORED)
         assert s["phase_mrad"]["p95"] == pytest.approx(
-            1e3 * ns.percentile_linear(np.abs(dphi), 95), rel=1e-9)
+            1e3 * ns.percentile_linear(np.abs(dphi), 95), rel=STORED)
         px = ds["coord_deviation_px"].values[di]
         mm = ds["coord_deviation_mm"].values[di]
-        np.testing.assert_allclose(mm[ok], 3.0 * px[ok], rtol=1e-12)
-        assert s["coord_mm"]["mean"] == pytest.approx(ns.mean(3.0 * px[ok]), rel=1e-9)
+        np.testing.assert_allclose(mm[ok], 3.0 * px[ok], rtol=2 * STORED)
+        assert s["coord_mm"]["mean"] == pytest.approx(
+            ns.mean(3.0 * px[ok]), rel=STORED, abs=STORED * ns.mean(np.abs(3.0 * px[ok])))
         slope = ds["slope_deviation_urad"].values[di][ok]     # 3-D geometry: tested above
-        assert s["slope_urad"]["rms"] == pytest.approx(ns.rms(slope), rel=1e-9)
+        assert s["slope_urad"]["rms"] == pytest.approx(ns.rms(slope), rel=STORED)
         assert s["slope_urad"]["p95"] == pytest.approx(
-            ns.percentile_linear(np.abs(slope), 95), rel=1e-9)
+            ns.percentile_linear(np.abs(slope), 95), rel=STORED)
         assert s["coord_px"]["n_valid"] == ok.sum()
 
 

@@ -189,12 +189,14 @@ def test_diagnose_and_check_name_the_fixing_setting():
 def test_check_reports_washed_out_fringes():
     sim = Simulation.from_config(make_config(
         brdf={"alpha_x": 0.05, "alpha_y": 0.05},
-        sampling={"n_rays": 64, "estimator": "radiometric"}))
+        sampling={"n_rays": 2048, "estimator": "radiometric"}))
     diag = dg.diagnose(sim, widths=(4.0, 2000.0), directions=("x",), grid=(6, 5), n_samples=1024,
                        n_seeds=3)
     warns = dg.check(diag, max_phase_error_mrad=1e3)
     washed = [w for w in warns if w.code == "washed_out"]
     assert len(washed) == 1 and "4 px" in washed[0].message
+    # the suggestion replaces the washed-out width by a wider one
+    assert 4.0 not in washed[0].suggested and 2000.0 in washed[0].suggested
 
 
 def test_mirror_has_nothing_to_diagnose():

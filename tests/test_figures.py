@@ -50,8 +50,9 @@ def decoded_run(tmp_path_factory):
 
 
 def test_default_figures_are_the_summary(decoded_run):
+    # the summary: set-up, overview and (the run reconstructs the surface) its errors
     assert sorted(p.name for p in (decoded_run.outdir / "figures").iterdir()) == [
-        "overview.png", "setup.png"]
+        "overview.png", "setup.png", "surface_errors.png"]
 
 
 def test_report_redraws_any_figure_from_the_run_folder(decoded_run, tmp_path):
@@ -63,7 +64,7 @@ def test_report_redraws_any_figure_from_the_run_folder(decoded_run, tmp_path):
     res = runner.invoke(app, ["report", str(decoded_run.outdir), "--all", "--workers", "1",
                               "-o", str(tmp_path / "b")])
     assert res.exit_code == 0, res.output
-    assert len(list((tmp_path / "b").iterdir())) == 9
+    assert len(list((tmp_path / "b").iterdir())) == 10
     bad = runner.invoke(app, ["report", str(decoded_run.outdir), "--figure", "nonsense"])
     assert bad.exit_code == 2 and "unknown figure" in bad.output
     missing = runner.invoke(app, ["report", str(tmp_path)])

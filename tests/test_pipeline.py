@@ -14,6 +14,7 @@ import pytest
 
 from pmdsim.run import files as pio
 from pmdsim import run as pipeline
+from pmdsim.run.dataset import KEEP_BITS, keep_bits
 from pmdsim.config import RunConfig, parse_config
 from pmdsim.render import Simulation
 
@@ -155,13 +156,15 @@ def test_dataset_matches_simulation(full_run, full_cfg):
     geo = sim.geometry()
     np.testing.assert_array_equal(ds["surface_mask"].values, geo.surface_mask)
     np.testing.assert_array_equal(ds["monitor_mask"].values, geo.monitor_mask)
-    np.testing.assert_array_equal(ds["specular_u"].values, geo.specular_u)
-    np.testing.assert_array_equal(ds["specular_v"].values, geo.specular_v)
+    # stored as docs/outputs.md says: exact specular points in full float32, camera values
+    # and weight sums in float32 with KEEP_BITS significant bits (pmdsim.run.dataset)
+    np.testing.assert_array_equal(ds["specular_u"].values, geo.specular_u.astype(np.float32))
+    np.testing.assert_array_equal(ds["specular_v"].values, geo.specular_v.astype(np.float32))
     fr = sim.render_fringes((8, 32), ("x", "y"), 4)
-    np.testing.assert_array_equal(ds["fringes"].values, fr.images)
-    np.testing.assert_array_equal(ds["fringe_sums_real"].values, fr.sums.real)
-    np.testing.assert_array_equal(ds["fringe_sums_imag"].values, fr.sums.imag)
-    np.testing.assert_array_equal(ds["f_hit"].values, fr.f_hit)
+    np.testing.assert_array_equal(ds["fringes"].values, keep_bits(fr.images))
+    np.testing.assert_array_equal(ds["fringe_sums_real"].values, keep_bits(fr.sums.real))
+    np.testing.assert_array_equal(ds["fringe_sums_imag"].values, keep_bits(fr.sums.imag))
+    np.testing.assert_array_equal(ds["f_hit"].values, keep_bits(fr.f_hit))
     assert ds["dots"].shape == (3, 40, 48) and ds["images"].shape == (1, 40, 48)
     assert list(ds["dot_u"].values) == [30.0, 129.0, 80.0]
     # Pixels that miss the surface are NaN in the dataset (and 0 in the image files).
@@ -190,12 +193,15 @@ def test_tiffs_are_uint16_with_documented_scaling(full_run):
     values = {"fringes": ds["fringes"].values, "dots": ds["dots"].values,
               "images": ds["images"].values}
     peak = max(np.nanmax(v) for v in values.values())
-    assert result.exposure == pytest.approx(0.95 * 65535 / peak)
+    # the dataset keeps KEEP_BITS significant bits of the values the files were scaled from
+    assert result.exposure == pytest.approx(0.95 * 65535 / peak, rel=2.0 ** -KEEP_BITS)
     tif = pio.read_image(result.outdir / "fringes" / "y_w032_k1.tif")
     assert tif.dtype == np.uint16 and tif.shape == (40, 48)
     ref = values["fringes"][1, 1, 1].astype(np.float64) * result.exposure
     expected = np.where(np.isnan(ref), 0, np.rint(ref)).astype(np.uint16)
-    np.testing.assert_array_equal(tif, expected)
+    # within one count: the stored value is the file's value to 2**-17 relative
+    diff = np.abs(tif.astype(np.int64) - expected.astype(np.int64))
+    assert diff.max() <= 1 and np.mean(diff == 0) > 0.9
     brightest = max(pio.read_image(p).max() for p in result.image_paths)
     assert brightest == round(0.95 * 65535)
 
@@ -302,7 +308,7 @@ def test_variants_become_sub_runs(tmp_path):
     # The mirror: full modulation, values = monitor luminance at the specular point.
     mirror = pipeline.load_run(out, variant="mirror")
     mod = np.hypot(mirror["fringe_sums_real"], mirror["fringe_sums_imag"]) / mirror["f_hit"]
-    np.testing.assert_allclose(np.nanmin(mod.values), 1.0, rtol=1e-9)
+    np.testing.assert_allclose(np.nanmin(mod.values), 1.0, rtol=4 * 2.0 ** -KEEP_BITS)
 
 
 @pytest.mark.parametrize("name", ["..", "figures", "config.json"])

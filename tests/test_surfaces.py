@@ -250,3 +250,51 @@ def test_compiled_trace_matches_numpy_trace_on_curved_surfaces(surface):
     u, v, on = trace.specular_monitor_coords(scene, hits)
     np.testing.assert_allclose(spec[:, 0], u.reshape(-1), rtol=0, atol=1e-10)
     assert np.isfinite(geo).all()
+
+
+def test_bspline_pair_matches_scipy_map_coordinates():
+    from pmdsim.kernels.surface import bspline_eval_pair
+    from pmdsim.scene.surfaces import bspline_coefficients
+
+    rng = np.random.default_rng(5)
+    a, b = rng.normal(size=(2, 23, 31))
+    rows = rng.uniform(0, 22, 200)
+    cols = rng.uniform(0, 30, 200)
+    rows[:2], cols[:2] = (0.0, 22.0), (30.0, 0.0)  # the grid's corners
+    ou, ov = np.empty(200), np.empty(200)
+    bspline_eval_pair(bspline_coefficients(a), bspline_coefficients(b), rows, cols, ou, ov)
+    np.testing.assert_allclose(ou, ndimage.map_coordinates(a, [rows, cols], order=3, mode="mirror"), atol=1e-12)
+    np.testing.assert_allclose(ov, ndimage.map_coordinates(b, [rows, cols], order=3, mode="mirror"), atol=1e-12)
+
+
+@pytest.mark.parametrize("axis", [None, (0.2, 0.1, 1.0)])
+def test_turning_frame_on_a_sphere_is_radial_about_the_axis(axis):
+    """Rotational BRDF frame on a curved part: the turning grooves are the curves where the
+    surface meets cylinders about the turning axis, so x (tangential, along the groove) is
+    perpendicular to the normal and to r (the point's offset from the axis); y (radial) is
+    tangent to the surface and points away from the axis. Default axis: the vertex normal."""
+    from conftest import make_config
+
+    from pmdsim import trace
+    from pmdsim.scene import Scene
+
+    frame = {"frame": "rotational", "centre_mm": [0.0, 0.0, 0.0]}
+    if axis is not None:
+        frame["axis"] = list(axis)
+    cfg = make_config(surface={"__replace__": dict(type="sphere", radius_mm=-250.0,
+                                                   aperture=dict(shape="circular", radius_mm=45.0))},
+                      anisotropy={"__replace__": frame})
+    scene = Scene.from_config(cfg)
+    hits = trace.trace_primary(scene)
+    v = hits.valid
+    p, n, x, y = hits.point[v], hits.normal[v], hits.x_axis[v], hits.y_axis[v]
+    a = np.array([0.0, 0.0, 1.0]) if axis is None else np.asarray(axis) / np.linalg.norm(axis)
+    r = p - (p @ a)[:, None] * a  # from the axis to the point, perpendicular to it
+    far = np.linalg.norm(r, axis=1) > 1.0
+    assert far.sum() > 100
+    rn = r / np.linalg.norm(r, axis=1, keepdims=True)
+    np.testing.assert_allclose(np.sum(x * rn, 1)[far], 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.sum(x * n, 1), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.sum(y * n, 1), 0.0, atol=1e-12)
+    assert np.all(np.sum(y * r, 1)[far] > 0)
+    np.testing.assert_allclose(np.cross(x, y), n, atol=1e-12)

@@ -21,20 +21,25 @@ from __future__ import annotations
 
 from ._version import __version__
 
-from . import patterns
-from .measure import decode
-from .config import ConfigError, RunConfig, load_config, parse_config
-from .render import Simulation
-from .scene import Scene
-
-_LAZY = {"run_simulation", "load_run", "RunResult"}
+#: Imported on first use (``pmdsim.Simulation``, ``from pmdsim import run_simulation``):
+#: ``import pmdsim`` and the command line's first checks stay fast (no Numba, xarray,
+#: zarr), so that e.g. a second run on a busy output folder fails at once.
+_LAZY = {
+    "ConfigError": ".config", "RunConfig": ".config", "load_config": ".config",
+    "parse_config": ".config",
+    "run_simulation": ".run", "load_run": ".run", "RunResult": ".run",
+    "Simulation": ".render", "Scene": ".scene", "patterns": None, "decode": ".measure",
+}
 
 
 def __getattr__(name: str):
     if name in _LAZY:
-        from . import run
+        import importlib
 
-        return getattr(run, name)
+        where = _LAZY[name]
+        if where is None:
+            return importlib.import_module(f".{name}", __name__)
+        return getattr(importlib.import_module(where, __name__), name)
     raise AttributeError(f"module 'pmdsim' has no attribute {name!r}")
 
 

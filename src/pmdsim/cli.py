@@ -13,12 +13,15 @@
     pmdsim version
     pmdsim --help
 
-Bad input (an invalid configuration, a missing file, an existing output folder) prints one
-red message and exits with code 2, without a traceback.
+Bad input (an invalid configuration or set-up, a missing or unreadable input file, an
+existing or busy output folder) prints one red message and exits with code 2, without a
+traceback. Anything else is a bug: Python's traceback and exit code 1. Ctrl-C (SIGINT) and
+SIGTERM stop a run, remove its temporary folder and exit with 130 / 143.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 
@@ -45,6 +48,52 @@ app = typer.Typer(
 
 #: Exit code for bad input (configuration, files, output folder).
 EXIT_BAD_INPUT = 2
+#: Exit codes of a run stopped by SIGINT (Ctrl-C) / SIGTERM (128 + signal number).
+EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143
+
+
+def _bad_input() -> tuple[type[BaseException], ...]:
+    """The exceptions that mean bad input (exit code 2): everything else is a bug."""
+    from .config import ConfigError, InputError
+
+    return (ConfigError, InputError, FileExistsError, PermissionError, NotADirectoryError,
+            IsADirectoryError)
+
+
+@contextlib.contextmanager
+def _guard():
+    """Bad input -> one red line, exit 2; SIGINT/SIGTERM -> a note, exit 130/143 (the run's
+    temporary folder is already removed); anything else propagates (traceback, exit 1)."""
+    from .run.claim import Terminated
+
+    try:
+        yield
+    except _bad_input() as err:
+        _fail(str(err))
+    except KeyboardInterrupt as err:
+        term = isinstance(err, Terminated)
+        _console(stderr=True).print(
+            f"{'terminated' if term else 'interrupted'}: stopped; nothing was written "
+            "(the temporary folder was removed)", style="bold red", markup=False)
+        raise typer.Exit(EXIT_TERMINATED if term else EXIT_INTERRUPTED) from None
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        from ._version import __version__
+
+        _console().print(f"pmdsim {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", callback=_version_callback,
+                                 is_eager=True, help="Print the pmdsim version and exit."),
+) -> None:
+    """Simulate Phase Measuring Deflectometry (PMD) of scattering surfaces by reverse ray
+    tracing with a BRDF-weighted ray bundle per camera pixel."""
 
 
 def _console(stderr: bool = False) -> Console:
@@ -87,23 +136,27 @@ def simulate(
     reference (statistics.json, summary.txt, deviation figures), and check the sampling
     (diagnostics: warnings, each naming the setting that fixes it; bounds in the
     configuration's diagnostics section)."""
-    from .config import ConfigError, load_config
-    from .report.text import warning_text
-    from .run import run_simulation
-    from .run.files import check_output_dir
+    from .run.claim import OutputBusy, check_free
+
+    try:  # a run already writing there: fail before the heavy imports (pydantic, NumPy)
+        check_free(output)
+    except OutputBusy as err:
+        _fail(str(err))
+    from .config import load_config
 
     console = _console()
-    try:
+    with _guard():
         cfg = load_config(config)
+        from .report.text import warning_text
+        from .run import run_simulation
+        from .run.files import check_output_dir
+
         check_output_dir(output, overwrite)
-    except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
-            NotADirectoryError, ValueError) as err:
-        _fail(str(err))
     figures = False if no_figures else None
     t0 = time.perf_counter()
     columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                TimeElapsedColumn(), TimeRemainingColumn())
-    try:
+    with _guard():
         with Progress(*columns, console=console, transient=False) as bar:
             task = bar.add_task(f"simulating {cfg.name}", total=None)
 
@@ -113,9 +166,6 @@ def simulate(
             result = run_simulation(cfg, output, progress, overwrite=overwrite,
                                     figures=figures, decode=decode,
                                     diagnostics=not no_diagnostics)
-    except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
-            NotADirectoryError, ValueError) as err:
-        _fail(str(err))
     wall = time.perf_counter() - t0
 
     h, w = result.shape
@@ -139,6 +189,10 @@ def simulate(
                   f"{chain_time}{diag_time}writing {result.timings['write']:.2f} s, "
                   f"figures {result.timings['figures']:.2f} s)")
     table.add_row("run folder", str(result.outdir))
+    if result.sizes:
+        from .run.files import size_text
+
+        table.add_row("size", size_text(result.sizes).removeprefix("run folder: "))
     if result.variants:
         for sub in result.variants:
             table.add_row(f"variant {sub.config.name}",
@@ -200,19 +254,22 @@ def _print_statistics(console: Console, result) -> None:
     per = {name: st for name, st in per.items() if "directions" in st}  # decoded ones
     if not per:
         return
-    table = Table(title="deviation from the ideal specular reference, RMS/P95 over the valid "
-                  "pixels (all statistics: statistics.json, summary.txt)", title_justify="left")
-    for col in ("variant", "dir", "phase mrad", "monitor px", "slope urad", "valid"):
+    table = Table(title="deviation from the ideal specular reference (decoded mirror) and, "
+                  "for the monitor coordinate, from the exact specular point P; RMS/P95 over "
+                  "the valid pixels (all statistics: statistics.json, summary.txt)",
+                  title_justify="left")
+    for col in ("variant", "dir", "phase mrad", "monitor px", "px vs exact P", "slope urad",
+                "valid"):
         table.add_column(col, justify="left" if col in ("variant", "dir") else "right",
                          no_wrap=True)
 
     def pair(s):
-        return "nan" if s["rms"] is None else f"{s['rms']:.3g}/{s['p95']:.3g}"
+        return "nan" if not s or s["rms"] is None else f"{s['rms']:.3g}/{s['p95']:.3g}"
 
     for name, st in per.items():
         for d, s in st["directions"].items():
             table.add_row(name, d.upper(), pair(s["phase_mrad"]), pair(s["coord_px"]),
-                          pair(s["slope_urad"]),
+                          pair(s.get("coord_vs_exact_px")), pair(s["slope_urad"]),
                           f"{100 * s['coord_px']['valid_fraction']:.1f} %")
     console.print(table)
 
@@ -260,14 +317,16 @@ def decode(
     statistics.json and PNG maps."""
     from .run.decode_run import decode_files, make_setup
 
+    from .config import InputError
+
     console = _console()
-    try:
+    with _guard():
         width_list = None
         if widths is not None:
             try:
                 width_list = [float(x) for x in widths.replace(" ", "").split(",") if x]
             except ValueError:
-                raise ValueError(f"--widths must be comma-separated numbers (monitor px), "
+                raise InputError(f"--widths must be comma-separated numbers (monitor px), "
                                  f"got {widths!r}") from None
         setup = make_setup(widths=width_list, shifts=shifts, direction=direction,
                            extent_px=extent_px, method=method, pitch_mm=pitch_mm,
@@ -276,9 +335,6 @@ def decode(
                               min_relative_amplitude=min_relative_amplitude,
                               max_order_residual=max_order_residual, overwrite=overwrite,
                               figures=not no_figures, from_run=from_run, variant=variant)
-    except (FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError,
-            ValueError) as err:
-        _fail(str(err))
     st = result.statistics
     table = Table(title=f"pmdsim decode ({setup.direction.upper()}, {setup.method})",
                   show_header=False, title_justify="left")
@@ -304,7 +360,9 @@ def _numbers(text: str | None, name: str, kind=float) -> list | None:
     try:
         return [kind(x) for x in text.replace(" ", "").split(",") if x]
     except ValueError:
-        raise ValueError(f"{name} must be comma-separated numbers, got {text!r}") from None
+        from .config import InputError
+
+        raise InputError(f"{name} must be comma-separated numbers, got {text!r}") from None
 
 
 @app.command()
@@ -337,8 +395,10 @@ def converge(
     from .run.convergence import run_convergence
     from .studies.convergence import DEFAULT_N, DEFAULT_THETA_DEG
 
+    from .config import InputError
+
     console = _console()
-    try:
+    with _guard():
         cfg = load_config(config)
         ns = _numbers(n_values, "--n-values", int) or DEFAULT_N
         thetas = _numbers(theta, "--theta") or DEFAULT_THETA_DEG
@@ -346,7 +406,7 @@ def converge(
         try:
             cw, ch = (int(x) for x in camera.lower().split("x"))
         except ValueError:
-            raise ValueError(f"--camera must be WxH in px, e.g. 160x128, got {camera!r}") from None
+            raise InputError(f"--camera must be WxH in px, e.g. 160x128, got {camera!r}") from None
         t0 = time.perf_counter()
         with console.status(f"convergence study of {cfg.name}") as status:
             result = run_convergence(
@@ -354,9 +414,6 @@ def converge(
                 camera_size=(cw, ch), figure=not no_figure, overwrite=overwrite,
                 progress=lambda msg: status.update(f"convergence study of {cfg.name}: {msg}"),
                 diagnostics=not no_diagnostics)
-    except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
-            NotADirectoryError, ValueError) as err:
-        _fail(str(err))
     wall = time.perf_counter() - t0
 
     rows = result.rows
@@ -390,6 +447,9 @@ def budget(
     output: Path = typer.Option(..., "-o", "--output", help="Output folder to create."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
     no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+    truth: str = typer.Option("centre", "--truth", help="Ground truth of the system rows: "
+                              "'centre' (the chief ray through each pixel centre) or "
+                              "'footprint' (averaged over the pixel's vision rays)."),
 ) -> None:
     """Error budget: the chain with each system effect of CONFIG alone and all together on
     the ideal mirror, and the surface's scattering minus that mirror; deviation from the
@@ -405,12 +465,14 @@ def budget(
         t0 = time.perf_counter()
         with console.status(f"error budget of {cfg.name}") as status:
             result = run_budget(cfg, output, figure=not no_figure, overwrite=overwrite,
-                                progress=lambda msg: status.update(f"error budget of {cfg.name}: {msg}"))
+                                progress=lambda msg: status.update(f"error budget of {cfg.name}: {msg}"),
+                                truth=truth)
     except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
             NotADirectoryError, ValueError) as err:
         _fail(str(err))
+    what = "centre ray" if truth == "centre" else "vision rays (footprint average)"
     console.print(f"pmdsim budget '{cfg.name}' ({time.perf_counter() - t0:.1f} s); deviation from "
-                  "the exact reflection point of each pixel's centre ray")
+                  f"the exact reflection point of each pixel's {what}")
     console.print(budget_text(result.rows), markup=False)
     console.print(f"table  {result.table}")
     if result.figure is not None:

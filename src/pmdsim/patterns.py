@@ -12,6 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .config import InputError, MissingInputError
+from .imagefile import read_image_file
+
 DIRECTIONS = ("x", "y")
 
 
@@ -76,22 +79,23 @@ def load_monitor_image(path: str | Path, monitor_shape: tuple[int, int]) -> np.n
     """
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"patterns.images.files: no such file: {path}")
-    if path.suffix.lower() in (".tif", ".tiff"):
-        import tifffile
-
-        img = tifffile.imread(path)
-    else:
-        import matplotlib.image
-
-        img = matplotlib.image.imread(path)
+        raise MissingInputError(f"patterns.images.files: no such file: {path}")
+    try:
+        data = read_image_file(path)
+    except Exception as exc:  # a corrupt, truncated or mislabelled file
+        raise InputError(f"patterns.images.files: cannot read {path}: {exc}") from exc
+    img = data.array
+    if not data.channels and img.ndim == 3 and img.shape[0] == 1:
+        img = img[0]  # a single-page stack
+    if not data.channels and img.ndim != 2:
+        raise InputError(f"patterns.images.files: {path} holds {data.what}: give one 2-D image")
     if np.issubdtype(img.dtype, np.integer):
         img = img.astype(np.float64) / np.iinfo(img.dtype).max
     img = np.asarray(img, np.float64)
     if img.ndim == 3:
         img = img[..., :3].mean(axis=-1)
     if img.shape != tuple(monitor_shape):
-        raise ValueError(
+        raise InputError(
             f"patterns.images.files: {path} is {img.shape[1]} x {img.shape[0]} px, but the monitor "
             f"is {monitor_shape[1]} x {monitor_shape[0]}: resize the image or fix monitor.resolution"
         )

@@ -23,6 +23,17 @@ def brdf_from_config(cfg) -> BRDF:
     raise ValueError(f"brdf.model: unknown model {cfg.model!r}")
 
 
+def equivalent_alphas(cfg) -> tuple[float, float]:
+    """(alpha along local x, alpha along local y) of a BRDF configuration: its own alphas
+    (Ward, Beckmann, Gaussian slopes) or sqrt(2) x the RMS slope per axis of its slope
+    density (kinematic, tabulated, turned); (0, 0) for the mirror."""
+    if cfg.model == "mirror":
+        return 0.0, 0.0
+    if cfg.model in ("ward", "beckmann") or getattr(cfg, "density", None) == "gaussian":
+        return cfg.alphas
+    return brdf_from_config(cfg).smith_alphas
+
+
 def _slope_brdf(cfg) -> SlopeDensityBRDF:
     from . import slope_density as sd
     from . import turning
@@ -44,5 +55,5 @@ def _slope_brdf(cfg) -> SlopeDensityBRDF:
     return SlopeDensityBRDF(dens, cfg.rho_s, smith, name=cfg.model)
 
 
-__all__ = ["BRDF", "Beckmann", "Mirror", "SlopeDensityBRDF", "Ward", "brdf_from_config",
+__all__ = ["BRDF", "Beckmann", "Mirror", "SlopeDensityBRDF", "Ward", "brdf_from_config", "equivalent_alphas",
            "lobe_weight"]

@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
-from ._jit import fastjit
+from ._jit import fastjit, parallel_jit
 
 SURF_SAG = 1
 
@@ -348,3 +349,35 @@ def sag_many(surf, x, y, z_out, zx_out, zy_out, ok_out):
         z_out[q] = z if ok else np.nan
         zx_out[q] = zx if ok else np.nan
         zy_out[q] = zy if ok else np.nan
+
+
+@parallel_jit
+def bspline_eval_pair(cu, cv, rows, cols, out_u, out_v):
+    """Cubic B-spline of two coefficient grids (each padded by 2 on every side, as from
+    :func:`pmdsim.scene.surfaces.bspline_coefficients`) at fractional (rows, cols) of the
+    unpadded grid, clamped to it; shares the weights between the two grids."""
+    ny = cu.shape[0] - 4
+    nx = cu.shape[1] - 4
+    for q in numba.prange(rows.shape[0]):
+        fy = min(max(rows[q], 0.0), ny - 1.0)
+        fx = min(max(cols[q], 0.0), nx - 1.0)
+        iy = min(int(math.floor(fy)), ny - 2)
+        ix = min(int(math.floor(fx)), nx - 2)
+        wx0, wx1, wx2, wx3, _, _, _, _ = _bspline3(fx - ix)
+        wy0, wy1, wy2, wy3, _, _, _, _ = _bspline3(fy - iy)
+        wx = (wx0, wx1, wx2, wx3)
+        wy = (wy0, wy1, wy2, wy3)
+        su = 0.0
+        sv = 0.0
+        for a in range(4):
+            ru = 0.0
+            rv = 0.0
+            r = iy + 1 + a
+            for b in range(4):
+                c = ix + 1 + b
+                ru += wx[b] * cu[r, c]
+                rv += wx[b] * cv[r, c]
+            su += wy[a] * ru
+            sv += wy[a] * rv
+        out_u[q] = su
+        out_v[q] = sv

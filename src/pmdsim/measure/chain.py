@@ -184,10 +184,14 @@ class ChainResult:
     min_modulation_ratio: float
     surface_mask: np.ndarray
     notes: tuple = field(default=())
+    #: (H, W) bool: surface pixels whose bundle puts more than the set share of its weight
+    #: off the monitor (``pmdsim.studies.coverage.off_monitor_mask``): never valid, counted
+    off_monitor: np.ndarray | None = None
 
 
 def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, pitch_mm: float,
-            decode_cfg, shifts: int, slope_geometry: SlopeGeometry | None = None) -> ChainResult:
+            decode_cfg, shifts: int, slope_geometry: SlopeGeometry | None = None,
+            off_monitor: np.ndarray | None = None) -> ChainResult:
     """Deviation of every decoded direction from the decoded reference.
 
     Parameters
@@ -202,14 +206,19 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
     slope_geometry : SlopeGeometry, optional
         Surface points, camera centre and monitor for the 3-D slope conversion (default:
         the small-angle coord / (2 d), wrong by cos(theta_i) across the plane of incidence).
+    off_monitor : (H, W) bool ndarray, optional
+        Pixels whose bundle hangs off the monitor: excluded from the valid pixels and
+        counted (``pixels.lobe_off_monitor`` of the statistics).
     """
     per = {}
+    keep = None if off_monitor is None else ~np.asarray(off_monitor, bool)
     for d, res in decoded.items():
         ref = reference[d]
         with warnings.catch_warnings():  # pixels off the surface: all-NaN modulation ratios
             warnings.simplefilter("ignore", RuntimeWarning)
             dev = analysis.compare_direction(
-                d, res.absolute_phase, res.monitor_coord_px, res.modulation, res.valid,
+                d, res.absolute_phase, res.monitor_coord_px, res.modulation,
+                res.valid if keep is None else res.valid & keep,
                 ref.absolute_phase, ref.monitor_coord_px, ref.modulation, ref.valid, pitch_mm,
                 decode_cfg.min_modulation_ratio)
         slope = slope_deviation_urad(d, dev.coord_px, geometry, slope_geometry, distance_mm, pitch_mm)
@@ -219,7 +228,8 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
             geometry.specular_u if d == "x" else geometry.specular_v)
     first = next(iter(decoded.values()))
     return ChainResult(per, distance_mm, first.widths_px, int(shifts), first.method, pitch_mm,
-                       decode_cfg.min_modulation_ratio, geometry.surface_mask)
+                       decode_cfg.min_modulation_ratio, geometry.surface_mask,
+                       off_monitor=None if off_monitor is None else np.asarray(off_monitor, bool))
 
 
 # ----------------------------------------------------------------------------- statistics
@@ -276,13 +286,18 @@ def statistics(chain: ChainResult, name: str) -> dict:
                               "without flags (n_masked = considered - valid)",
             "low_modulation": "considered pixels whose modulation B/A of some width is below "
                               "min_modulation_ratio x the reference's (masked, counted)",
+            "lobe_off_monitor": "considered pixels whose bundle puts more than "
+                                "diagnostics.max_off_monitor_fraction of its weight off the "
+                                "monitor (masked, counted; not low_modulation)",
         },
         "directions": {},
     }
     for d, dc in chain.directions.items():
         dv = dc.deviation
         considered = np.asarray(dc.reference.valid, bool)
-        flagged = considered & ~dc.decoded.valid & ~dv.low_modulation
+        off = (np.zeros_like(considered) if chain.off_monitor is None
+               else considered & chain.off_monitor & ~dv.low_modulation)
+        flagged = considered & ~dc.decoded.valid & ~dv.low_modulation & ~off
         exact = dc.exact_px
         ref_q = np.where(considered, dc.reference.monitor_coord_px - exact, np.nan)
         vs_exact = np.where(dv.valid, dc.decoded.monitor_coord_px - exact, np.nan)
@@ -295,6 +310,7 @@ def statistics(chain: ChainResult, name: str) -> dict:
                 "valid": int(np.count_nonzero(dv.valid)),
                 "low_modulation": int(np.count_nonzero(dv.low_modulation)),
                 "decode_flagged": int(np.count_nonzero(flagged)),
+                "lobe_off_monitor": int(np.count_nonzero(off)),
                 "decode_flags_of_considered": _flag_counts(dc.decoded.flags, considered),
                 "reference_flagged_on_surface": int(np.count_nonzero(
                     chain.surface_mask & ~considered)),

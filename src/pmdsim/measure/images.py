@@ -8,6 +8,9 @@ from typing import Iterable
 
 import numpy as np
 
+from ..config import InputError, MissingInputError
+from ..imagefile import read_image_file
+
 
 _TIFF_SUFFIXES = (".tif", ".tiff")
 
@@ -21,33 +24,16 @@ def _read_one(path: Path) -> np.ndarray:
     """(pages, H, W) array of one file, raw counts."""
     suffix = path.suffix.lower()
     if suffix not in _TIFF_SUFFIXES + _PNG_SUFFIXES:
-        raise ValueError(f"paths: {str(path)!r} is neither TIFF (.tif, .tiff) nor PNG (.png)")
-    channels = None
+        raise InputError(f"paths: {str(path)!r} is neither TIFF (.tif, .tiff) nor PNG (.png)")
     try:
-        if suffix in _TIFF_SUFFIXES:
-            import tifffile
-
-            with tifffile.TiffFile(path) as tif:
-                series = tif.series[0]
-                if "S" in series.axes:
-                    channels = f"axes {series.axes!r}, shape {series.shape}"
-                else:
-                    img = np.asarray(series.asarray())
-        else:
-            # Pillow (a matplotlib dependency) keeps the raw 8/16-bit counts, as TIFF does;
-            # matplotlib.image.imread would rescale them to [0, 1].
-            from PIL import Image
-
-            with Image.open(path) as png:
-                if png.mode not in ("L", "I", "I;16", "I;16B", "I;16L", "F"):
-                    channels = f"PNG mode {png.mode!r}"
-                else:
-                    img = np.asarray(png)
+        data = read_image_file(path)
     except Exception as exc:  # a corrupt, truncated or mislabelled file
-        raise ValueError(f"paths: cannot read image file {str(path)!r}: {exc}") from exc
+        raise InputError(f"paths: cannot read image file {str(path)!r}: {exc}") from exc
+    img = data.array
+    channels = data.what if data.channels else None
     if channels is not None or img.ndim < 2 or img.dtype.kind not in "uif":
         what = channels or f"array shape {img.shape}, dtype {img.dtype}"
-        raise ValueError(
+        raise InputError(
             f"paths: {str(path)!r} is not a single-channel image ({what}); convert it to "
             "grayscale"
         )
@@ -81,17 +67,17 @@ def load_image_stack(paths: Iterable[str | os.PathLike]) -> np.ndarray:
         paths = [paths]
     path_list = [Path(p) for p in paths]
     if not path_list:
-        raise ValueError("paths must name at least one image file")
+        raise InputError("paths must name at least one image file")
     stack = []
     shape = None
     for path in path_list:
         if not path.is_file():
-            raise FileNotFoundError(f"paths: image file {str(path)!r} does not exist")
+            raise MissingInputError(f"paths: image file {str(path)!r} does not exist")
         img = _read_one(path)
         if shape is None:
             shape = img.shape[1:]
         elif img.shape[1:] != shape:
-            raise ValueError(
+            raise InputError(
                 f"paths: {str(path)!r} has size {img.shape[1:]} but the first image has {shape}"
             )
         stack.append(img.astype(np.float64))

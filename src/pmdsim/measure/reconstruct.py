@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from ..kernels.surface import bspline_eval_pair
 from .integrate import _lstsq, southwell
 
 __all__ = [
@@ -170,8 +171,8 @@ def _spline_maps(u, v, valid):
         idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
         uf = _smooth_fill(u, valid, idx)
         vf = _smooth_fill(v, valid, idx)
-    cu = ndimage.spline_filter(uf, order=3, mode="mirror")
-    cv = ndimage.spline_filter(vf, order=3, mode="mirror")
+    cu = np.pad(ndimage.spline_filter(uf, order=3, mode="mirror"), 2, mode="reflect")
+    cv = np.pad(ndimage.spline_filter(vf, order=3, mode="mirror"), 2, mode="reflect")
     return cu, cv
 
 
@@ -274,9 +275,10 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         col = np.where(fin, col, -10.0)
         row = np.where(fin, row, -10.0)
         node_ok = node_ok & fin & _support_ok(ok_pix, col, row)
-        coords = np.stack([row[node_ok], col[node_ok]])
-        mu = ndimage.map_coordinates(cu, coords, order=3, mode="mirror", prefilter=False)
-        mv = ndimage.map_coordinates(cv, coords, order=3, mode="mirror", prefilter=False)
+        mu = np.empty(int(node_ok.sum()))
+        mv = np.empty_like(mu)
+        # = ndimage.map_coordinates(..., order=3, mode="mirror") of u and v, in one pass
+        bspline_eval_pair(cu, cv, np.ascontiguousarray(row[node_ok]), np.ascontiguousarray(col[node_ok]), mu, mv)
         m3 = monitor.pixel_to_world(mu, mv)
         n = bisector_normals(s[node_ok], cam_pos, m3)
         a, b = slopes_in_frame(n, pf.rotation)

@@ -42,6 +42,7 @@ CLASS_COLOURS = {
     "decode flagged": "#111111",
     "no valid reference": "#bdbdbd",
     "off surface": "#ffffff",
+    "bundle off monitor": "#8c564b",
 }
 DEV_CMAP = "RdBu_r"
 DIR_COLOURS = {"x": "#1f77b4", "y": "#ff7f0e"}
@@ -52,6 +53,21 @@ DEVIATIONS = (
     ("coord_deviation_px", 1.0, "monitor coordinate deviation (monitor px)", "coord (px)"),
     ("slope_deviation_urad", 1.0, "slope deviation (urad)", "slope (urad)"),
 )
+
+
+#: What each coordinate deviation is measured against, as the figures label it.
+VS_MIRROR = "vs decoded mirror reference"
+VS_EXACT = "vs exact specular point"
+
+
+def coord_vs_exact(ds, d: str) -> np.ndarray:
+    """(H, W) decoded monitor coordinate minus the exact specular point P (monitor px) on
+    the valid pixels: what the surface's scattering does to the measurement, without the
+    decoded mirror reference's own quantisation (which ``coord_deviation_px`` contains on a
+    ``nearest`` monitor)."""
+    exact = ds["specular_u" if d == "x" else "specular_v"].values
+    coord = ds["monitor_coord_px"].sel(direction=d).values
+    return np.where(ds["valid"].sel(direction=d).values, coord - exact, np.nan)
 
 
 def _dirs(ds) -> list[str]:
@@ -91,9 +107,19 @@ def _classes(ds, d: str):
     low = ds["low_modulation"].sel(direction=d).values.astype(bool)
     surface = ds["surface_mask"].values.astype(bool)
     considered = ds["reference_decode_flags"].sel(direction=d).values == 0
-    flagged = considered & ~valid & ~low
+    flagged = considered & ~valid & ~low & ~_off_monitor(ds, d)
     no_ref = surface & ~considered
     return valid, low, flagged, no_ref, ~surface
+
+
+def _off_monitor(ds, d: str) -> np.ndarray:
+    """Considered pixels excluded because their bundle hangs off the monitor (not low
+    modulation): their own class, ``lobe_off_monitor``; all False for older runs."""
+    if "lobe_off_monitor" not in ds:
+        return np.zeros(ds["surface_mask"].shape, bool)
+    considered = ds["reference_decode_flags"].sel(direction=d).values == 0
+    low = ds["low_modulation"].sel(direction=d).values.astype(bool)
+    return considered & ds["lobe_off_monitor"].values.astype(bool) & ~low
 
 
 def _overlay(ax, ds, d: str, legend: bool = False, counts: bool = True):
@@ -102,7 +128,8 @@ def _overlay(ax, ds, d: str, legend: bool = False, counts: bool = True):
     rgba = np.zeros(valid.shape + (4,))
     handles = []
     for name, m in (("off surface", off), ("no valid reference", no_ref),
-                    ("decode flagged", flagged), ("low modulation", low)):
+                    ("decode flagged", flagged), ("low modulation", low),
+                    ("bundle off monitor", _off_monitor(ds, d))):
         rgba[m] = to_rgba(CLASS_COLOURS[name])
         if m.any() or name in ("low modulation", "decode flagged"):
             lab = f"{name}: {int(m.sum()):,}" if counts else name
@@ -170,32 +197,44 @@ def plot_phase(ds, path, name: str | None = None) -> Path:
 
 # ----------------------------------------------------------------------------- deviation
 def plot_deviation(ds, path, name: str | None = None) -> Path:
-    """Phase (mrad), coordinate (monitor px) and slope (urad) deviation maps, rows =
-    directions; one symmetric colour scale per quantity (X and Y comparable)."""
+    """Phase (mrad), monitor coordinate (monitor px) and slope (urad) deviation maps, rows =
+    directions. The coordinate deviation is shown twice, labelled on the figure: against the
+    decoded mirror reference (what a PMD system compares with; on a ``nearest`` monitor it
+    contains the mirror's own +-0.5 px pixel quantisation) and against the exact specular
+    point P (what the scattering does). One symmetric colour scale per quantity (X and Y
+    comparable; both coordinate columns share one)."""
     name = _label(ds, name)
     dirs = _dirs(ds)
     stats = _stats(ds)["directions"]
-    keys = {"phase_deviation": "phase_mrad", "coord_deviation_px": "coord_px",
-            "slope_deviation_urad": "slope_urad"}
-    fig = _figure(_map_size(ds, 3, len(dirs), 3.9, 1.6, 1.1))
-    axes = fig.subplots(len(dirs), 3, squeeze=False)
-    for j, (var, scale, label, _) in enumerate(DEVIATIONS):
-        maps = [ds[var].sel(direction=d).values * scale for d in dirs]
-        lim = symmetric_limit(maps)
+    coord_mirror = [ds["coord_deviation_px"].sel(direction=d).values for d in dirs]
+    coord_exact = [coord_vs_exact(ds, d) for d in dirs]
+    coord_lim = symmetric_limit(coord_mirror + coord_exact)
+    panels = [  # (maps, colour limit, title, unit, statistics key, colour-bar label)
+        ([ds["phase_deviation"].sel(direction=d).values * 1e3 for d in dirs], None,
+         f"phase deviation {VS_MIRROR}", "mrad", "phase_mrad", "phase deviation (mrad)"),
+        (coord_mirror, coord_lim, f"coordinate deviation\n{VS_MIRROR}", "px", "coord_px",
+         f"monitor coordinate {VS_MIRROR} (monitor px)"),
+        (coord_exact, coord_lim, f"coordinate deviation\n{VS_EXACT}", "px",
+         "coord_vs_exact_px", f"monitor coordinate {VS_EXACT} (monitor px)"),
+        ([ds["slope_deviation_urad"].sel(direction=d).values for d in dirs], None,
+         f"slope deviation {VS_MIRROR}", "urad", "slope_urad", "slope deviation (urad)"),
+    ]
+    fig = _figure(_map_size(ds, len(panels), len(dirs), 3.9, 1.6, 1.4))
+    axes = fig.subplots(len(dirs), len(panels), squeeze=False)
+    for j, (maps, lim, title, unit, key, label) in enumerate(panels):
+        lim = symmetric_limit(maps) if lim is None else lim
         im = None
         for i, d in enumerate(dirs):
             ax = axes[i, j]
             im = imshow(ax, maps[i], cmap=DEV_CMAP, vmin=-lim, vmax=lim, interpolation="nearest")
             _overlay(ax, ds, d, legend=(j == 0))
-            s = stats[d][keys[var]]
-            unit = label.split(" (")[1].rstrip(")")
-            ax.set_title(f"{name}: {d.upper()} {label.split(' (')[0]}\n"
-                         f"mean {_g(s['mean'])}, RMS {_g(s['rms'])}, P95 {_g(s['p95'])} {unit}",
-                         fontsize=8)
+            st = stats[d].get(key) or {}
+            ax.set_title(f"{name}: {d.upper()} {title}\nmean {_g(st.get('mean'))}, "
+                         f"RMS {_g(st.get('rms'))}, P95 {_g(st.get('p95'))} {unit}", fontsize=8)
             _image_axes(ax)
         cb = fig.colorbar(im, ax=list(axes[:, j]), orientation="horizontal", shrink=0.9,
                           extend="both", pad=0.02)
-        cb.set_label(label + f", scale +-{lim:g} (P99.5)", fontsize=8)
+        cb.set_label(label + f"\nscale +-{lim:g} (P99.5)", fontsize=8)
     return _save(fig, path)
 
 
@@ -221,21 +260,34 @@ def plot_histograms(ds, path, name: str | None = None) -> Path:
     return _save(fig, path)
 
 
-def _histogram(ax, data: dict, colours: dict, stats: dict, bins: int = 121, lim=None):
+def _histogram(ax, data: dict, colours: dict, stats: dict, bins: int = 121, lim=None,
+               log: bool = False, styles: dict | None = None):
+    """Step histograms of ``data`` (label -> values) on a symmetric range; ``log``: a log
+    count axis (set before the limits, so that the empty bins do not collapse it)."""
     lim = symmetric_limit(data.values(), 99.9) if lim is None else lim
+    styles = styles or {}
+    if log:
+        ax.set_yscale("log")
     edges = np.linspace(-lim, lim, bins + 1)
+    top = 0.0
     for key, a in data.items():
         a = np.asarray(a, np.float64)
         a = a[np.isfinite(a)]
         if not a.size:
             continue
         s = stats.get(key, {})
-        ax.hist(np.clip(a, -lim, lim), bins=edges, histtype="step", linewidth=1.3,
-                color=colours.get(key), label=f"{key}: mean {_g(s.get('mean'))}, "
-                f"RMS {_g(s.get('rms'))}, P95 {_g(s.get('p95'))}, n = {a.size:,}")
+        counts, _, _ = ax.hist(np.clip(a, -lim, lim), bins=edges, histtype="step",
+                               linewidth=1.3, color=colours.get(key),
+                               linestyle=styles.get(key, "-"),
+                               label=f"{key}: mean {_g(s.get('mean'))}, "
+                               f"RMS {_g(s.get('rms'))}, P95 {_g(s.get('p95'))}, n = {a.size:,}")
+        top = max(top, float(np.max(counts)) if np.size(counts) else 0.0)
     ax.axvline(0, color="0.5", linewidth=0.6)
     ax.set_xlim(-lim, lim)
-    ax.set_ylim(0, ax.get_ylim()[1] * (1.35 if ax.get_yscale() == "linear" else 30))
+    if log:
+        ax.set_ylim(0.5, max(top, 1.0) * 30)
+    else:
+        ax.set_ylim(0, max(top, 1.0) * 1.35)
     ax.legend(fontsize=6.5, loc="upper left", title=f"(|values| > {lim:g} in the end bins)",
               title_fontsize=6)
     ax.tick_params(labelsize=7)
@@ -275,10 +327,10 @@ def plot_masks(ds, path, name: str | None = None) -> Path:
     name = _label(ds, name)
     dirs = _dirs(ds)
     cols = ["#9ecae1", CLASS_COLOURS["low modulation"], "#111111", "#fd8d3c", "#8c6d31",
-            CLASS_COLOURS["no valid reference"], "#ffffff"]
+            CLASS_COLOURS["no valid reference"], "#ffffff", CLASS_COLOURS["bundle off monitor"]]
     labels = ["valid", "low modulation (masked)", "flagged: low amplitude",
               "flagged: order residual", "flagged: out of range / other",
-              "no valid reference", "off surface"]
+              "no valid reference", "off surface", "bundle off the monitor (masked)"]
     cmap = ListedColormap(cols)
     h, w = ds["surface_mask"].shape
     fig = _figure((4.6 * len(dirs) + 0.4, 4.6 * h / w + 1.9))
@@ -295,8 +347,9 @@ def plot_masks(ds, path, name: str | None = None) -> Path:
         cls[flagged & (flags & 4 > 0)] = 3
         cls[flagged & (flags & 2 > 0)] = 2
         cls[low] = 1
+        cls[_off_monitor(ds, d)] = 7
         cls[valid] = 0
-        imshow(ax, cls, cmap=cmap, vmin=-0.5, vmax=6.5, interpolation="nearest")
+        imshow(ax, cls, cmap=cmap, vmin=-0.5, vmax=7.5, interpolation="nearest")
         handles = [Patch(facecolor=c, edgecolor="0.5", label=f"{lab}: {int((cls == k).sum()):,}")
                    for k, (c, lab) in enumerate(zip(cols, labels))]
         lax.legend(handles=handles, loc="upper center", ncol=2, fontsize=7, frameon=False)
@@ -315,10 +368,11 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
     fine = float(min(ds["width"].values))
     h, w = ds["surface_mask"].shape
     ph = 3.5 * h / w
-    fig = _figure((17.0, 2 * ph + 2.2))
-    gs = fig.add_gridspec(2, 4, width_ratios=[1, 1, 1, 1.15])
+    fig = _figure((21.0, 2 * ph + 2.4))
+    gs = fig.add_gridspec(2, 5, width_ratios=[1, 1, 1, 1, 1.15])
     maps = [ds["coord_deviation_px"].sel(direction=d).values for d in dirs]
-    lim = symmetric_limit(maps)
+    exact = [coord_vs_exact(ds, d) for d in dirs]
+    lim = symmetric_limit(maps + exact)
     fr = [ds["fringes"].sel(direction=d, width=fine).isel(shift=0).values for d in dirs]
     vmax = max((float(np.nanmax(a)) for a in fr if np.isfinite(a).any()), default=1.0)
     last = {}
@@ -337,32 +391,44 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
         ax.set_title(f"{name}: {d.upper()} modulation ratio (width {fine:g} px)\nmedian "
                      f"{_g(np.nanmedian(r) if np.isfinite(r).any() else np.nan)}", fontsize=9)
         _image_axes(ax)
-        ax = fig.add_subplot(gs[i, 2])
-        im = imshow(ax, maps[i], cmap=DEV_CMAP, vmin=-lim, vmax=lim, interpolation="nearest")
-        last["c"] = (ax, im)
-        _overlay(ax, ds, d, legend=True)
-        s = st["directions"][d]["coord_px"]
-        ax.set_title(f"{name}: {d.upper()} coordinate deviation\nRMS {_g(s['rms'])} px, "
-                     f"P95 {_g(s['p95'])} px", fontsize=9)
-        _image_axes(ax)
+        for col, (m, against, key) in enumerate(((maps[i], VS_MIRROR, "coord_px"),
+                                                 (exact[i], VS_EXACT, "coord_vs_exact_px"))):
+            ax = fig.add_subplot(gs[i, 2 + col])
+            im = imshow(ax, m, cmap=DEV_CMAP, vmin=-lim, vmax=lim, interpolation="nearest")
+            last["c" + str(col)] = (ax, im)
+            _overlay(ax, ds, d, legend=(col == 0))
+            s = st["directions"][d].get(key) or {}
+            ax.set_title(f"{name}: {d.upper()} coordinate deviation\n{against}: "
+                         f"RMS {_g(s.get('rms'))} px, P95 {_g(s.get('p95'))} px", fontsize=9)
+            _image_axes(ax)
     for key, label, extend in (("f", "camera value", "neither"),
                                ("m", "modulation / reference modulation (1)", "max"),
-                               ("c", f"coordinate deviation (monitor px), +-{lim:g}", "both")):
+                               ("c0", f"coordinate deviation {VS_MIRROR} (monitor px), "
+                                      f"+-{lim:g}", "both"),
+                               ("c1", f"coordinate deviation {VS_EXACT} (monitor px), "
+                                      f"+-{lim:g}", "both")):
         ax, im = last[key]
         fig.colorbar(im, ax=ax, orientation="horizontal", shrink=0.85, pad=0.02,
                      extend=extend).set_label(label, fontsize=8)
-    ax = fig.add_subplot(gs[0, 3])
-    _histogram(ax, {d.upper(): maps[i] for i, d in enumerate(dirs)},
-               {d.upper(): DIR_COLOURS.get(d) for d in dirs},
-               {d.upper(): st["directions"][d]["coord_px"] for d in dirs}, lim=lim)
-    ax.set_xlabel("coordinate deviation (monitor px)", fontsize=8)
+    ax = fig.add_subplot(gs[0, 4])
+    hist, colours, hstats, styles = {}, {}, {}, {}
+    for i, d in enumerate(dirs):
+        for m, tag, key, ls in ((maps[i], "vs mirror", "coord_px", "-"),
+                                (exact[i], "vs exact", "coord_vs_exact_px", "--")):
+            k = f"{d.upper()} {tag}"
+            hist[k], colours[k], styles[k] = m, DIR_COLOURS.get(d), ls
+            hstats[k] = st["directions"][d].get(key) or {}
+    _histogram(ax, hist, colours, hstats, lim=lim, styles=styles)
+    ax.set_xlabel("coordinate deviation (monitor px)\nsolid: vs decoded mirror, dashed: vs "
+                  "exact specular point", fontsize=7)
     ax.set_ylabel("pixels", fontsize=8)
     ax.set_title("histogram of the valid pixels", fontsize=9)
-    ax = fig.add_subplot(gs[1, 3])
+    ax = fig.add_subplot(gs[1, 4])
     ax.axis("off")
     ax.text(0.0, 1.0, _stats_box(st), family="monospace", fontsize=7.2, va="top", ha="left",
             transform=ax.transAxes)
-    title = f"{name}: phase measurement deviation from the ideal specular reference"
+    title = (f"{name}: phase measurement deviation from the ideal specular reference "
+             "(decoded mirror) and from the exact specular points")
     if description:
         title += f"\n{description}"
     fig.suptitle(title, fontsize=11)
@@ -379,11 +445,15 @@ def _stats_box(st: dict) -> str:
             r = s[q]
             lines.append(f"{d.upper():3}{lab:>13}" + "".join(f"{_g(r[k]):>9}"
                                                             for k in ("mean", "rms", "p95")))
+        ex = s.get("coord_vs_exact_px") or {}
+        lines.append(f"{d.upper():3}{'px vs exact':>13}" + "".join(f"{_g(ex.get(k)):>9}"
+                                                               for k in ("mean", "rms", "p95")))
         p = s["pixels"]
         lines.append(f"   valid {p['valid']:,} / {p['considered']:,} "
                      f"({100 * (s['coord_px']['valid_fraction'] or 0):.1f} %)")
         lines.append(f"   masked: low mod. {p['low_modulation']:,}, "
-                     f"flagged {p['decode_flagged']:,}")
+                     f"flagged {p['decode_flagged']:,}, off monitor "
+                     f"{p.get('lobe_off_monitor', 0):,}")
     return "\n".join(lines)
 
 
@@ -414,7 +484,7 @@ def plot_variant_deviation(datasets: dict, path, descriptions: dict | None = Non
                            interpolation="nearest")
             _overlay(ax, datasets[n], d, legend=True)
             s = st[d]["coord_px"]
-            ax.set_title(f"{n}: {d.upper()} coordinate deviation\nRMS {_g(s['rms'])} px, "
+            ax.set_title(f"{n}: {d.upper()} coordinate deviation {VS_MIRROR}\nRMS {_g(s['rms'])} px, "
                          f"P95 {_g(s['p95'])} px, valid {100 * (s['valid_fraction'] or 0):.1f} %",
                          fontsize=8)
             _noticks(ax)
@@ -429,10 +499,9 @@ def plot_variant_deviation(datasets: dict, path, descriptions: dict | None = Non
         _histogram(ax, {n: maps[n, d] for n in names},
                    {n: colours[k % len(colours)] for k, n in enumerate(names)},
                    {n: _stats(datasets[n])["directions"][d]["coord_px"] for n in names},
-                   lim=lim)
-        ax.set_xlabel(f"{d.upper()} coordinate deviation (monitor px)", fontsize=8)
+                   lim=lim, log=True)
+        ax.set_xlabel(f"{d.upper()} coordinate deviation {VS_MIRROR} (monitor px)", fontsize=8)
         ax.set_ylabel("pixels", fontsize=8)
-        ax.set_yscale("log")
     return _save(fig, path)
 
 

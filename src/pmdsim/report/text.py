@@ -29,11 +29,16 @@ def summary_text(stats: dict, timings: dict | None = None) -> str:
             label = q.rsplit("_", 1)[0] + f" ({unit})"
             lines.append(f"{d.upper():<4}{label:<20}" + "".join(
                 f"{_num(r[k]):>11}" for k in ("mean", "rms", "p95", "max")))
+        ex = s.get("coord_vs_exact_px")
+        if ex:  # the same coordinate against the exact specular point P
+            lines.append(f"{d.upper():<4}{'coord vs exact (px)':<20}" + "".join(
+                f"{_num(ex[k]):>11}" for k in ("mean", "rms", "p95", "max")))
         p = s["pixels"]
         frac = s["phase_mrad"]["valid_fraction"]
         lines.append(f"    valid {p['valid']} of {p['considered']} considered pixels "
                      f"({100 * frac:.2f} %); masked: low modulation {p['low_modulation']}, "
-                     f"decode flags {p['decode_flagged']}")
+                     f"decode flags {p['decode_flagged']}, bundle off the monitor "
+                     f"{p.get('lobe_off_monitor', 0)}")
         mr = ", ".join(_num(x, 3) for x in s["modulation"]["ratio_median_by_width"])
         lines.append(f"    median modulation ratio by width {stats['widths_px']}: {mr}")
         rq = s["reference_vs_exact_px"]
@@ -79,8 +84,11 @@ def diagnostics_text(name: str, d: dict) -> str:
         lines.append(f"effective sample size: median {_fmt(d['ess_median'], '.1f')}, "
                      f"min {_fmt(d['ess_min'], '.1f')} of {d['n_rays']} rays")
     if "phase_se_rad" in d:
-        lines.append(f"phase standard error ({d['phase_se_method']} method: N independent rays, "
-                     "an upper bound for the lattice), mrad, median / P95; fringe modulation:")
+        how = ("spread over independent rotations of the sample set"
+               if d["phase_se_method"] == "seeds" else
+               "N independent rays, an upper bound for the lattice")
+        lines.append(f"phase standard error ({d['phase_se_method']} method: {how}), mrad, "
+                     "median / P95; fringe modulation:")
         for key, v in d["phase_se_rad"].items():
             direction, width = key.split("/")
             med = None if v["median"] is None else 1e3 * v["median"]
@@ -144,8 +152,10 @@ def reconstruction_text(name: str, rec: dict) -> str:
 def description(cfg) -> str:
     b = cfg.brdf
     text = f"BRDF {b.model}"
-    if hasattr(b, "alphas"):
-        ax, ay = b.alphas
+    if b.model != "mirror":
+        from ..brdf import equivalent_alphas
+
+        ax, ay = equivalent_alphas(b)
         names = (("tangential", "radial") if cfg.anisotropy.frame == "rotational"
                  else ("x", "y"))
         text += f" alpha_{names[0]} {ax:g}, alpha_{names[1]} {ay:g}"

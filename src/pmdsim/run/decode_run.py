@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config import InputError, MissingInputError
 from ..measure import decode as dec
 from . import files as pio
 
@@ -69,12 +70,12 @@ def setup_from_run(run: str | Path, direction: str) -> dict:
         try:
             cfg = run_config(load_run(run))
         except FileNotFoundError as err:
-            raise FileNotFoundError(f"--from-run: {err}") from None
+            raise MissingInputError(f"--from-run: {err}") from None
     fr = cfg.patterns.fringes
     if fr is None:
-        raise ValueError(f"--from-run: the run {run} has no fringes (patterns.fringes = false)")
+        raise InputError(f"--from-run: the run {run} has no fringes (patterns.fringes = false)")
     if direction not in fr.directions:
-        raise ValueError(f"--from-run: the run {run} has no {direction!r} fringes "
+        raise InputError(f"--from-run: the run {run} has no {direction!r} fringes "
                          f"(directions {list(fr.directions)})")
     w, h = cfg.monitor.resolution
     method = cfg.decode.method if hasattr(cfg, "decode") else "hierarchical"
@@ -89,7 +90,7 @@ def make_setup(*, widths=None, shifts=None, direction="x", extent_px=None, metho
     """Combine command-line values with those of a run (given values win); ValueError names
     the missing option."""
     if direction not in ("x", "y"):
-        raise ValueError(f"--direction must be 'x' or 'y', got {direction!r}")
+        raise InputError(f"--direction must be 'x' or 'y', got {direction!r}")
     base: dict = {}
     source = "command line"
     if from_run is not None:
@@ -103,22 +104,22 @@ def make_setup(*, widths=None, shifts=None, direction="x", extent_px=None, metho
     missing = [name for name, v in (("--widths", widths), ("--shifts", shifts),
                                     ("--extent-px", extent_px)) if v is None]
     if missing:
-        raise ValueError(f"give {', '.join(missing)} (or --from-run RUN to read them from a "
+        raise InputError(f"give {', '.join(missing)} (or --from-run RUN to read them from a "
                          "simulation's run folder)")
     if int(shifts) < 3:
-        raise ValueError(f"--shifts must be K >= 3 phase shifts, got {shifts}")
+        raise InputError(f"--shifts must be K >= 3 phase shifts, got {shifts}")
     if not extent_px > 0:
-        raise ValueError(f"--extent-px must be positive monitor px, got {extent_px}")
+        raise InputError(f"--extent-px must be positive monitor px, got {extent_px}")
     if pitch_mm is not None and not pitch_mm > 0:
-        raise ValueError(f"--pitch-mm must be positive, got {pitch_mm}")
+        raise InputError(f"--pitch-mm must be positive, got {pitch_mm}")
     if method not in dec.METHODS:
-        raise ValueError(f"--method must be one of {', '.join(dec.METHODS)}, got {method!r}")
+        raise InputError(f"--method must be one of {', '.join(dec.METHODS)}, got {method!r}")
     try:
         reach = dec.unambiguous_range_px(widths, method)
     except ValueError as err:
-        raise ValueError(f"--widths {list(widths)} do not fit --method {method}: {err}") from None
+        raise InputError(f"--widths {list(widths)} do not fit --method {method}: {err}") from None
     if reach < extent_px:
-        raise ValueError(
+        raise InputError(
             f"--widths {list(widths)} cannot be unwrapped over the monitor with --method "
             f"{method}: they reach {reach:g} monitor px, the monitor spans {extent_px:g} "
             f"(--extent-px); add a wider width (hierarchical) or choose other widths")
@@ -152,7 +153,7 @@ def check_frame_order(paths: list[Path], setup: DecodeSetup) -> None:
         want = (setup.direction, setup.widths_px[j], k)
         got = (t["direction"], float(t["width_px"]), int(t["k"]))
         if got != want:
-            raise ValueError(
+            raise InputError(
                 f"IMAGES: frame {q} ({p.name}) is direction {got[0]}, width {got[1]:g} px, "
                 f"shift index {got[2]}, but the order width-major then shift with widths "
                 f"{list(setup.widths_px)} and K = {setup.shifts} expects direction {want[0]}, "
@@ -251,7 +252,7 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
     frames = dec.load_image_stack(paths)
     n_w, k = len(setup.widths_px), setup.shifts
     if frames.shape[0] != n_w * k:
-        raise ValueError(
+        raise InputError(
             f"IMAGES: {frames.shape[0]} frames were read ({len(paths)} files) but "
             f"{n_w} widths x {k} shifts = {n_w * k} are needed (order: width-major, then shift)")
     check_frame_order(paths, setup)

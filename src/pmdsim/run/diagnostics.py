@@ -66,11 +66,13 @@ def _json_safe(obj):
 
 
 
-def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry) -> _Diagnosed | None:
+def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
+                 exclude: np.ndarray | None = None) -> _Diagnosed | None:
     """Energy fraction inside theta_max (cone estimators), effective sample size and the
     phase standard error (``[diagnostics] phase_method``) of every fringe (with fringes) on the coarse pixel
     grid of ``[diagnostics]``, and the :func:`~pmdsim.studies.diagnostics.check` warnings for its
-    bounds. None for the mirror (no lobe)."""
+    bounds. None for the mirror (no lobe). ``exclude`` (H, W): pixels left out of the
+    judgement (bundles off the monitor)."""
     if sim.scene.brdf.is_delta:
         return None
     from dataclasses import asdict
@@ -88,7 +90,8 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry) -> _Diagno
                        grid=cfg.diagnostics.grid,
                        target_fraction=cfg.diagnostics.min_energy_fraction,
                        phase_method=cfg.diagnostics.phase_method,
-                       n_samples=DIAGNOSTICS_ENERGY_SAMPLES if cone else 16)
+                       n_samples=DIAGNOSTICS_ENERGY_SAMPLES if cone else 16,
+                       exclude=exclude)
     summary = dict(diag.summary)
     if not cone:
         diag = replace(diag, energy=None)

@@ -120,14 +120,24 @@ def default_workers(n_figures: int) -> int:
 
 def draw_figures(run_folder: str | Path, names, run_name: str, description: str = "",
                  ds=None, sim=None, workers: int | None = None,
-                 folder: str | Path | None = None) -> list[Path]:
+                 folder: str | Path | None = None, notes: list | None = None) -> list[Path]:
     """Draw the figures ``names`` of the run folder ``run_folder`` into ``folder`` (default
     ``run_folder/figures``).
 
     With one worker they are drawn here, from ``ds`` (and ``sim``) when given, else from the
     folder's dataset; with more, each is drawn by a separate process that opens the
     dataset (which must have been written). Returns the paths in the order of ``names``.
+
+    With ``notes`` (a list), a figure that cannot be drawn is a note appended to it (the
+    run's data are complete without it) and the others are still drawn; without, the
+    error propagates.
     """
+    def failed(name, err) -> None:
+        if notes is None:
+            raise err
+        notes.append(f"figure {name} could not be drawn ({type(err).__name__}: {err}); the "
+                     "data are complete (run.zarr, statistics.json)")
+
     run_folder = Path(run_folder)
     folder = Path(folder) if folder is not None else run_folder / "figures"
     folder.mkdir(parents=True, exist_ok=True)
@@ -136,7 +146,13 @@ def draw_figures(run_folder: str | Path, names, run_name: str, description: str 
     if workers <= 1 or len(names) <= 1:
         if ds is None:
             ds = open_dataset(run_folder)
-        return [draw_one(ds, n, folder, run_name, description, sim) for n in names]
+        paths = []
+        for n in names:
+            try:
+                paths.append(draw_one(ds, n, folder, run_name, description, sim))
+            except Exception as err:  # noqa: BLE001 - reported in notes (or re-raised)
+                failed(n, err)
+        return paths
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -145,7 +161,13 @@ def draw_figures(run_folder: str | Path, names, run_name: str, description: str 
     with ProcessPoolExecutor(min(workers, len(names)), mp_context=mp.get_context("spawn")) as ex:
         futures = {n: ex.submit(_draw_from_folder, str(run_folder), n, str(folder), run_name,
                                 description) for n in order}
-        return [Path(futures[n].result()) for n in names]
+        paths = []
+        for n in names:
+            try:
+                paths.append(Path(futures[n].result()))
+            except Exception as err:  # noqa: BLE001 - reported in notes (or re-raised)
+                failed(n, err)
+        return paths
 
 
 __all__ = ["FIGURES", "figure_names", "draw_figures", "draw_one", "default_workers"]

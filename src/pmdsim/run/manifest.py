@@ -32,6 +32,7 @@ def write_run_manifest(folder: Path, cfg: RunConfig, result, timings: dict) -> N
         "notes": list(result.notes),
         "warnings": [w.message for w in result.warnings],
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
+        "sizes_bytes": dict(result.sizes),
     })
 
 
@@ -52,4 +53,5 @@ def write_variants_manifest(folder: Path, cfg: RunConfig, top) -> None:
         "notes": list(top.notes),
         "warnings": {r.config.name: [w.message for w in r.warnings] for r in top.variants},
         "timings_s": {k: round(v, 4) for k, v in top.timings.items()},
+        "sizes_bytes": dict(top.sizes),
     })

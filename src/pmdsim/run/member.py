@@ -13,12 +13,13 @@ from ..config import RunConfig
 from ..scene.sensor import Sensor, capture_dn
 from ..measure import chain
 from ..render import Geometry, Simulation
+from ..studies import coverage
 from . import files as pio
-from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, _encoding
+from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, write_dataset
 from ..report.text import description, summary_text_of
 from .dataset import assign_to_dataset, dot_dataset_variables
 from .diagnostics import diagnose_run
-from .result import RunResult, _Steps
+from .result import RunResult, _Steps, draw_safely
 
 
 def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
@@ -54,6 +55,11 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         images = sim.render_images(levels, progress=steps.tiles())
         steps.finish_render(base, n_tiles)
     timings["render"] = time.perf_counter() - t
+    # nothing empty is written as if it were a result; bundles off the monitor are flagged
+    coverage.check_rendered(None if fringes is None else fringes.images, dot_images)
+    off_monitor = None if fringes is None else coverage.off_monitor_mask(
+        fringes.f_total, fringes.f_hit, geometry.surface_mask,
+        cfg.diagnostics.max_off_monitor_fraction)
     sensor = Sensor.from_config(cfg.sensor)
     if sensor.enabled:  # what the camera writes: digital numbers (docs/system.md)
         if fringes is not None:
@@ -74,6 +80,16 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     steps.advance()
     ds = build_dataset(cfg, geometry, fringes, dots, dot_images, image_files, images,
                        exposure, sim.scene.rays_per_pixel)
+    if off_monitor is not None:
+        ds["lobe_off_monitor"] = (("row", "col"), off_monitor, {
+            "units": "bool", "description": "surface pixels whose bundle puts more than "
+            f"diagnostics.max_off_monitor_fraction = {cfg.diagnostics.max_off_monitor_fraction:g}"
+            " of its weight off the monitor (never valid; counted)"})
+
+    if fringes is not None and fringes.sums is not None:
+        # the dataset holds the sums' real and imaginary parts: free the complex copy
+        # (2 directions x 3 widths x 16 bytes per pixel, 480 MB at 5 MP)
+        fringes = replace(fringes, sums=None)
     timings["write"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -85,7 +101,8 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
             reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
             cfg.decode, len(fringes.shifts),
             slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
-                reference.points_mm, sim.scene.camera.position, sim.scene.monitor))
+                reference.points_mm, sim.scene.camera.position, sim.scene.monitor),
+            off_monitor=off_monitor)
         stats = chain.statistics(measured, cfg.name)
         from . import reconstruction as recon
 
@@ -110,7 +127,7 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
 
     t = time.perf_counter()
     statistics = dict(stats)  # statistics.json: the chain's (when decoded) + diagnostics
-    diagnosed = diagnose_run(cfg, sim, geometry) if diagnostics else None
+    diagnosed = diagnose_run(cfg, sim, geometry, exclude=off_monitor) if diagnostics else None
     if diagnosed is not None:
         ds = ds.assign_coords(diagnosed.coords)
         for name, var in diagnosed.variables.items():
@@ -122,7 +139,7 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     timings["diagnostics"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    ds.to_zarr(folder / DATASET_NAME, mode="w-", consolidated=False, encoding=_encoding(ds))
+    write_dataset(ds, folder / DATASET_NAME)
     (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
     if statistics:
         (folder / "statistics.json").write_text(json.dumps(statistics, indent=2) + "\n")
@@ -131,18 +148,20 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     timings["write"] += time.perf_counter() - t
 
     figure_paths: list[Path] = []
+    notes: list[str] = []
     t = time.perf_counter()
     if figures:
         from .figures import draw_figures, figure_names
 
         figure_paths = draw_figures(folder, figure_names(ds, out.figure_set), cfg.name,
                                     description(cfg), ds=ds, sim=sim,
-                                    workers=out.figure_workers)
+                                    workers=out.figure_workers, notes=notes)
         if dot_table and standalone:
             from ..report import chain as plot_chain
 
-            figure_paths += plot_chain.dot_figures(folder / "figures", {cfg.name: dot_images},
-                                                   {cfg.name: dot_table}, sim, {})
+            figure_paths += draw_safely(notes, "of the dots", plot_chain.dot_figures,
+                                        folder / "figures", {cfg.name: dot_images},
+                                        {cfg.name: dot_table}, sim, {})
         steps.advance()
     timings["figures"] = time.perf_counter() - t
 
@@ -150,8 +169,10 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     result = RunResult(
         outdir=folder, dataset_path=folder / DATASET_NAME, image_paths=tuple(image_paths),
         figure_paths=tuple(figure_paths), exposure=exposure, shape=sim.shape,
-        surface_pixels=surface_pixels, rays_per_pixel=sim.scene.rays_per_pixel,
-        rays_traced=surface_pixels * sim.scene.rays_per_pixel * n_calls, timings=timings,
-        config=cfg, statistics=statistics,
+        surface_pixels=surface_pixels,
+        rays_per_pixel=sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel,
+        rays_traced=surface_pixels * sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel
+        * n_calls, timings=timings,
+        config=cfg, statistics=statistics, notes=tuple(notes),
         warnings=() if diagnosed is None else diagnosed.warnings)
     return result, ds

@@ -31,9 +31,10 @@ class RunResult:
     surface_pixels : int
         Pixels whose vision ray hits the surface.
     rays_per_pixel : int
-        Rays of each pixel's bundle (N, P included; 1 for the mirror).
+        Scattered rays per pixel: N (P included; 1 for the mirror) times the camera's vision
+        rays per pixel (sub-pixels x aperture samples).
     rays_traced : int
-        Scattered rays traced in all render passes (surface pixels x N x passes).
+        Scattered rays traced in all render passes (surface pixels x rays per pixel x passes).
     timings : dict
         Wall times in s: ``geometry``, ``render``, ``write``, ``figures``, ``total``.
     config : RunConfig
@@ -65,6 +66,9 @@ class RunResult:
     notes: tuple[str, ...] = ()
     statistics: dict = field(default_factory=dict)
     warnings: tuple = ()
+    #: bytes of the run folder by part (``total``, ``run.zarr``, ``images``, ``figures``,
+    #: ``other``), measured when it was complete
+    sizes: dict = field(default_factory=dict)
 
     @property
     def rays_per_second(self) -> float:
@@ -107,3 +111,16 @@ class _Steps:
         self.done = base_tiles + n_tiles
         if self.progress is not None:
             self.progress(min(self.done, self.total), self.total)
+
+
+def draw_safely(notes: list, what: str, draw, *args, **kwargs) -> list:
+    """Call a figure function; a figure that cannot be drawn is a note (the run's data are
+    complete without it), never a failed run. Returns the paths it drew ([] on failure).
+    Interrupts (KeyboardInterrupt) and other BaseExceptions propagate."""
+    try:
+        out = draw(*args, **kwargs)
+    except Exception as err:  # noqa: BLE001 - a figure is never worth the run's data
+        notes.append(f"figure(s) {what} could not be drawn ({type(err).__name__}: {err}); "
+                     "the data are complete (run.zarr, statistics.json)")
+        return []
+    return list(out) if isinstance(out, (list, tuple)) else [out]

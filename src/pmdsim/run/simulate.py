@@ -56,7 +56,8 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from ..config import RESERVED_VARIANT_NAMES, RunConfig
+from ..config import RESERVED_VARIANT_NAMES, ConfigError, RunConfig, check_resources
+from ..studies import coverage
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
 from . import files as pio
@@ -146,6 +147,11 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         # The vision rays and the ideal specular reference do not depend on what a variant
         # may change (BRDF, anisotropy frame, sampling): one of each for all.
         geometry = plan.sim.geometry()
+        # a set-up that sees nothing stops here, before any scattered ray is traced
+        view = coverage.check_view(geometry.surface_mask, geometry.monitor_mask,
+                                   cfg.diagnostics.min_view_fraction)
+        if view.warning:
+            plan.notes.append(view.warning)
         t_geometry = time.perf_counter() - t
         plan.steps.advance()
         reference = None
@@ -161,10 +167,17 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
             result, _ = run_member(cfg, plan.sim, geometry, tmp, plan.steps, plan.figures,
                                    plan.inputs, reference=reference, standalone=True,
                                    diagnostics=plan.diagnostics)
-            result = replace(result, notes=tuple(plan.notes),
+            result = replace(result, notes=tuple(plan.notes) + result.notes,
                              timings=dict(result.timings, **shared))
         timings = dict(result.timings, total=time.perf_counter() - t_start)
         result = replace(result, timings=timings)
+        # the folder's size, measured now that everything but the manifest is written
+        sizes = pio.folder_sizes(tmp)
+        result = replace(result, sizes=sizes)
+        summary = tmp / "summary.txt"
+        if summary.is_file():
+            with open(summary, "a") as fh:
+                fh.write("\n" + pio.size_text(sizes) + "\n")
         if cfg.variants:
             write_variants_manifest(tmp, cfg, result)
         else:
@@ -177,10 +190,11 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
     """Resolve and check the inputs of a run (variant names, dots, monitor images, whether
     the fringes can be decoded) and count its progress steps, before anything is written."""
     figures = cfg.output.figures if figures is None else figures
+    check_resources(cfg)  # memory and time from the configuration, before any allocation
     for k, v in enumerate(cfg.variants):
         if v.name in RESERVED_NAMES or v.name.startswith("."):
-            raise ValueError(
-                f"variants.{k}.name: {v.name!r} cannot name a sub-folder of the run (reserved "
+            raise ConfigError(
+                f"invalid configuration:\n  variants.{k}.name: {v.name!r} cannot name a sub-folder of the run (reserved "
                 f"or hidden: {sorted(RESERVED_NAMES)}); choose another name")
     members = [(name, c, Simulation.from_config(c)) for name, c in cfg.expand()]
     dots = resolve_dots(cfg)

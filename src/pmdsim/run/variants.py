@@ -17,7 +17,7 @@ from . import files as pio
 from .dataset import CONFIG_NAME
 from .manifest import write_run_manifest
 from .member import run_member
-from .result import RunResult
+from .result import RunResult, draw_safely
 from .dataset import load_run
 
 
@@ -50,11 +50,13 @@ def run_variants(plan, geometry, reference, tmp: Path, shared_timings: dict) -> 
     if compare:
         from ..report import scene as plot
 
-        figure_paths.append(plot.plot_variant_fringes(
-            datasets, tmp / "figures" / "fringes_variants.png", descriptions=descriptions))
+        figure_paths += draw_safely(plan.notes, "fringes_variants.png", plot.plot_variant_fringes,
+                                    datasets, tmp / "figures" / "fringes_variants.png",
+                                    descriptions=descriptions)
     names = [name for name, _, _ in plan.members]
     figure_paths += write_variant_outputs(cfg, tmp, names, subs, plan.figures, descriptions,
-                                          plan.sim)
+                                          plan.sim, plan.notes)
+    plan.notes += [f"{r.config.name}: {n}" for r in subs for n in r.notes]
     if plan.figures and (cfg.patterns.fringes is not None or cfg.patterns.dots is not None):
         plan.steps.advance()
     timings = {k: sum(r.timings.get(k, 0.0) for r in subs)
@@ -73,7 +75,8 @@ def run_variants(plan, geometry, reference, tmp: Path, shared_timings: dict) -> 
 
 
 def write_variant_outputs(cfg: RunConfig, tmp: Path, names: list[str], subs, figures: bool,
-                           descriptions: dict, sim: Simulation) -> list[Path]:
+                           descriptions: dict, sim: Simulation,
+                           notes: list | None = None) -> list[Path]:
     """Top-level outputs of a run with variants: statistics.json and summary.txt of all
     variants (deviation statistics and diagnostics), dots.csv, and the comparison figures (deviation, dots). Reads the variants'
     datasets back lazily from their folders."""
@@ -102,9 +105,12 @@ def write_variant_outputs(cfg: RunConfig, tmp: Path, names: list[str], subs, fig
 
     datasets = {n: load_run(tmp / n) for n in names}
     if decoded:
-        paths.append(plot_chain.plot_variant_deviation(
-            datasets, tmp / "figures" / "deviation_variants.png", descriptions))
+        paths += draw_safely(notes if notes is not None else [], "deviation_variants.png",
+                             plot_chain.plot_variant_deviation, datasets,
+                             tmp / "figures" / "deviation_variants.png", descriptions)
     if has_dots:
         images = {n: datasets[n]["dots"] for n in names}  # lazy: one dot image at a time
-        paths += plot_chain.dot_figures(tmp / "figures", images, tables, sim, descriptions)
+        paths += draw_safely(notes if notes is not None else [], "of the dots",
+                             plot_chain.dot_figures, tmp / "figures", images, tables, sim,
+                             descriptions)
     return paths

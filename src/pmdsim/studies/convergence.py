@@ -39,7 +39,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..config import RunConfig
+from ..config import InputError, RunConfig
 from ..measure.decode import phase_shift
 from ..measure.deviation import wrap
 from ..render import Simulation
@@ -148,17 +148,17 @@ def convergence_study(
     estimators = tuple(estimators)
     for e in estimators:
         if e not in ALL_ESTIMATORS:
-            raise ValueError(f"estimators: unknown estimator {e!r}; choose from {ALL_ESTIMATORS}")
+            raise InputError(f"estimators: unknown estimator {e!r}; choose from {ALL_ESTIMATORS}")
     if not estimators:
-        raise ValueError("estimators: give at least one estimator")
+        raise InputError("estimators: give at least one estimator")
     n_values = sorted({int(n) for n in n_values} | {cfg.sampling.n_rays})
     if n_values[0] < 1:
-        raise ValueError(f"n_values: rays per pixel must be >= 1, got {n_values[0]}")
+        raise InputError(f"n_values: rays per pixel must be >= 1, got {n_values[0]}")
     theta_values = sorted({float(t) for t in theta_values} | {float(cfg.sampling.theta_max_deg)})
     if theta_values[0] <= 0 or theta_values[-1] >= 90:
-        raise ValueError(f"theta_values: cone half angles must be in (0, 90) deg, got {theta_values}")
+        raise InputError(f"theta_values: cone half angles must be in (0, 90) deg, got {theta_values}")
     if cfg.brdf.model == "mirror":
-        raise ValueError("brdf: the mirror has nothing to converge (one ray, weight 1)")
+        raise InputError("brdf: the mirror has nothing to converge (one ray, weight 1)")
     fr = cfg.patterns.fringes
     widths = tuple(float(w) for w in (widths or (fr.widths_px if fr else (50.0,))))
     directions = tuple(directions or (fr.directions if fr else ("x", "y")))

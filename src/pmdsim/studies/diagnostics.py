@@ -309,6 +309,21 @@ class RayStatistics:
     directions: tuple[str, ...]
     widths: tuple[float, ...]
     grid: PixelGrid
+    #: (n_directions, gr, gc) weighted standard deviation of the rays' monitor coordinate
+    #: along each direction, monitor px: the width of the lobe's footprint on the monitor
+    spread_px: np.ndarray | None = None
+
+
+def _footprint_spread(c: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Weighted standard deviation over the last axis of the finite coordinates ``c``."""
+    ok = np.isfinite(c) & (w > 0)
+    ww = np.where(ok, w, 0.0)
+    cc = np.where(ok, c, 0.0)
+    total = ww.sum(-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mean = (ww * cc).sum(-1) / total
+        var = (ww * (cc - mean[:, None]) ** 2).sum(-1) / total
+    return np.where(total > 0, np.sqrt(np.maximum(var, 0.0)), np.nan)
 
 
 def ray_statistics(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
@@ -319,14 +334,17 @@ def ray_statistics(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
     ess = ess_from_weights(w)
     se, mod = phase_error_from_rays(u, v, w, tuple(widths), tuple(directions),
                                     sim.scene.monitor.pixel_model == "nearest")
+    spread = np.stack([_footprint_spread(np.asarray(u if d == "x" else v, np.float64),
+                                         np.asarray(w, np.float64)) for d in directions])
     ess[~valid] = np.nan
     se[..., ~valid] = np.nan
     mod[..., ~valid] = np.nan
+    spread[..., ~valid] = np.nan
     shape = grid.grid_shape
     return RayStatistics(
         sim.scene.rays_per_pixel, ess.reshape(shape), se.reshape(se.shape[:2] + shape),
         mod.reshape(mod.shape[:2] + shape), tuple(directions), tuple(float(x) for x in widths),
-        grid,
+        grid, spread.reshape(spread.shape[:1] + shape),
     )
 
 
@@ -412,6 +430,16 @@ class Diagnostics:
     phase_se_method: str
     phase_se: np.ndarray | None  # (nd, nw, gr, gc), rad
     summary: dict = field(default_factory=dict)
+    #: (gr, gc) bool: grid pixels left out of the judgement (their bundle hangs off the
+    #: monitor: flagged and never valid in the run); None: none
+    excluded: np.ndarray | None = None
+
+    def judged(self, values: np.ndarray) -> np.ndarray:
+        """``values`` (..., gr, gc) with the excluded grid pixels set to NaN."""
+        values = np.asarray(values, np.float64)
+        if self.excluded is None:
+            return values
+        return np.where(self.excluded, np.nan, values)
 
     def full(self, values: np.ndarray) -> np.ndarray:
         """A grid map (..., gr, gc) interpolated to the camera (..., H, W)."""
@@ -426,7 +454,8 @@ def _pct(a, q):
 
 def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[str] = ("x", "y"),
              grid: tuple[int, int] = (24, 20), target_fraction: float = 0.95,
-             phase_method: str = "seeds", n_seeds: int = 8, n_samples: int = 16384) -> Diagnostics:
+             phase_method: str = "seeds", n_seeds: int = 8, n_samples: int = 16384,
+             exclude: np.ndarray | None = None) -> Diagnostics:
     """Energy fraction, effective sample size and phase standard error of a simulation.
 
     Parameters
@@ -439,6 +468,10 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
     phase_method : ``"seeds"`` (``n_seeds`` independent sample sets, mode ``random``) or
         ``"delta"`` (per-sample variance of one set: the plain Monte-Carlo bound)
     n_samples : quadrature points per pixel for the energy fraction
+    exclude : (H, W) bool, optional
+        Camera pixels to leave out of the summary and the warnings (the run passes the
+        pixels whose bundle hangs off the monitor: their phase error says nothing about the
+        sampling of the pixels that are measured). Their maps are kept.
     """
     if phase_method not in ("delta", "seeds"):
         raise ValueError(f"phase_method must be 'delta' or 'seeds', got {phase_method!r}")
@@ -457,30 +490,49 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
         phase_se = rays.phase_se
     else:
         phase_se = phase_error_seeds(sim, pgrid, widths, directions, n_seeds)
+    vision = scene.camera.rays_per_pixel
+    if phase_se is not None and vision > 1 and scene.sampling.mode == "random":
+        # camera optics: a pixel averages S vision rays with independently rotated bundles
+        # (docs/system.md); the transport above is the chief ray's
+        phase_se = phase_se / math.sqrt(vision)
+    excluded = None
+    if exclude is not None:
+        excluded = np.asarray(exclude, bool)[pgrid.pixel_rows, pgrid.pixel_cols].reshape(
+            pgrid.grid_shape)
+
+    def judged(a):
+        a = np.asarray(a, np.float64)
+        return a if excluded is None else np.where(excluded, np.nan, a)
+
     summary: dict = {
         "estimator": scene.estimator,
         "n_rays": scene.rays_per_pixel,
         "theta_max_deg": math.degrees(scene.sampling.theta_max),
+        "vision_rays_per_pixel": vision,
     }
     if energy is not None:
         summary["energy"] = energy.summary()
     if rays is not None:
-        summary["ess_median"] = _pct(rays.ess, 50)
+        summary["ess_median"] = _pct(judged(rays.ess), 50)
         summary["ess_min"] = float(np.nanmin(rays.ess)) if np.isfinite(rays.ess).any() else float("nan")
     if phase_se is not None:
         summary["phase_se_method"] = phase_method
         summary["phase_se_rad"] = {
-            f"{d}/{wd:g}": {"median": _pct(phase_se[di, wi], 50), "p95": _pct(phase_se[di, wi], 95)}
+            f"{d}/{wd:g}": {"median": _pct(judged(phase_se[di, wi]), 50),
+                            "p95": _pct(judged(phase_se[di, wi]), 95)}
             for di, d in enumerate(directions) for wi, wd in enumerate(widths)
         }
     if rays is not None:
         summary["modulation_median"] = {
-            f"{d}/{wd:g}": _pct(rays.modulation[di, wi], 50)
+            f"{d}/{wd:g}": _pct(judged(rays.modulation[di, wi]), 50)
             for di, d in enumerate(directions) for wi, wd in enumerate(widths)
         }
+    if excluded is not None:
+        summary["excluded_grid_pixels"] = int(np.count_nonzero(
+            excluded & surface[pgrid.pixel_rows, pgrid.pixel_cols].reshape(pgrid.grid_shape)))
     return Diagnostics(scene.estimator, scene.rays_per_pixel, math.degrees(scene.sampling.theta_max),
                        directions, widths, pgrid, surface, energy, rays, phase_method, phase_se,
-                       summary)
+                       summary, excluded)
 
 
 @dataclass(frozen=True)
@@ -497,6 +549,25 @@ class DiagnosticWarning:
         return self.message
 
 
+#: Below this effective sample size (median) the fringes are not judged at all (the noise
+#: floor 2/sqrt(ESS) of the modulation would exceed 1): a "too_few_rays" warning instead.
+MIN_ESS = 4
+#: Suggestions never ask for more rays than the configuration allows.
+MAX_SUGGESTED_RAYS = 10_000_000
+
+
+def _wider_width(width: float, spread_px: float, target: float) -> float:
+    """The fringe width (monitor px) whose modulation reaches ``target`` if the lobe's
+    footprint on the monitor were Gaussian with the rays' standard deviation ``spread_px``,
+    ``m(w) = exp(-2 pi^2 sigma^2 / w^2)``, with a margin of 1.2; rounded up, and at least
+    twice ``width``."""
+    t = min(max(target, 0.01), 0.9)
+    if not math.isfinite(spread_px) or spread_px <= 0:
+        return float(_nice_up(2 * width))
+    need = math.pi * spread_px * math.sqrt(2.0 / math.log(1.0 / t))
+    return float(_nice_up(max(1.2 * need, 2 * width)))
+
+
 def _nice_up(x: float) -> int:
     """Round up to two significant digits (1234 -> 1300)."""
     if x <= 0 or not math.isfinite(x):
@@ -511,12 +582,17 @@ def check(diag: Diagnostics, min_energy_fraction: float = 0.95, max_phase_error_
     """Warnings for a :class:`Diagnostics`, each with the setting that would fix it.
 
     ``bounds``: a :class:`pmdsim.config.DiagnosticsConfig` whose values replace the
-    keyword arguments. The energy fraction is judged by its median over the grid pixels
-    (the suggested theta_max covers the worst pixel), the phase error by its 95th
-    percentile for the worst fringe (direction, width) whose median modulation is at least
-    ``min_modulation`` and twice the sampling noise floor ``1 / sqrt(ESS)`` (fringes below
-    are reported as washed out: no number of rays recovers their phase), the effective
-    sample size by its median.
+    keyword arguments. Grid pixels in ``diag.excluded`` (bundles off the monitor) and NaN
+    values (no surface, no hit) are left out of every statistic. The energy fraction is
+    judged by its median over the grid pixels (the suggested theta_max covers the worst
+    pixel). With a median effective sample size (ESS) below ``MIN_ESS`` the fringes are not
+    judged ("too_few_rays", raise n_rays). Otherwise each fringe (direction, width) is
+    judged by its median modulation ``m`` against the noise floor ``2 / sqrt(ESS)``:
+    ``m`` below a floor that exceeds ``min_modulation`` cannot be told from noise
+    ("modulation_undetermined", raise n_rays); ``m < min_modulation`` is washed out (a wider
+    width is suggested); the others' phase error, P95 over the pixels of the worst fringe,
+    is compared with ``max_phase_error_mrad``. The ESS fraction is judged by its median.
+    Every warning's ``setting = suggested``, applied, is meant to clear it (tested).
     """
     if bounds is not None:
         min_energy_fraction = bounds.min_energy_fraction
@@ -540,27 +616,70 @@ def check(diag: Diagnostics, min_energy_fraction: float = 0.95, max_phase_error_
                 sugg = None
             msg += " (or use sampling.estimator = 'radiometric', which samples the whole lobe)"
             out.append(DiagnosticWarning("energy_fraction", msg, "sampling.theta_max_deg", sugg))
-    if diag.phase_se is not None:
+    rays = diag.rays
+    ess_med = _pct(diag.judged(rays.ess), 50) if rays is not None else float("nan")
+    few = rays is not None and math.isfinite(ess_med) and ess_med < MIN_ESS
+    if few and cone:
+        # The cone's rays miss the lobe (narrower than their spacing, or off to one side):
+        # more rays of the same cone barely help; importance sampling of the lobe does.
+        out.append(DiagnosticWarning(
+            "effective_sample_size",
+            f"effective sample size {ess_med:.2g} of {diag.n_rays} rays (median over pixels) "
+            f"< {MIN_ESS}: almost all the weight sits on one ray of the cone, the fringes' "
+            "modulation and phase error cannot be judged; use sampling.estimator = "
+            "'radiometric' (importance sampling of the lobe)",
+            "sampling.estimator", "radiometric"))
+    elif few:
+        n_new = min(_nice_up(diag.n_rays * 1.5 * MIN_ESS / max(ess_med, 0.25)), MAX_SUGGESTED_RAYS)
+        out.append(DiagnosticWarning(
+            "too_few_rays",
+            f"effective sample size {ess_med:.2g} (median over pixels) < {MIN_ESS}: too few of "
+            f"the {diag.n_rays} rays carry weight to judge the fringes' modulation or phase "
+            f"error; raise sampling.n_rays to ~ {n_new}",
+            "sampling.n_rays", n_new))
+    if diag.phase_se is not None and not few:
         worst, which = -1.0, None
+        floor = 2.0 / math.sqrt(ess_med) if math.isfinite(ess_med) else 0.0
         for di, d in enumerate(diag.directions):
             for wi, wd in enumerate(diag.widths):
-                mod = _pct(diag.rays.modulation[di, wi], 50) if diag.rays is not None else 1.0
-                floor = 2.0 / math.sqrt(max(_pct(diag.rays.ess, 50), 1.0)) if diag.rays is not None else 0.0
-                if not mod >= max(min_modulation, floor):
+                mod = _pct(diag.judged(rays.modulation[di, wi]), 50) if rays is not None else 1.0
+                if not math.isfinite(mod):
+                    continue  # no pixel to judge (an empty view stops the run before this)
+                if mod < floor and floor > min_modulation:
+                    # indistinguishable from sampling noise, which is above the bound:
+                    # more rays tell whether the lobe washes the fringes out
+                    # a modulation below the floor is consistent with none: bring the floor
+                    # below min_modulation (ESS grows with N), then the next run can tell
+                    n_new = min(_nice_up(diag.n_rays * 1.5 * (floor / min_modulation) ** 2),
+                                MAX_SUGGESTED_RAYS)
+                    out.append(DiagnosticWarning(
+                        "modulation_undetermined",
+                        f"{d} fringes of {wd:g} px: modulation {mod:.3g} (median) is within the "
+                        f"sampling noise ~ {floor / 2:.2g} of {ess_med:.3g} effective rays: "
+                        f"whether the lobe washes them out cannot be told; raise "
+                        f"sampling.n_rays to ~ {n_new}",
+                        "sampling.n_rays", n_new))
+                    continue
+                if mod < min_modulation:
+                    spread = (_pct(diag.judged(rays.spread_px[di]), 50)
+                              if rays is not None and rays.spread_px is not None else float("nan"))
+                    wider = _wider_width(wd, spread, 2.0 * max(min_modulation, floor))
                     out.append(DiagnosticWarning(
                         "washed_out",
                         f"{d} fringes of {wd:g} px keep a modulation of {mod:.3g} (median; "
                         f"sampling noise alone gives ~ {floor / 2:.2g}): the lobe washes them "
-                        "out, their phase cannot be measured at any number of rays; use wider "
-                        "fringes",
-                        "patterns.fringes.widths_px", None,
+                        f"out, their phase cannot be measured at any number of rays; use wider "
+                        f"fringes (~ {wider:g} px instead of {wd:g})",
+                        "patterns.fringes.widths_px",
+                        tuple(sorted({wider if w == wd else w for w in diag.widths})),
                     ))
                     continue
-                p95 = _pct(diag.phase_se[di, wi], 95)
+                p95 = _pct(diag.judged(diag.phase_se[di, wi]), 95)
                 if p95 > worst:
                     worst, which = p95, (d, wd)
         if which is not None and worst * 1e3 > max_phase_error_mrad:
-            n_new = _nice_up(diag.n_rays * (worst * 1e3 / max_phase_error_mrad) ** 2)
+            n_new = min(_nice_up(diag.n_rays * (worst * 1e3 / max_phase_error_mrad) ** 2),
+                        MAX_SUGGESTED_RAYS)
             out.append(DiagnosticWarning(
                 "phase_error",
                 f"phase standard error {worst * 1e3:.2g} mrad for {which[0]} fringes of "
@@ -569,8 +688,8 @@ def check(diag: Diagnostics, min_energy_fraction: float = 0.95, max_phase_error_
                 "1/sqrt(N); the lattice often converges faster: see pmdsim converge)",
                 "sampling.n_rays", n_new,
             ))
-    if cone and diag.rays is not None and np.isfinite(diag.rays.ess).any():
-        med = float(np.nanmedian(diag.rays.ess))
+    if cone and rays is not None and math.isfinite(ess_med) and ess_med >= MIN_ESS:
+        med = ess_med
         if med < min_ess_fraction * diag.n_rays:
             out.append(DiagnosticWarning(
                 "effective_sample_size",

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..brdf import equivalent_alphas
 from ..config import ConfigError, RunConfig
 from ..render import Simulation
 
@@ -221,7 +222,7 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
     shifts = images.shape[2]
     if shifts < 3:
         raise ValueError("images: need at least 3 phase shifts per width")
-    base = _with_alphas(cfg, *cfg.brdf.alphas)
+    base = _with_alphas(cfg, *equivalent_alphas(cfg.brdf))
     sim0 = Simulation.from_config(base)
     if images.shape[-2:] != sim0.shape:
         raise ValueError(f"images: {images.shape[-2:]} pixels, but the camera of the "
