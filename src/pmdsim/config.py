@@ -534,7 +534,135 @@ class BeckmannConfig(_Model):
         return float(self.alpha_tangential), float(self.alpha_radial)
 
 
-BrdfConfig = Annotated[WardConfig | BeckmannConfig | MirrorConfig, Field(discriminator="model")]
+class _RoughnessFields(_Model):
+    """Random roughness of a machined surface, shared by ``slope_density`` (kinematic) and
+    ``turned``: either ``rq_um`` with ``correlation_length_um`` (Gaussian autocorrelation:
+    RMS slope sqrt(2) Rq / l per axis) or the RMS slopes per direction."""
+
+    rq_um: Annotated[float, Field(ge=0)] | None = None
+    correlation_length_um: PositiveFloat | None = None
+    rms_slope_radial: Annotated[float, Field(ge=0)] | None = None
+    rms_slope_tangential: PositiveFloat | None = None
+
+    def random_rms_slopes(self) -> tuple[float, float]:
+        """(tangential, radial) RMS slopes of the random roughness."""
+        if self.rms_slope_tangential is not None:
+            rad = self.rms_slope_radial
+            return float(self.rms_slope_tangential), float(self.rms_slope_tangential if rad is None else rad)
+        s = math.sqrt(2) * self.rq_um / self.correlation_length_um
+        return s, s
+
+    def _check_roughness(self):
+        by_rq = self.rq_um is not None or self.correlation_length_um is not None
+        by_slope = self.rms_slope_tangential is not None or self.rms_slope_radial is not None
+        if by_rq and by_slope:
+            raise ValueError("give either rq_um/correlation_length_um or "
+                             "rms_slope_tangential/rms_slope_radial, not both")
+        if by_rq and (self.rq_um is None or self.correlation_length_um is None):
+            raise ValueError("give both rq_um and correlation_length_um")
+        if by_slope and self.rms_slope_tangential is None:
+            raise ValueError("give rms_slope_tangential (> 0; rms_slope_radial defaults to it)")
+        if not (by_rq or by_slope):
+            raise ValueError("give the random roughness: rq_um and correlation_length_um, or "
+                             "rms_slope_tangential (and rms_slope_radial)")
+        if by_rq and self.rq_um <= 0:
+            raise ValueError("rq_um must be > 0 (the tangential slopes need a spread)")
+
+
+class SlopeDensityConfig(_RoughnessFields):
+    """Micro-facet BRDF F D G / (4 cos_i cos_o) with a general slope density
+    (``pmdsim.brdf.slope_density``). ``density``:
+
+    - ``gaussian``: ``alpha_tangential``/``alpha_radial`` (or ``alpha_x``/``alpha_y``), the
+      Beckmann model exactly;
+    - ``kinematic``: diamond turning, ``feed_um`` and ``nose_radius_mm`` (exact arc slopes
+      across the grooves, local y = radial) plus the random roughness (``rq_um`` and
+      ``correlation_length_um``, or ``rms_slope_tangential``/``rms_slope_radial``);
+    - ``tabulated``: ``file`` (.npz with ``counts``, ``edges_x``, ``edges_y``: a slope
+      histogram; or .npz ``heights``/.npy: a height map with ``pitch_mm`` (x, y) and
+      ``bins``).
+
+    ``rho_s`` is the Fresnel factor F; ``shadowing``: Smith with the density's equivalent
+    alphas, or none."""
+
+    model: Literal["slope_density"] = "slope_density"
+    density: Literal["gaussian", "kinematic", "tabulated"]
+    alpha_x: PositiveFloat | None = None
+    alpha_y: PositiveFloat | None = None
+    alpha_tangential: PositiveFloat | None = None
+    alpha_radial: PositiveFloat | None = None
+    feed_um: PositiveFloat | None = None
+    nose_radius_mm: PositiveFloat | None = None
+    file: str | None = None
+    pitch_mm: tuple[PositiveFloat, PositiveFloat] | None = None
+    bins: Annotated[int, Field(ge=4, le=4096)] = 128
+    rho_s: PositiveFloat = 0.4
+    shadowing: Literal["smith", "none"] = "smith"
+
+    @model_validator(mode="after")
+    def _check(self) -> "SlopeDensityConfig":
+        if self.density == "gaussian":
+            a = (self.alpha_x, self.alpha_y)
+            b = (self.alpha_tangential, self.alpha_radial)
+            if not ((None not in a and all(v is None for v in b))
+                    or (None not in b and all(v is None for v in a))):
+                raise ValueError("density 'gaussian' needs alpha_tangential and alpha_radial "
+                                 "(or alpha_x and alpha_y)")
+        elif self.density == "kinematic":
+            if self.feed_um is None or self.nose_radius_mm is None:
+                raise ValueError("density 'kinematic' needs feed_um and nose_radius_mm")
+            if self.feed_um * 1e-3 >= 2 * self.nose_radius_mm:
+                raise ValueError("feed_um must be below twice nose_radius_mm")
+            self._check_roughness()
+        elif self.file is None:
+            raise ValueError("density 'tabulated' needs file (a slope histogram .npz or a "
+                             "height map .npz/.npy)")
+        return self
+
+    @property
+    def alphas(self) -> tuple[float, float]:
+        """(alpha along local x, alpha along local y) of the ``gaussian`` density: sqrt(2) x
+        RMS slope. Other densities: :func:`pmdsim.brdf.equivalent_alphas`."""
+        if self.density != "gaussian":
+            raise AttributeError("alphas: only the gaussian density is given by alphas; "
+                                 "use pmdsim.brdf.equivalent_alphas")
+        if self.alpha_x is not None:
+            return float(self.alpha_x), float(self.alpha_y)
+        return float(self.alpha_tangential), float(self.alpha_radial)
+
+
+class TurnedConfig(_RoughnessFields):
+    """A diamond-turned surface from its machining (``pmdsim.brdf.turning``): feed
+    ``feed_um`` per revolution, tool nose radius ``nose_radius_mm``, random roughness as in
+    ``slope_density``. ``regime``: ``geometric`` (the kinematic slope density) or
+    ``diffractive`` (the grating orders of period f, scalar Kirchhoff efficiencies at
+    ``incidence_deg`` for the spectrum ``wavelengths_nm`` x ``spectral_weights``, each with
+    the random-roughness lobe). The grooves run along local x (tangential): use a
+    ``rotational`` frame about the spindle axis."""
+
+    model: Literal["turned"] = "turned"
+    regime: Literal["geometric", "diffractive"] = "geometric"
+    feed_um: PositiveFloat
+    nose_radius_mm: PositiveFloat
+    wavelengths_nm: tuple[PositiveFloat, ...] = (610.0, 545.0, 465.0)
+    spectral_weights: tuple[Annotated[float, Field(ge=0)], ...] = (1.0, 1.0, 1.0)
+    incidence_deg: Annotated[float, Field(ge=0, lt=90)] = 0.0
+    rho_s: PositiveFloat = 0.4
+    shadowing: Literal["smith", "none"] = "smith"
+
+    @model_validator(mode="after")
+    def _check(self) -> "TurnedConfig":
+        if self.feed_um * 1e-3 >= 2 * self.nose_radius_mm:
+            raise ValueError("feed_um must be below twice nose_radius_mm")
+        if len(self.wavelengths_nm) != len(self.spectral_weights) or sum(self.spectral_weights) <= 0:
+            raise ValueError("wavelengths_nm and spectral_weights must be equally long, with "
+                             "a positive sum of weights")
+        self._check_roughness()
+        return self
+
+
+BrdfConfig = Annotated[WardConfig | BeckmannConfig | MirrorConfig | SlopeDensityConfig
+                       | TurnedConfig, Field(discriminator="model")]
 
 
 class SamplingConfig(_Model):
@@ -705,13 +833,18 @@ class ReconstructConfig(_Model):
     the surface grid; ``remove``: terms removed before the height statistics (``piston``,
     ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism);
     ``order``: 2 = classic Southwell, 4 = higher-order; ``anchor``: where the height is
-    tied to the nominal shape (the aperture centre, or the mean over the aperture)."""
+    tied to the nominal shape (the aperture centre, or the mean over the aperture);
+    ``prior``: the nominal shape (a surface table like ``[surface]``, e.g. the design when
+    ``[surface]`` is a measured height map); default: the configured surface. The grid is
+    in the prior's frame; errors are always against the configured (true) surface."""
 
     enabled: Bool | None = None
     spacing_mm: PositiveFloat = 0.5
     remove: Literal["none", "piston", "tilt", "power", "astigmatism"] = "piston"
     order: Literal[2, 4] = 4
     anchor: Literal["centre", "mean"] = "centre"
+    prior: SurfaceConfig | None = Field(
+        None, description="nominal shape (a [surface]-like table); default: the configured surface")
 
 
 class DecodeConfig(_Model):
@@ -964,7 +1097,8 @@ class RunConfig(_Model):
 
 
 def _check_alpha_frame(brdf, anisotropy, where: str) -> None:
-    if isinstance(brdf, (WardConfig, BeckmannConfig)) and brdf.alpha_tangential is not None:
+    if (isinstance(brdf, (WardConfig, BeckmannConfig, SlopeDensityConfig))
+            and brdf.alpha_tangential is not None):
         if anisotropy.frame != "rotational":
             raise ValueError(
                 f"{where}.alpha_tangential/alpha_radial need anisotropy.frame = 'rotational'; "
@@ -980,7 +1114,8 @@ def _union_tags(union, field: str) -> set:
 
 #: Tagged unions (field name -> its tags): pydantic puts the tag into error locations
 #: (``brdf.ward.alpha_x``); the messages show the path as written in the file (``brdf.alpha_x``).
-_UNION_TAGS = {"surface": _union_tags(SurfaceConfig, "type"), "brdf": _union_tags(BrdfConfig, "model")}
+_UNION_TAGS = {"surface": _union_tags(SurfaceConfig, "type"), "prior": _union_tags(SurfaceConfig, "type"),
+               "brdf": _union_tags(BrdfConfig, "model")}
 
 
 def _error_path(loc) -> list:
@@ -1044,10 +1179,16 @@ def load_config(path: str | Path) -> RunConfig:
     surf = data.get("surface")
     if isinstance(surf, dict) and surf.get("type") == "height_map":
         surf["file"] = _resolve_file(path.parent, surf.get("file"))
+    prior = (data.get("reconstruct") or {}).get("prior") if isinstance(data.get("reconstruct"), dict) else None
+    if isinstance(prior, dict) and prior.get("type") == "height_map":
+        prior["file"] = _resolve_file(path.parent, prior.get("file"))
     patterns = data.get("patterns")
     images = patterns.get("images") if isinstance(patterns, dict) else None
     if isinstance(images, dict) and isinstance(images.get("files"), list):
         images["files"] = [_resolve_file(path.parent, f) for f in images["files"]]
+    brdf = data.get("brdf")
+    if isinstance(brdf, dict) and "file" in brdf:
+        brdf["file"] = _resolve_file(path.parent, brdf["file"])
     return parse_config(data, str(path))
 
 

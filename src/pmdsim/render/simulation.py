@@ -106,14 +106,16 @@ def reduce_subrays(out: np.ndarray, estimator: str) -> np.ndarray:
     miss the surface (NaN) see a black background; a pixel none of whose rays hits is NaN.
     """
     s = out.shape[1]
-    hit = np.isfinite(out[..., kb.OUT_FTOTAL])
+    ft = out[..., kb.OUT_FTOTAL]
+    hit = np.isfinite(ft)
     if estimator == "weighted_mean":
-        ft = out[..., kb.OUT_FTOTAL]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scaled = out / ft[..., None]
         hit &= ft > 0
-        out = scaled
-    summed = np.where(hit[..., None], out, 0.0).sum(axis=1) / s
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = out / ft[..., None]
+    elif not hit.all():
+        out = out.copy()
+    out[~hit] = 0.0  # a ray that misses the surface sees black
+    summed = out.sum(axis=1) / s
     if estimator == "weighted_mean":
         summed[:, kb.OUT_FTOTAL] = 1.0
     summed[~hit.any(axis=1)] = np.nan

@@ -152,8 +152,10 @@ def reconstruction_text(name: str, rec: dict) -> str:
 def description(cfg) -> str:
     b = cfg.brdf
     text = f"BRDF {b.model}"
-    if hasattr(b, "alphas"):
-        ax, ay = b.alphas
+    if b.model != "mirror":
+        from ..brdf import equivalent_alphas
+
+        ax, ay = equivalent_alphas(b)
         names = (("tangential", "radial") if cfg.anisotropy.frame == "rotational"
                  else ("x", "y"))
         text += f" alpha_{names[0]} {ax:g}, alpha_{names[1]} {ay:g}"

@@ -490,6 +490,11 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
         phase_se = rays.phase_se
     else:
         phase_se = phase_error_seeds(sim, pgrid, widths, directions, n_seeds)
+    vision = scene.camera.rays_per_pixel
+    if phase_se is not None and vision > 1 and scene.sampling.mode == "random":
+        # camera optics: a pixel averages S vision rays with independently rotated bundles
+        # (docs/system.md); the transport above is the chief ray's
+        phase_se = phase_se / math.sqrt(vision)
     excluded = None
     if exclude is not None:
         excluded = np.asarray(exclude, bool)[pgrid.pixel_rows, pgrid.pixel_cols].reshape(
@@ -503,6 +508,7 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
         "estimator": scene.estimator,
         "n_rays": scene.rays_per_pixel,
         "theta_max_deg": math.degrees(scene.sampling.theta_max),
+        "vision_rays_per_pixel": vision,
     }
     if energy is not None:
         summary["energy"] = energy.summary()
