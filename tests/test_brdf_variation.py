@@ -203,3 +203,38 @@ def test_missing_or_bad_map_file_names_the_field(tmp_path):
                                  "spacing_mm": [1.0, 1.0]})
     with pytest.raises(ConfigError, match=r"brdf\.variation\.file: alpha_radial"):
         Scene.from_config(cfg)
+
+
+def test_load_config_resolves_the_map_file_next_to_the_config(tmp_path):
+    from pmdsim.config import load_config
+
+    np.save(tmp_path / "alpha.npy", np.full((4, 4), 0.01))
+    (tmp_path / "run.toml").write_text(
+        '[camera]\nresolution = [8, 6]\nfocal_length_px = 20.0\nposition_mm = [0, -100, 200]\n'
+        'look_at_mm = [0, 0, 0]\n[monitor]\nresolution = [64, 48]\npixel_pitch_mm = 1.0\n'
+        'centre_mm = [0, 100, 200]\nlook_at_mm = [0, 0, 0]\n[surface]\nsize_mm = [50, 50]\n'
+        '[brdf]\nmodel = "beckmann"\nalpha_u = 0.02\nalpha_v = 0.004\n'
+        '[brdf.variation]\nfile = "alpha.npy"\nquantity = "alpha_radial"\nspacing_mm = [10, 10]\n')
+    cfg = load_config(tmp_path / "run.toml")
+    assert cfg.brdf.variation.file == str((tmp_path / "alpha.npy").resolve())
+    assert Scene.from_config(cfg).brdf_variation.values["alpha_radial"].shape == (4, 4)
+
+
+@pytest.mark.parametrize("estimator", ["paper", "radiometric"])
+def test_transport_uses_the_pixels_own_parameters(estimator):
+    """The rays of one pixel (weights; radiometric: also directions drawn from its own
+    lobe) equal those of the uniform BRDF with that pixel's parameters."""
+    at, ar, sc = [0.005, 0.04], [0.002, 0.008], [0.5, 1.0]
+    scene = Scene.from_config(_cfg("ward", estimator, {
+        "radius_mm": [0.0, 150.0], "alpha_tangential": at, "alpha_radial": ar,
+        "rho_s_scale": sc}))
+    row, col = 20, 30
+    r = float(np.hypot(*(trace_pixels(scene, [row], [col]).point[0, 0, :2]
+                         - np.array(TURN_CENTRE[:2]))))
+    lin = lambda t: t[0] + (t[1] - t[0]) * r / 150.0  # noqa: E731
+    uni = _uniform(scene, lin(at), lin(ar), rho=0.4 * lin(sc))
+    a = _sim(scene).transport([row], [col])
+    b = _sim(uni).transport([row], [col])
+    assert np.count_nonzero(b[2]) > 10
+    np.testing.assert_allclose(a[2], b[2], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(a[3], b[3], rtol=0, atol=1e-12)
