@@ -1035,6 +1035,7 @@ def render_tile(
     if shared:
         _directions(u1, u2, 0.0, 0.0, scheme, theta_max, cos_tm, include_principal, a, b, c)
     nout = out.shape[1] - OUT_FIRST
+    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -1052,7 +1053,6 @@ def render_tile(
                 include_principal, a, b, c,
             )
         if brdf_px is not None:  # spatially varying parameters: the pixel's own vector
-            pix = brdf.copy()
             pix[B_RHO] = brdf_px[p, 0]
             pix[B_AX] = brdf_px[p, 1]
             pix[B_AY] = brdf_px[p, 2]
@@ -1157,6 +1157,7 @@ def render_tile_lobe(
             _micronormals_slopes(u1, u2, 0.0, 0.0, brdf, osx, osy, ow, ocum, 1.0, mx, my, mz, mz3)
         else:
             _micronormals(u1, u2, 0.0, 0.0, ax, ay, mx, my, mz, mz3)
+    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -1181,7 +1182,6 @@ def render_tile_lobe(
             else:
                 _micronormals(u1, u2, rotation[p, 0], rotation[p, 1], ax, ay, mx, my, mz, mz3)
         if brdf_px is not None:  # spatially varying (Ward, Beckmann): the pixel's own lobe
-            pix = brdf.copy()
             pix[B_RHO] = brdf_px[p, 0]
             pix[B_AX] = brdf_px[p, 1]
             pix[B_AY] = brdf_px[p, 2]
