@@ -37,6 +37,7 @@ import numpy as np
 from ..kernels import bundle as kb
 from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
+from ..scene.brdf_variation import with_params
 from ..kernels import primary as kprim
 from ..kernels.synth import shifted_images
 from ..trace import bundle_geometry, cone_basis, trace_pixels
@@ -534,7 +535,7 @@ class Simulation:
                 frame = (hits.x_axis[0, p], hits.y_axis[0, p], hits.normal[0, p])
                 i_loc = np.array([hits.to_camera[0, p] @ b for b in frame])
                 off = rot[p] if rot.shape[0] else (0.0, 0.0)
-                model = scene.brdf if px is None else _with_alphas(scene.brdf, px[p, 1], px[p, 2])
+                model = scene.brdf if px is None else with_params(scene.brdf, *px[p])
                 loc = model.sample(np.mod(u1 + off[0], 1.0), np.mod(u2 + off[1], 1.0), i_loc)
                 e1, e2, e3 = frame
             else:
@@ -547,11 +548,3 @@ class Simulation:
             dirs[p] = loc[:, :1] * e1 + loc[:, 1:2] * e2 + loc[:, 2:3] * e3
         return ou, ov, of, dirs, origin
 
-
-def _with_alphas(brdf, ax: float, ay: float):
-    """The Ward/Beckmann model with the alphas of one pixel (spatially varying BRDF)."""
-    import dataclasses
-
-    if hasattr(brdf, "alpha_u"):
-        return dataclasses.replace(brdf, alpha_u=float(ax), alpha_v=float(ay))
-    return dataclasses.replace(brdf, alpha_x=float(ax), alpha_y=float(ay))

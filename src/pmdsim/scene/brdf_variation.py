@@ -171,6 +171,18 @@ class BrdfVariation:
         return self.pixel_params(points_from_geometry(geo, monitor), brdf_vector)
 
 
+def with_params(brdf, rho_s: float, alpha_x: float, alpha_y: float):
+    """The Ward or Beckmann model ``brdf`` with one pixel's parameters (a row of
+    :meth:`BrdfVariation.pixel_params`): the NumPy twin of the kernels' ``brdf_px``."""
+    import dataclasses
+
+    if hasattr(brdf, "alpha_u"):
+        return dataclasses.replace(brdf, rho_s=float(rho_s), alpha_u=float(alpha_x),
+                                   alpha_v=float(alpha_y))
+    return dataclasses.replace(brdf, rho_s=float(rho_s), alpha_x=float(alpha_x),
+                               alpha_y=float(alpha_y))
+
+
 def points_from_geometry(geo: np.ndarray, monitor) -> np.ndarray:
     """Surface points (P, 3) of geometry rows: S = M0 + (U0 - (W-1)/2) p e_u +
     (V0 - (H-1)/2) p e_v - T n_m (the rows' ``G_U0``, ``G_V0``, ``G_T``; orthonormal
