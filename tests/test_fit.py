@@ -51,6 +51,7 @@ def test_closed_form_start_is_near_the_truth(truth_values):
     assert abs(ax / TRUTH[0] - 1) < 0.25 and abs(ay / TRUTH[1] - 1) < 0.25, (ax, ay)
 
 
+@pytest.mark.slow  # 20 fits, ~28 s CPU alone
 def test_fit_recovers_alphas_and_uncertainties_cover(truth_values):
     noise = NoiseModel(SENSOR.gain, SENSOR.dark_noise_electrons)
     cfg = _config(0.02, 0.02)  # the configuration's own alphas are not the truth

@@ -95,6 +95,8 @@ def plot_fit(res, path, frame: str = "fixed") -> Path:
         ax.plot(w, res.modulation_start[i], "--", color="tab:orange", label="closed-form start")
         ax.plot(w, res.modulation_fitted[i], "-", color="tab:blue", label="fitted simulation")
         ax.set_xscale("log")
+        ax.set_xticks(w, [f"{x:g}" for x in w])
+        ax.minorticks_off()
         ax.set_ylim(0, 1.05)
         ax.set_xlabel("fringe width (monitor px)")
         ax.set_ylabel("modulation B/A")

@@ -252,7 +252,7 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
 
     x0 = np.array([np.log(start[0]), np.log(start[1]), np.log(scale0)])
     sol = least_squares(residuals, x0, diff_step=diff_step, x_scale=np.array([0.1, 0.1, 0.1]),
-                        max_nfev=max_nfev, method="trf")
+                        max_nfev=max_nfev, method="trf", xtol=1e-6)
     n, p = sol.fun.size, sol.x.size
     chi2 = float(np.sum(sol.fun**2) / max(n - p, 1))
     jtj = sol.jac.T @ sol.jac
