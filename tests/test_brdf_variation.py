@@ -76,6 +76,22 @@ def test_constant_variation_is_the_uniform_brdf(model, estimator, mode):
     np.testing.assert_array_equal(var.sums, uni.sums)
 
 
+def test_constant_variation_with_camera_subpixels_is_the_uniform_brdf():
+    """The camera-optics path (2 x 2 sub-pixel vision rays per pixel, distortion): every
+    vision ray's own geometry row gives its surface point."""
+    const = {"radius_mm": [0.0, 200.0], "alpha_radial": [0.004, 0.004],
+             "rho_s_scale": [1.0, 1.0]}
+    cfg = _cfg("beckmann", "paper", const)
+    cfg = cfg.model_copy(update={"camera": cfg.camera.model_copy(update={"subpixels": 2,
+                                                                         "k1": 0.01})})
+    scene = Scene.from_config(cfg)
+    assert not scene.camera.is_simple_pinhole and scene.camera.rays_per_pixel == 4
+    var = _sim(scene).render_fringes(WIDTHS, shifts=4)
+    uni = _sim(scene.replace(brdf_variation=None)).render_fringes(WIDTHS, shifts=4)
+    assert np.isfinite(uni.images).sum() > 100
+    np.testing.assert_array_equal(var.images, uni.images)
+
+
 def test_constant_map_file_is_the_uniform_brdf(tmp_path):
     """The map path (.npz, fixed frame) with constant grids."""
     f = tmp_path / "const.npz"
