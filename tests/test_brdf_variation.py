@@ -283,3 +283,13 @@ def test_lobe_energy_diagnostic_uses_the_pixels_own_lobe():
     uni = energy_fraction(scene.replace(brdf_variation=None), grid, n_samples=2048)
     ok = np.isfinite(uni.fraction)
     assert np.nanmax(np.abs(uni.fraction[ok] - got.fraction[ok])) > 0.05  # it matters
+
+
+def test_fit_refuses_varying_alphas():
+    from pmdsim.studies import fit
+
+    cfg = _cfg("ward", "paper", {"radius_mm": [0.0, 100.0], "alpha_radial": [0.004, 0.008]})
+    with pytest.raises(ConfigError, match=r"fit: brdf\.variation"):
+        fit._with_alphas(cfg, 0.01, 0.01)
+    cfg = _cfg("ward", "paper", {"radius_mm": [0.0, 100.0], "rho_s_scale": [1.0, 0.5]})
+    assert fit._with_alphas(cfg, 0.01, 0.02).brdf.alpha_y == 0.02
