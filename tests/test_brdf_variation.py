@@ -293,3 +293,27 @@ def test_fit_refuses_varying_alphas():
         fit._with_alphas(cfg, 0.01, 0.01)
     cfg = _cfg("ward", "paper", {"radius_mm": [0.0, 100.0], "rho_s_scale": [1.0, 0.5]})
     assert fit._with_alphas(cfg, 0.01, 0.02).brdf.alpha_y == 0.02
+
+
+def test_rho_scale_over_the_radius_on_a_sphere():
+    """A concave sphere turned about its vertex axis (rotational frame, default axis = the
+    vertex normal): rho_s_scale(r) linear in the radius r = hypot(x, y) of each pixel's hit
+    point (NumPy tracer) multiplies the paper values."""
+    data = merge(base_dict(), {
+        "surface": {"__replace__": {"type": "sphere", "radius_mm": 800.0,
+                                    "aperture": {"shape": "circular", "radius_mm": 45.0}}},
+        "anisotropy": {"__replace__": {"frame": "rotational"}},
+        "brdf": {"__replace__": {"model": "ward", "alpha_x": 0.02, "alpha_y": 0.004,
+                                 "variation": {"radius_mm": [0.0, 50.0],
+                                               "rho_s_scale": [0.3, 1.0]}}},
+    })
+    scene = Scene.from_config(parse_config(data))
+    var = _sim(scene).render_fringes(WIDTHS, shifts=4)
+    uni = _sim(scene.replace(brdf_variation=None)).render_fringes(WIDTHS, shifts=4)
+    h, w = var.f_total.shape
+    rows, cols = np.mgrid[0:h, 0:w]
+    pt = trace_pixels(scene, rows.ravel(), cols.ravel()).point[0].reshape(h, w, 3)
+    s = 0.3 + 0.7 * np.minimum(np.hypot(pt[..., 0], pt[..., 1]), 50.0) / 50.0
+    ok = np.isfinite(uni.f_total)
+    assert ok.sum() > 100 and np.ptp(s[ok]) > 0.3
+    np.testing.assert_allclose(var.f_total[ok], uni.f_total[ok] * s[ok], rtol=1e-12, atol=0)
