@@ -524,3 +524,17 @@ def test_library_defaults_match_the_configuration_defaults():
     assert p["target_fraction"].default == c.min_energy_fraction
     assert inspect.signature(dg.energy_fraction).parameters["target"].default == c.min_energy_fraction
     assert inspect.signature(dg.lobe_energy).parameters["target"].default == c.min_energy_fraction
+
+
+def test_fewer_than_four_effective_rays_are_not_judged():
+    """Median ESS 4 is judged (modulation 1 is above any noise floor: no warning); 3.99 is
+    not: the cone estimators are told to sample the lobe, the radiometric one to raise N
+    (~ N 1.5 x 4 / ESS). Guards against the bound moved to 5 or to '<='."""
+    se = np.full((1, 1, 3, 7), 1e-5)
+    kw = dict(directions=("x",), widths=(400.0,), modulation=np.full((1, 1, 3, 7), 1.0),
+              n_rays=10)
+    assert dg.check(_diag(se, ess=np.full((3, 7), 4.0), **kw)) == []
+    warns = dg.check(_diag(se, ess=np.full((3, 7), 3.99), **kw))
+    assert [w.code for w in warns] == ["effective_sample_size"] and "< 4" in warns[0].message
+    warns = dg.check(_diag(se, ess=np.full((3, 7), 3.99), estimator="radiometric", **kw))
+    assert [w.code for w in warns] == ["too_few_rays"] and warns[0].suggested == 16

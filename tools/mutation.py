@@ -140,6 +140,15 @@ EQUIVALENT: dict[str, str] = {
         "for the diagonal covariance of an axis-aligned spot (it returns (0, 1))",
     "measure/deviation.py:image_moments:Gt->GtE:img > threshold#0":
         "a pixel exactly at the threshold weighs img - threshold = 0 either way",
+    "measure/deviation.py:image_moments:int 2->3:2#0":
+        "-pi/3 instead of -pi/2 differs only for raw eigenvector angles in (-90, -60] deg; "
+        "LAPACK's 2 x 2 eigenvectors never point into (-90, 0) deg (0 of 20 000 random "
+        "covariances), so the branch sees the same angles",
+    "studies/diagnostics.py:lobe_energy:float 1.0->2.0:1.0#0":
+        "np.clip's upper bound only catches the rounding overshoot of a unit dot product "
+        "(1 + 1e-16) for a sample within ~1e-8 rad of P; the lattice has none there",
+    "studies/diagnostics.py:lobe_energy:Lt->LtE:cum < target#0":
+        "differs only when a cumulative weight fraction equals the target to the last bit",
     "measure/deviation.py:image_moments:Gt->GtE:minor > 0#0":
         "major / 0.0 on float64 is inf, the value of the else branch",
     "measure/chain.py:surface_to_monitor_mm:int 128->129:128#0":
@@ -503,7 +512,11 @@ def main(argv=None) -> int:
 
 
 def summarize(report: dict) -> None:
-    """Print the kill rate per module and the survivors of a (possibly partial) report."""
+    """Print the kill rate per module and the survivors of a (possibly partial) report
+    (equivalence from the current :data:`EQUIVALENT`, so a later review counts)."""
+    for r in report["modules"].values():
+        for x in r["results"]:
+            x["equivalent"] = EQUIVALENT.get(x["key"]) or x.get("equivalent")
     print("\nmodule                      run  equiv  killed  survived  timeout  kill rate")
     for mod, r in report["modules"].items():
         res = r["results"]
