@@ -962,6 +962,7 @@ def render_tile(
     out_v,
     out_f,
     mon_corr=None,
+    brdf_px=None,
 ):
     """Render one tile of pixels.
 
@@ -1002,6 +1003,10 @@ def render_tile(
     mon_corr : (MC_COEF + ...) float64, optional
         Display geometry and falloff (layout ``MC_*``, :func:`monitor_correction`); omitted
         = the nominal flat, bare, Lambertian monitor.
+    brdf_px : (P, 3) float64, optional
+        Per-pixel ``(rho, alpha_x, alpha_y)`` replacing ``brdf[B_RHO]``, ``brdf[B_AX]``,
+        ``brdf[B_AY]`` (spatially varying parameters; Ward and Beckmann); omitted = the
+        vector's constants for every pixel.
     """
     npix = geo.shape[0]
     m = u1.shape[0]
@@ -1030,6 +1035,7 @@ def render_tile(
     if shared:
         _directions(u1, u2, 0.0, 0.0, scheme, theta_max, cos_tm, include_principal, a, b, c)
     nout = out.shape[1] - OUT_FIRST
+    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -1046,7 +1052,16 @@ def render_tile(
                 u1, u2, rotation[p, 0], rotation[p, 1], scheme, theta_max, cos_tm,
                 include_principal, a, b, c,
             )
-        if beckmann:
+        if brdf_px is not None:  # spatially varying parameters: the pixel's own vector
+            pix[B_RHO] = brdf_px[p, 0]
+            pix[B_AX] = brdf_px[p, 1]
+            pix[B_AY] = brdf_px[p, 2]
+            if beckmann:
+                ftot, fhit = _phase1_beckmann(g, a, b, c, n, pix, wm, hm, ubuf, vbuf, iubuf,
+                                              ivbuf, fbuf)
+            else:
+                ftot, fhit = _phase1(g, a, b, c, n, pix, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+        elif beckmann:
             ftot, fhit = _phase1_beckmann(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         elif slopes:
             wsum = 1.0
@@ -1086,6 +1101,7 @@ def render_tile_lobe(
     out_v,
     out_f,
     mon_corr=None,
+    brdf_px=None,
 ):
     """Render one tile with the radiometric estimator: directions sampled from the lobe.
 
@@ -1106,7 +1122,8 @@ def render_tile_lobe(
     phase 2 sums ``w L``: ``(1/N) sum w L`` estimates the integral of ``f L cos(theta_o)``
     over the hemisphere. The parameters are those of :func:`render_tile` without the cone
     (``scheme``, ``theta_max``, ``include_principal``); ``geo`` rows may use any orthonormal
-    basis; ``mon_corr`` as there. The mirror (no lobe) is not accepted: render it with
+    basis; ``mon_corr`` and ``brdf_px`` (per-pixel rho and alphas, which also shape each
+    pixel's micro-normals) as there. The mirror (no lobe) is not accepted: render it with
     :func:`render_tile`.
     """
     if int(brdf[B_MODEL]) == MODEL_MIRROR:
@@ -1140,6 +1157,7 @@ def render_tile_lobe(
             _micronormals_slopes(u1, u2, 0.0, 0.0, brdf, osx, osy, ow, ocum, 1.0, mx, my, mz, mz3)
         else:
             _micronormals(u1, u2, 0.0, 0.0, ax, ay, mx, my, mz, mz3)
+    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -1163,7 +1181,18 @@ def render_tile_lobe(
                                      ocum, 1.0, mx, my, mz, mz3)
             else:
                 _micronormals(u1, u2, rotation[p, 0], rotation[p, 1], ax, ay, mx, my, mz, mz3)
-        ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+        if brdf_px is not None:  # spatially varying (Ward, Beckmann): the pixel's own lobe
+            pix[B_RHO] = brdf_px[p, 0]
+            pix[B_AX] = brdf_px[p, 1]
+            pix[B_AY] = brdf_px[p, 2]
+            _micronormals(u1, u2, 0.0 if shared else rotation[p, 0],
+                          0.0 if shared else rotation[p, 1], pix[B_AX], pix[B_AY],
+                          mx, my, mz, mz3)
+            ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, pix, wm, hm, ubuf, vbuf, iubuf,
+                                      ivbuf, fbuf)
+        else:
+            ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf,
+                                      ivbuf, fbuf)
         if nord > 0 and wsum != 1.0:  # only the propagating orders' share leaves the surface
             for j in range(n):
                 fbuf[j] *= wsum

@@ -234,7 +234,19 @@ def energy_fraction(scene, grid: PixelGrid, theta_max: float | None = None, targ
         raise ValueError("energy_fraction: the mirror has no lobe (all its energy is in P)")
     theta_max = scene.sampling.theta_max if theta_max is None else float(theta_max)
     valid, i_local = incidence(scene, grid.pixel_rows, grid.pixel_cols)
-    frac, need, albedo = lobe_energy(scene.brdf, i_local, theta_max, n_samples, target)
+    if scene.brdf_variation is None:
+        frac, need, albedo = lobe_energy(scene.brdf, i_local, theta_max, n_samples, target)
+    else:  # spatially varying BRDF: each pixel's lobe with its own alphas and rho_s
+        from ..scene.brdf_variation import with_params
+        from ..trace import trace_pixels
+
+        pts = trace_pixels(scene, grid.pixel_rows, grid.pixel_cols).point[0]
+        px = scene.brdf_variation.pixel_params(np.nan_to_num(pts), scene.brdf.kernel_params())
+        parts = [lobe_energy(with_params(scene.brdf, *px[k]), i_local[k:k + 1], theta_max,
+                             n_samples, target) for k in range(i_local.shape[0])]
+        frac = np.concatenate([p[0] for p in parts])
+        need = np.concatenate([p[1] for p in parts])
+        albedo = np.concatenate([p[2] for p in parts])
     shape = grid.grid_shape
     return EnergyFraction(
         math.degrees(theta_max), target, frac[:, 0].reshape(shape),

@@ -125,6 +125,12 @@ def _with_alphas(cfg: RunConfig, ax: float, ay: float) -> RunConfig:
     if b.model not in FIT_FIELDS or (b.model == "slope_density" and b.density != "gaussian"):
         raise ConfigError(f"fit: brdf.model = {b.model!r} has no alphas to fit; use 'ward', "
                           "'beckmann' or 'slope_density' with density = 'gaussian'")
+    var = getattr(b, "variation", None)
+    if var is not None and (var.file is not None or var.alpha_tangential is not None
+                            or var.alpha_radial is not None):
+        raise ConfigError("fit: brdf.variation varies the alphas over the surface, so one pair "
+                          "of alphas cannot be fitted; remove brdf.variation (a radius table "
+                          "of rho_s_scale alone is allowed)")
     d = cfg.model_dump()
     brdf = d["brdf"]
     for k in ("alpha_tangential", "alpha_radial"):
