@@ -149,3 +149,16 @@ def _write_toml(path: Path, data: dict) -> None:
                 section(f"{prefix}.{k}" if prefix else k, v)
     section("", data)
     path.write_text("\n".join(lines) + "\n")
+
+
+def test_footprint_truth():
+    """With the footprint average as the truth, sub-pixels on a continuous monitor give the
+    same (near-zero) system error as with the centre ray on a flat mirror (they differ by
+    < 1e-4 px, docs/system.md); a bad choice is an error."""
+    cfg = _cfg(monitor={"pixel_model": "continuous", "gamma": 1.0, "bit_depth": None,
+                        "cover_glass_thickness_mm": 0.0}, sensor={"enabled": False})
+    rows = budget(cfg, truth="footprint")
+    for d in ("x", "y"):
+        assert _get(rows, "footprint", d)["rms_px"] < 1e-3
+    with pytest.raises(ValueError, match="truth"):
+        budget(cfg, truth="middle")

@@ -245,6 +245,8 @@ def test_reduced_camera_keeps_at_least_one_pixel_per_axis():
     tighter axis sets the scale (guards against one axis used for both)."""
     cfg = make_config(camera={"resolution": [400, 20], "focal_length_px": 800.0})
     assert reduced_config(cfg, (10, 10)).camera.resolution == (10, 1)
+    cfg = make_config(camera={"resolution": [20, 400], "focal_length_px": 800.0})
+    assert reduced_config(cfg, (10, 10)).camera.resolution == (1, 10)
     # the tighter axis sets the scale: 40 x 32 into 30 x 12 is 3/8, i.e. 15 x 12
     assert reduced_config(make_config(), (30, 12)).camera.resolution == (15, 12)
     assert reduced_config(make_config(), (12, 30)).camera.resolution == (12, 10)
@@ -290,3 +292,22 @@ def test_cli_help_states_the_study_defaults():
     w, h = (int(x) for x in p["camera"].default.default.split("x"))
     assert (w, h) == inspect.signature(convergence_study).parameters["camera_size"].default
     assert (w, h) == inspect.signature(reduced_config).parameters["camera_size"].default
+
+
+def test_study_defaults_without_fringes_and_pixels_off_the_monitor():
+    """A configuration that shows only dots: the study uses 50 px fringes, x and y, K = 4.
+    The base scene with a 100 x 50 mm monitor has plate pixels whose principal ray misses it
+    (found by hand with ``naive.primary``): they are not counted in n_valid even though their decoded
+    phases are finite (black images decode to a phase too). Guards against the default K or
+    widths changed, and '&' / '|' in the valid mask."""
+    cfg = make_config(patterns={"fringes": False, "dots": {"size_px": 9, "grid": [2, 2]}},
+                      monitor={"resolution": [100, 50]})
+    res = convergence_study(cfg, n_values=(8,), estimators=("radiometric",),
+                            camera_size=(20, 16), diagnostics=False)
+    m = res.meta
+    assert m["shifts"] == 4 and m["widths_px"] == [50.0] and m["directions"] == ["x", "y"]
+    prim = naive.primary(reduced_config(cfg, (20, 16)))
+    off = prim["valid"] & ~prim["on_monitor"]
+    assert off.sum() > 5                          # plate pixels whose P misses the monitor
+    for r in res.rows:
+        assert r["n_valid"] == int(prim["on_monitor"].sum())

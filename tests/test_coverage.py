@@ -62,3 +62,29 @@ def test_off_monitor_share_and_flags():
                                   [[False, False, True, False]])
     np.testing.assert_array_equal(off_monitor_mask(f_total, f_hit, surface, 0.2),
                                   [[False, True, True, False]])
+
+
+def test_bundles_off_the_monitor_are_flagged_counted_and_never_valid(tmp_path):
+    """The monitor moved so that the reflection of part of the plate falls off its edge: the
+    pixels whose bundle puts more than max_off_monitor_fraction of its weight off the monitor
+    are in ``lobe_off_monitor``, counted in the statistics and not valid; their share, from
+    f_hit / f_total of an independent render, exceeds the bound, the others' does not."""
+    from pmdsim.render import Simulation
+    from pmdsim.run import load_run, run_simulation
+
+    cfg = make_config(monitor={"centre_mm": [60.0, 85.2, 181.3]},
+                      patterns={"fringes": {"widths_px": [25.0, 200.0]}})
+    result = run_simulation(cfg, tmp_path / "run", figures=False, diagnostics=False)
+    ds = load_run(result.outdir)
+    off = ds["lobe_off_monitor"].values
+    fr = Simulation.from_config(cfg).render_fringes((25.0,), ("x",), 4)
+    surface = ds["surface_mask"].values
+    share = 1.0 - fr.f_hit / fr.f_total
+    bound = cfg.diagnostics.max_off_monitor_fraction
+    assert off.any() and np.all(share[off] > bound)
+    assert np.all(share[surface & ~off] <= bound)
+    for di, d in enumerate(("x", "y")):
+        assert not np.any(ds["valid"].values[di] & off)
+        considered = ds["reference_decode_flags"].values[di] == 0
+        expected = considered & off & ~ds["low_modulation"].values[di]
+        assert result.statistics["directions"][d]["pixels"]["lobe_off_monitor"] == expected.sum()

@@ -460,3 +460,26 @@ def test_library_defaults_match_the_configuration_defaults():
 
     sig = inspect.signature(compare_direction)
     assert sig.parameters["min_modulation_ratio"].default == DecodeConfig().min_modulation_ratio
+
+
+def test_chain_counts_bundles_off_the_monitor_apart():
+    """Pixels whose bundle hangs off the monitor are masked and counted as lobe_off_monitor,
+    not as decode-flagged or low-modulation: with off = {(1, 1) valid, (0, 0) low modulation,
+    (2, 3) decode-flagged, (2, 0) not considered}, the counts are 2 off, 2 low, 0 flagged,
+    7 valid of 11. Guards against the off-monitor set overlapping the other two counts."""
+    c = _direction_case()
+    w = c["width"]
+    coord = c["phase"] * w / (2 * math.pi)
+    ref_coord = c["ref_phase"] * w / (2 * math.pi)
+    meas = _decode_result(c["phase"], coord, c["mod"], c["valid"])
+    ref = _decode_result(c["ref_phase"], ref_coord, c["ref_mod"], c["ref_valid"])
+    geo = SimpleNamespace(specular_u=ref_coord, specular_v=ref_coord,
+                          surface_mask=np.ones(coord.shape, bool))
+    off = np.zeros(coord.shape, bool)
+    off[1, 1] = off[0, 0] = off[2, 3] = off[2, 0] = True
+    res = chain.compare({"x": meas}, {"x": ref}, geo, np.full(coord.shape, 500.0), 0.3,
+                        SimpleNamespace(min_modulation_ratio=0.1), 4, off_monitor=off)
+    p = chain.statistics(res, "off")["directions"]["x"]["pixels"]
+    assert (p["considered"], p["valid"], p["low_modulation"]) == (11, 7, 2)
+    assert p["lobe_off_monitor"] == 2 and p["decode_flagged"] == 0
+    assert p["valid"] + p["low_modulation"] + p["decode_flagged"] + p["lobe_off_monitor"] == 11

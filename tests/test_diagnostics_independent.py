@@ -66,31 +66,36 @@ def test_suggested_n_rays_follows_n_times_ratio_squared():
 
 def test_phase_error_below_target_gives_no_warning_and_washed_out_fringes_are_skipped():
     """P95 at 0.9 x the target: no warning; a fringe with median modulation 0.04 (< 0.05)
-    is reported as washed out and its (huge) error is not what sets N. Guards against a
-    '<' / '>' swap, the washed-out fringe entering the worst-fringe choice."""
+    and a noise floor below it (ESS 4000: 2 / sqrt(ESS) = 0.03) is washed out, a wider width
+    is suggested, and its (huge) error is not what sets N. Guards against a '<' / '>' swap,
+    the washed-out fringe entering the worst-fringe choice."""
     se = np.full((2, 2, 3, 7), 0.9e-3)
     se[0, 0] = 5.0                                   # washed out: its phase is noise
     mod = np.full((2, 2, 3, 7), 0.8)
     mod[0, 0] = 0.04
-    warns = dg.check(_diag(se, modulation=mod), max_phase_error_mrad=1.0)
-    codes = [w.code for w in warns]
-    assert codes == ["washed_out"]
+    kw = dict(modulation=mod, n_rays=5000, ess=np.full((3, 7), 4000.0))
+    warns = dg.check(_diag(se, **kw), max_phase_error_mrad=1.0)
+    assert [w.code for w in warns] == ["washed_out"]
     assert "x fringes of 40 px" in warns[0].message
+    assert warns[0].setting == "patterns.fringes.widths_px" and 40.0 not in warns[0].suggested
     se[1, 1] = 1.2e-3
-    warns = dg.check(_diag(se, modulation=mod), max_phase_error_mrad=1.0)
+    warns = dg.check(_diag(se, **kw), max_phase_error_mrad=1.0)
     w = {x.code: x for x in warns}["phase_error"]
-    assert w.suggested == 150 and "y fringes of 400 px" in w.message   # 100 x 1.44 -> 150
+    assert w.suggested == 7200 and "y fringes of 400 px" in w.message   # 5000 x 1.44
 
 
-def test_washed_out_floor_is_twice_the_sampling_noise():
+def test_modulation_within_the_noise_floor_is_undetermined():
     """Modulation 0.3 is measurable with ESS 100 (floor 2 / sqrt(100) = 0.2) but not with
-    ESS 25 (floor 0.4). Guards against a floor of 1 / sqrt(ESS) or 2 / ESS."""
+    ESS 25 (floor 0.4 > 0.05): 'modulation_undetermined', raise N to bring the floor below
+    the 5 % bound: 100 x 1.5 x (0.4 / 0.05)^2 = 9600. Guards against a floor of
+    1 / sqrt(ESS) or 2 / ESS, the square missing in the suggestion."""
     se = np.full((1, 1, 3, 7), 1e-4)
     mod = np.full((1, 1, 3, 7), 0.3)
     kw = dict(directions=("x",), widths=(40.0,), modulation=mod, n_rays=100)
     assert dg.check(_diag(se, ess=np.full((3, 7), 100.0), **kw)) == []
     warns = dg.check(_diag(se, ess=np.full((3, 7), 25.0), **kw))
-    assert [w.code for w in warns] == ["washed_out"]
+    assert [w.code for w in warns] == ["modulation_undetermined"]
+    assert warns[0].setting == "sampling.n_rays" and warns[0].suggested == 9600
 
 
 def test_ess_warning_fires_below_the_fraction_only_for_cone_estimators():
@@ -519,3 +524,17 @@ def test_library_defaults_match_the_configuration_defaults():
     assert p["target_fraction"].default == c.min_energy_fraction
     assert inspect.signature(dg.energy_fraction).parameters["target"].default == c.min_energy_fraction
     assert inspect.signature(dg.lobe_energy).parameters["target"].default == c.min_energy_fraction
+
+
+def test_fewer_than_four_effective_rays_are_not_judged():
+    """Median ESS 4 is judged (modulation 1 is above any noise floor: no warning); 3.99 is
+    not: the cone estimators are told to sample the lobe, the radiometric one to raise N
+    (~ N 1.5 x 4 / ESS). Guards against the bound moved to 5 or to '<='."""
+    se = np.full((1, 1, 3, 7), 1e-5)
+    kw = dict(directions=("x",), widths=(400.0,), modulation=np.full((1, 1, 3, 7), 1.0),
+              n_rays=10)
+    assert dg.check(_diag(se, ess=np.full((3, 7), 4.0), **kw)) == []
+    warns = dg.check(_diag(se, ess=np.full((3, 7), 3.99), **kw))
+    assert [w.code for w in warns] == ["effective_sample_size"] and "< 4" in warns[0].message
+    warns = dg.check(_diag(se, ess=np.full((3, 7), 3.99), estimator="radiometric", **kw))
+    assert [w.code for w in warns] == ["too_few_rays"] and warns[0].suggested == 16

@@ -141,3 +141,77 @@ def test_precompensated_gamma_renders_like_a_linear_display():
         ok = a[d][1] & b[d][1]
         np.testing.assert_allclose(b[d][0][ok], a[d][0][ok], atol=1e-9)
         assert np.nanmax(np.abs(c[d][0] - a[d][0])[ok]) > 0.01  # gamma 2.2 uncompensated shows
+
+
+def test_falloff_dims_by_the_emission_angle():
+    """An all-white monitor seen in a mirror: each pixel shows cos(theta)^m of its principal
+    ray's emission angle, times the tabulated factor."""
+    sim = Simulation.from_config(make_config(brdf=MIRROR, monitor={
+        "falloff_exponent": 3.0, "falloff_table": [[0.0, 1.0], [40.0, 0.6]]}))
+    img = sim.render_images(np.ones((1,) + sim.scene.monitor.shape))[0]
+    _, (ou, ov, on) = _exact_monitor_hits(sim)
+    theta = np.arccos(-on)
+    expect = np.cos(theta) ** 3 * np.interp(np.degrees(theta), [0, 40], [1.0, 0.6])
+    geo = sim.geometry()
+    ok = geo.monitor_mask
+    assert ok.sum() > 500 and np.ptp(expect[ok]) > 0.05
+    np.testing.assert_allclose(img[ok], expect[ok], rtol=1e-5)
+
+
+def test_lut_and_sensor_photons_from_a_config_file(tmp_path):
+    from pmdsim.config import load_config
+
+    (tmp_path / "lut.csv").write_text("drive,cd_m2\n0,0.5\n128,60\n255,300\n")
+    (tmp_path / "c.toml").write_text('''
+[camera]
+resolution = [8, 6]
+focal_length_px = 20.0
+position_mm = [0.0, -120.0, 260.0]
+look_at_mm = [0.0, 0.0, 0.0]
+[monitor]
+resolution = [100, 80]
+pixel_pitch_mm = 1.0
+centre_mm = [0.0, 90.0, 180.0]
+look_at_mm = [0.0, 0.0, 0.0]
+response_lut = "lut.csv"
+[surface]
+size_mm = [50.0, 50.0]
+[brdf]
+model = "mirror"
+[sensor]
+enabled = true
+quantum_efficiency = 0.5
+exposure_photons = 8000.0
+''')
+    cfg = load_config(tmp_path / "c.toml")
+    sim = Simulation.from_config(cfg)
+    mon = sim.scene.monitor
+    assert not mon.is_linear
+    np.testing.assert_allclose(mon.luminance([0.0, 128 / 255, 1.0]), [0.0, (60 - 0.5) / 299.5, 1.0])
+    from pmdsim.scene.sensor import Sensor
+
+    assert Sensor.from_config(cfg.sensor).exposure == pytest.approx(4000.0)
+
+
+@pytest.mark.parametrize("estimator", ["paper", "weighted_mean", "radiometric"])
+def test_subpixel_render_is_the_mean_of_shifted_pinhole_renders(estimator):
+    """n x n sub-pixels = the mean of n^2 single-ray renders whose principal point is shifted
+    by the sub-pixel offsets (the fast pinhole path, each ray normalised by its own
+    estimator); rays that miss the surface count as black."""
+    samp = {"estimator": estimator, "n_rays": 16}
+    sim = Simulation.from_config(make_config(camera={"subpixels": 2}, sampling=samp))
+    got = sim.render_fringes((24.0, 200.0), ("x", "y"), 4).images
+    cx, cy = (40 - 1) / 2, (32 - 1) / 2
+    parts = []
+    for dr in (-0.25, 0.25):
+        for dc in (-0.25, 0.25):
+            s = Simulation.from_config(make_config(
+                camera={"principal_point_px": [cx - dc, cy - dr]}, sampling=samp))
+            assert s.scene.camera.is_simple_pinhole
+            parts.append(s.render_fringes((24.0, 200.0), ("x", "y"), 4).images.astype(np.float64))
+    stack = np.stack(parts)
+    hit = np.isfinite(stack)
+    expect = np.where(hit, stack, 0.0).sum(0) / 4
+    expect[~hit.any(0)] = np.nan
+    np.testing.assert_allclose(got, expect, rtol=1e-5, atol=1e-6 * np.nanmax(np.abs(expect)))
+    assert np.isnan(got).any() and (hit.sum(0) == 2).any()  # edges: partly on the plate

@@ -109,7 +109,7 @@ def test_simulate_writes_what_the_camera_would(tmp_path):
 
     from test_pipeline import tiny_config_dict
 
-    d = tiny_config_dict(fringes={"widths_px": [8, 32, 160], "shifts": 4})
+    d = tiny_config_dict(fringes={"widths_px": [8, 32, 160], "shifts": 4, "directions": ["x"]})
     d["sensor"] = {"enabled": True, "target_fill": 0.8, "full_well_electrons": 10000.0,
                    "dark_noise_electrons": 3.0, "bit_depth": 12, "seed": 4}
     res = pipeline.run_simulation(parse_config(d), tmp_path / "run", figures=False)

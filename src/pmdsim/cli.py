@@ -7,6 +7,8 @@
     pmdsim sweep CONFIG -o OUTDIR [--scheduler threads|processes|synchronous|tcp://..]
                                   [--workers N] [--overwrite] [--no-figures]
     pmdsim report RUN [--all | --figure NAME ...] [--variant NAME] [-o FOLDER]
+    pmdsim texture --feed-um F --nose-radius-mm R [--rq-um Q --correlation-um L] [-o OUT]
+    pmdsim fit CONFIG IMAGES... -o OUT
     pmdsim warmup
     pmdsim version
     pmdsim --help
@@ -134,12 +136,16 @@ def simulate(
     reference (statistics.json, summary.txt, deviation figures), and check the sampling
     (diagnostics: warnings, each naming the setting that fixes it; bounds in the
     configuration's diagnostics section)."""
+    from .run.claim import OutputBusy, check_free
+
+    try:  # a run already writing there: fail before the heavy imports (pydantic, NumPy)
+        check_free(output)
+    except OutputBusy as err:
+        _fail(str(err))
     from .config import load_config
-    from .run.claim import check_free
 
     console = _console()
     with _guard():
-        check_free(output)  # a run already writing there: fail before the heavy imports
         cfg = load_config(config)
         from .report.text import warning_text
         from .run import run_simulation
@@ -441,6 +447,9 @@ def budget(
     output: Path = typer.Option(..., "-o", "--output", help="Output folder to create."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
     no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+    truth: str = typer.Option("centre", "--truth", help="Ground truth of the system rows: "
+                              "'centre' (the chief ray through each pixel centre) or "
+                              "'footprint' (averaged over the pixel's vision rays)."),
 ) -> None:
     """Error budget: the chain with each system effect of CONFIG alone and all together on
     the ideal mirror, and the surface's scattering minus that mirror; deviation from the
@@ -456,16 +465,85 @@ def budget(
         t0 = time.perf_counter()
         with console.status(f"error budget of {cfg.name}") as status:
             result = run_budget(cfg, output, figure=not no_figure, overwrite=overwrite,
-                                progress=lambda msg: status.update(f"error budget of {cfg.name}: {msg}"))
+                                progress=lambda msg: status.update(f"error budget of {cfg.name}: {msg}"),
+                                truth=truth)
     except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
             NotADirectoryError, ValueError) as err:
         _fail(str(err))
+    what = "centre ray" if truth == "centre" else "vision rays (footprint average)"
     console.print(f"pmdsim budget '{cfg.name}' ({time.perf_counter() - t0:.1f} s); deviation from "
-                  "the exact reflection point of each pixel's centre ray")
+                  f"the exact reflection point of each pixel's {what}")
     console.print(budget_text(result.rows), markup=False)
     console.print(f"table  {result.table}")
     if result.figure is not None:
         console.print(f"figure {result.figure}")
+
+
+@app.command()
+def texture(
+    feed_um: float = typer.Option(..., "--feed-um", help="Feed per revolution f, um."),
+    nose_radius_mm: float = typer.Option(..., "--nose-radius-mm", help="Tool nose radius r, mm."),
+    rq_um: float = typer.Option(0.0, "--rq-um", help="Random roughness Rq, um."),
+    correlation_um: float = typer.Option(10.0, "--correlation-um",
+                                         help="Correlation length of the random roughness, um."),
+    wavelength_nm: float = typer.Option(545.0, "--wavelength-nm", help="Wavelength, nm."),
+    incidence_deg: float = typer.Option(0.0, "--incidence-deg", help="Angle of incidence, deg."),
+    distance_mm: float = typer.Option(600.0, "--distance-mm",
+                                      help="Surface-to-monitor distance d, mm."),
+    pitch_mm: float = typer.Option(0.25, "--pitch-mm", help="Monitor pixel pitch, mm."),
+    output: Path | None = typer.Option(None, "-o", "--output",
+                                       help="Folder for texture.json, texture.txt, texture.png."),
+    no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+) -> None:
+    """Machining to parameters: slope statistics, equivalent Ward/Beckmann alphas, specular
+    share, grating order spacing on the monitor and the regime of a diamond-turned surface
+    (docs/texture.md)."""
+    from .run.texture import run_texture
+
+    try:
+        res = run_texture(output, figure=not no_figure, feed_um=feed_um,
+                          nose_radius_mm=nose_radius_mm, rq_um=rq_um,
+                          correlation_length_um=correlation_um, wavelength_nm=wavelength_nm,
+                          incidence_deg=incidence_deg, distance_mm=distance_mm,
+                          pixel_pitch_mm=pitch_mm)
+    except ValueError as err:
+        _fail(str(err))
+    console = _console()
+    console.print(res.text, markup=False)
+    if res.json is not None:
+        console.print(f"table  {res.json}")
+    if res.figure is not None:
+        console.print(f"figure {res.figure}")
+
+
+@app.command()
+def fit(
+    config: Path = typer.Argument(..., help="Run configuration (TOML) of the set-up and model; "
+                                  "[patterns.fringes] describes the images."),
+    images: list[Path] = typer.Argument(..., help="Fringe images, ordered direction, width, "
+                                        "shift as [patterns.fringes] lists them."),
+    output: Path = typer.Option(..., "-o", "--output", help="Folder for fit.json, fit.txt, fit.png."),
+    no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+) -> None:
+    """Images to parameters: fit alpha_x/alpha_y (tangential/radial) and a brightness scale
+    of the configured BRDF to fringe images at several widths (closed-form start from the
+    modulation, then least squares with the full simulator; docs/texture.md)."""
+    from .config import ConfigError, load_config
+    from .run.texture import run_fit
+
+    console = _console()
+    try:
+        cfg = load_config(config)
+        t0 = time.perf_counter()
+        with console.status(f"fitting {cfg.brdf.model} alphas to {len(images)} images"):
+            res = run_fit(cfg, images, output, figure=not no_figure)
+    except (ConfigError, FileNotFoundError, ValueError) as err:
+        _fail(str(err))
+    console.print(f"pmdsim fit '{cfg.name}' ({time.perf_counter() - t0:.1f} s)")
+    console.print(res.text, markup=False)
+    console.print(f"table  {res.json}")
+    if res.figure is not None:
+        console.print(f"figure {res.figure}")
 
 
 @app.command()

@@ -74,6 +74,21 @@ B_SIZE = 6
 MODEL_MIRROR = 0
 MODEL_WARD = 1
 MODEL_BECKMANN = 2  # F D G / (4 cos_i cos_o), D anisotropic Beckmann, F = rho constant
+# Micro-facet models with a general slope density (``pmdsim.brdf.slope_density``): F D G /
+# (4 cos_i cos_o), D = p(s_x, s_y) / cos^4(theta_h), G Smith-Beckmann with the density's
+# equivalent alphas in B_AX/B_AY. Their vectors are longer than B_SIZE: the model's data
+# starts at B_TAB.
+MODEL_SLOPE_TABLE = 3  # p piecewise constant on a slope grid (separable or joint)
+MODEL_SLOPE_ORDERS = 4  # p = sum_k w_k Gaussian(s - s_k(i)): grating orders of a turned surface
+B_TAB = 6
+# MODEL_SLOPE_TABLE: [x0, dx, nx, y0, dy, ny, separable] then cdf_x (nx + 1); separable:
+# cdf_y (ny + 1), density_x (nx), density_y (ny); joint: cdf_y (nx rows of ny + 1),
+# density (nx * ny), per unit slope (area).
+TAB_X0, TAB_DX, TAB_NX, TAB_Y0, TAB_DY, TAB_NY, TAB_SEP, TAB_DATA = 0, 1, 2, 3, 4, 5, 6, 7
+# MODEL_SLOPE_ORDERS: [alpha_x, alpha_y (Gaussian lobe of each order), K] then K pairs
+# (q_k, w_k): order k leaves with local direction cosines (-i_x, -i_y + q_k) (q = m lambda / f,
+# grating vector along local y) and weight w_k (efficiency x spectral weight).
+ORD_AX, ORD_AY, ORD_K, ORD_DATA = 0, 1, 2, 3
 
 NORM_WARD1992 = 0  # the paper: 1 / (4 pi ax ay sqrt(cos_i cos_o))
 NORM_DUER2006 = 1  # 1 / (4 pi ax ay cos_i cos_o)
@@ -452,6 +467,250 @@ def _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, 
 
 
 
+# --- general slope densities (MODEL_SLOPE_TABLE, MODEL_SLOPE_ORDERS) -----------------------
+@fastjit(inline="always")
+def _cdf_pick(brdf, start, n, u):
+    """Cell index and position in it (0..1) of u in the cumulative table brdf[start:start+n+1]
+    (cdf[0] = 0, cdf[n] = 1): the cell k with cdf[k] <= u < cdf[k+1] (binary search)."""
+    lo = 0
+    hi = n
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if brdf[start + mid] <= u:
+            lo = mid
+        else:
+            hi = mid
+    c0 = brdf[start + lo]
+    dc = brdf[start + lo + 1] - c0
+    t = (u - c0) / dc if dc > 0.0 else 0.5
+    t = min(max(t, 0.0), 1.0)
+    return lo, t
+
+
+@fastjit(inline="always")
+def _table_slopes(brdf, s1, s2):
+    """Slopes (s_x, s_y) of the unit-square point (s1, s2) under a MODEL_SLOPE_TABLE density:
+    s1 picks the x cell from the marginal cdf (its remainder the position in the cell), s2
+    the y cell from the (conditional) cdf: an exact draw from the piecewise-constant density."""
+    b = B_TAB
+    x0 = brdf[b + TAB_X0]
+    dx = brdf[b + TAB_DX]
+    nx = int(brdf[b + TAB_NX])
+    y0 = brdf[b + TAB_Y0]
+    dy = brdf[b + TAB_DY]
+    ny = int(brdf[b + TAB_NY])
+    sep = brdf[b + TAB_SEP] != 0.0
+    cx = b + TAB_DATA
+    i, tx = _cdf_pick(brdf, cx, nx, s1)
+    cy = cx + nx + 1
+    if not sep:
+        cy += i * (ny + 1)
+    j, ty = _cdf_pick(brdf, cy, ny, s2)
+    return x0 + (i + tx) * dx, y0 + (j + ty) * dy
+
+
+@fastjit(inline="always")
+def _table_density(brdf, sx, sy):
+    """p(s_x, s_y) per unit slope area of a MODEL_SLOPE_TABLE density (0 off the grid)."""
+    b = B_TAB
+    x0 = brdf[b + TAB_X0]
+    dx = brdf[b + TAB_DX]
+    nx = int(brdf[b + TAB_NX])
+    y0 = brdf[b + TAB_Y0]
+    dy = brdf[b + TAB_DY]
+    ny = int(brdf[b + TAB_NY])
+    fx = (sx - x0) / dx
+    fy = (sy - y0) / dy
+    if not (fx >= 0.0 and fx < nx and fy >= 0.0 and fy < ny):
+        return 0.0
+    i = int(fx)
+    j = int(fy)
+    cx = b + TAB_DATA
+    if brdf[b + TAB_SEP] != 0.0:
+        d0 = cx + nx + 1 + ny + 1
+        return brdf[d0 + i] * brdf[d0 + nx + j]
+    d0 = cx + nx + 1 + nx * (ny + 1)
+    return brdf[d0 + i * ny + j]
+
+
+@fastjit(inline="always")
+def _order_centres(brdf, ix, iy, iz, osx, osy, ow, ocum):
+    """Slope centres (s_x, s_y) and weights of the grating orders for the local incident
+    direction i: order k leaves along o_k = (-i_x, -i_y + q_k, sqrt(1 - ..)) (the grating
+    equation in direction cosines); its centre is the slope of the half vector of i and o_k.
+    Evanescent orders get weight 0; ``ocum`` (K + 1) receives the cumulative weights.
+    Returns the sum of the propagating weights."""
+    b = B_TAB
+    k = int(brdf[b + ORD_K])
+    wsum = 0.0
+    ocum[0] = 0.0
+    for q in range(k):
+        qk = brdf[b + ORD_DATA + 2 * q]
+        wk = brdf[b + ORD_DATA + 2 * q + 1]
+        ox = -ix
+        oy = -iy + qk
+        oz2 = 1.0 - ox * ox - oy * oy
+        if oz2 <= 0.0:
+            osx[q] = 0.0
+            osy[q] = 0.0
+            ow[q] = 0.0
+        else:
+            hz = iz + math.sqrt(oz2)
+            osx[q] = -(ix + ox) / hz
+            osy[q] = -(iy + oy) / hz
+            ow[q] = wk
+            wsum += wk
+        ocum[q + 1] = wsum
+    return wsum
+
+
+@fastjit(inline="always")
+def _orders_density(brdf, sx, sy, osx, osy, ow, wsum):
+    """Mixture density sum_k w_k G(s - s_k) / sum_k w_k, G the Gaussian slope density of
+    alphas (ORD_AX, ORD_AY)."""
+    b = B_TAB
+    ax = brdf[b + ORD_AX]
+    ay = brdf[b + ORD_AY]
+    iax2 = 1.0 / (ax * ax)
+    iay2 = 1.0 / (ay * ay)
+    acc = 0.0
+    for q in range(osx.shape[0]):
+        if ow[q] > 0.0:
+            ex = sx - osx[q]
+            ey = sy - osy[q]
+            acc += ow[q] * math.exp(-(ex * ex * iax2 + ey * ey * iay2))
+    return acc / (math.pi * ax * ay * wsum) if wsum > 0.0 else 0.0
+
+
+@fastjit
+def _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wm, hm, ubuf, vbuf, iubuf,
+                   ivbuf, fbuf):
+    """Phase 1 of the cone estimators for the slope-density models (as
+    :func:`_phase1_beckmann`, with D = p(s_x, s_y) / cos^4(theta_h), s = -(h_x, h_y) / h_z);
+    returns (sum f, sum f over hits). For MODEL_SLOPE_ORDERS the density is the mixture of
+    the orders (``osx``, ``osy``, ``ow``, ``wsum`` from :func:`_order_centres`) times
+    ``wsum`` (the propagating share)."""
+    T = g[G_T]
+    A1 = g[G_A]
+    A2 = g[G_A + 1]
+    A3 = g[G_A + 2]
+    U0 = g[G_U0]
+    B1 = g[G_B]
+    B2 = g[G_B + 1]
+    B3 = g[G_B + 2]
+    V0 = g[G_V0]
+    C1 = g[G_C]
+    C2 = g[G_C + 1]
+    C3 = g[G_C + 2]
+    X0 = g[G_X]
+    X1 = g[G_X + 1]
+    X2 = g[G_X + 2]
+    X3 = g[G_X + 3]
+    Y0 = g[G_Y]
+    Y1 = g[G_Y + 1]
+    Y2 = g[G_Y + 2]
+    Y3 = g[G_Y + 3]
+    Z0 = g[G_Z]
+    Z1 = g[G_Z + 1]
+    Z2 = g[G_Z + 2]
+    Z3 = g[G_Z + 3]
+    table = int(brdf[B_MODEL]) == MODEL_SLOPE_TABLE
+    rho = brdf[B_RHO]
+    ax = brdf[B_AX]
+    ay = brdf[B_AY]
+    umax = wm - 0.5
+    vmax = hm - 0.5
+    ftot = 0.0
+    fhit = 0.0
+    smith = brdf[B_SMITH] != 0.0
+    k0 = rho / (4.0 * Z0)
+    if not table:
+        k0 *= wsum
+    if smith:
+        k0 *= _smith_g1_beckmann(X0, Y0, Z0, ax, ay)
+    for j in range(n):
+        aj = a[j]
+        bj = b[j]
+        cj = c[j]
+        dn = aj * A1 + bj * A2 + cj * A3
+        hx = X0 + aj * X1 + bj * X2 + cj * X3
+        hy = Y0 + aj * Y1 + bj * Y2 + cj * Y3
+        oz = aj * Z1 + bj * Z2 + cj * Z3
+        hz = Z0 + oz
+        hz2 = hz * hz
+        t = T / dn
+        u = U0 + t * (aj * B1 + bj * B2 + cj * B3)
+        v = V0 + t * (aj * C1 + bj * C2 + cj * C3)
+        ozp = max(oz, 1e-300)
+        f = 0.0
+        if oz > 0.0 and hz > 0.0:
+            sx = -hx / hz
+            sy = -hy / hz
+            if table:
+                p = _table_density(brdf, sx, sy)
+            else:
+                p = _orders_density(brdf, sx, sy, osx, osy, ow, wsum)
+            hh = (hx * hx + hy * hy + hz2) / hz2  # 1 / cos^2(theta_h)
+            f = k0 * p * hh * hh / ozp
+            if smith:
+                f *= _smith_g1_beckmann(hx - X0, hy - Y0, oz, ax, ay)
+        ftot += f
+        fhit += _store_ray(j, f, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
+    return ftot, fhit
+
+
+@fastjit
+def _micronormals_slopes(u1, u2, r1, r2, brdf, osx, osy, ow, ocum, wsum, mx, my, mz, mz3):
+    """Micro-normals m = (-s_x, -s_y, 1) / |.| of slopes drawn from a slope-density model
+    for the unit-square points rotated by (r1, r2) mod 1. MODEL_SLOPE_TABLE: the table
+    sampler; MODEL_SLOPE_ORDERS: s1 picks an order by weight (its remainder drives the
+    Gaussian radius), then the Walter Gaussian slope about the order's centre."""
+    table = int(brdf[B_MODEL]) == MODEL_SLOPE_TABLE
+    b = B_TAB
+    gax = brdf[b + ORD_AX]
+    gay = brdf[b + ORD_AY]
+    nord = osx.shape[0]
+    for j in range(u1.shape[0]):
+        s1 = u1[j] + r1
+        s1 = s1 - np.floor(s1)
+        s2 = u2[j] + r2
+        s2 = s2 - np.floor(s2)
+        if table:
+            sa, sb = _table_slopes(brdf, s1, s2)
+        else:
+            target = s1 * wsum
+            # the order k with ocum[k] <= target < ocum[k + 1] (binary search)
+            lo = 0
+            hi = nord
+            while hi - lo > 1:
+                mid = (lo + hi) >> 1
+                if ocum[mid] <= target:
+                    lo = mid
+                else:
+                    hi = mid
+            k = lo
+            acc = ocum[k]
+            t = (target - acc) / ow[k]
+            t = min(max(t, 0.0), 1.0)
+            r = math.sqrt(-math.log(max(1.0 - t, 1e-300)))
+            sp, cp = sincos(_TWO_PI * s2)
+            sa = osx[k] + gax * r * cp
+            sb = osy[k] + gay * r * sp
+        z = 1.0 / math.sqrt(1.0 + sa * sa + sb * sb)
+        mx[j] = -sa * z
+        my[j] = -sb * z
+        mz[j] = z
+        mz3[j] = z * z * z
+
+
+@fastjit(inline="always")
+def _n_orders(brdf):
+    """Number of grating orders of a MODEL_SLOPE_ORDERS vector (0 for other models)."""
+    if int(brdf[B_MODEL]) == MODEL_SLOPE_ORDERS:
+        return int(brdf[B_TAB + ORD_K])
+    return 0
+
+
 @fastjit(inline="always")
 def _flat_height(mc, n, x, y, map0, mr, mcols, gu, gv):
     """h(x, y) (mm) of the display's emitting surface: the polynomial sum_ij c[i, j] x^i y^j
@@ -703,6 +962,7 @@ def render_tile(
     out_v,
     out_f,
     mon_corr=None,
+    brdf_px=None,
 ):
     """Render one tile of pixels.
 
@@ -743,6 +1003,10 @@ def render_tile(
     mon_corr : (MC_COEF + ...) float64, optional
         Display geometry and falloff (layout ``MC_*``, :func:`monitor_correction`); omitted
         = the nominal flat, bare, Lambertian monitor.
+    brdf_px : (P, 3) float64, optional
+        Per-pixel ``(rho, alpha_x, alpha_y)`` replacing ``brdf[B_RHO]``, ``brdf[B_AX]``,
+        ``brdf[B_AY]`` (spatially varying parameters; Ward and Beckmann); omitted = the
+        vector's constants for every pixel.
     """
     npix = geo.shape[0]
     m = u1.shape[0]
@@ -752,6 +1016,12 @@ def render_tile(
     cos_tm = math.cos(theta_max)
     shared = rotation.shape[0] == 0
     beckmann = int(brdf[B_MODEL]) == MODEL_BECKMANN
+    slopes = int(brdf[B_MODEL]) >= MODEL_SLOPE_TABLE
+    nord = _n_orders(brdf)
+    osx = np.zeros(nord)
+    osy = np.zeros(nord)
+    ow = np.zeros(nord)
+    ocum = np.zeros(nord + 1)
     a = np.empty(n)
     b = np.empty(n)
     c = np.empty(n)
@@ -765,6 +1035,7 @@ def render_tile(
     if shared:
         _directions(u1, u2, 0.0, 0.0, scheme, theta_max, cos_tm, include_principal, a, b, c)
     nout = out.shape[1] - OUT_FIRST
+    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -781,8 +1052,23 @@ def render_tile(
                 u1, u2, rotation[p, 0], rotation[p, 1], scheme, theta_max, cos_tm,
                 include_principal, a, b, c,
             )
-        if beckmann:
+        if brdf_px is not None:  # spatially varying parameters: the pixel's own vector
+            pix[B_RHO] = brdf_px[p, 0]
+            pix[B_AX] = brdf_px[p, 1]
+            pix[B_AY] = brdf_px[p, 2]
+            if beckmann:
+                ftot, fhit = _phase1_beckmann(g, a, b, c, n, pix, wm, hm, ubuf, vbuf, iubuf,
+                                              ivbuf, fbuf)
+            else:
+                ftot, fhit = _phase1(g, a, b, c, n, pix, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+        elif beckmann:
             ftot, fhit = _phase1_beckmann(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+        elif slopes:
+            wsum = 1.0
+            if nord > 0:
+                wsum = _order_centres(brdf, g[G_X], g[G_Y], g[G_Z], osx, osy, ow, ocum)
+            ftot, fhit = _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wm, hm, ubuf,
+                                        vbuf, iubuf, ivbuf, fbuf)
         else:
             ftot, fhit = _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         if mon_corr is not None:
@@ -815,6 +1101,7 @@ def render_tile_lobe(
     out_v,
     out_f,
     mon_corr=None,
+    brdf_px=None,
 ):
     """Render one tile with the radiometric estimator: directions sampled from the lobe.
 
@@ -835,7 +1122,8 @@ def render_tile_lobe(
     phase 2 sums ``w L``: ``(1/N) sum w L`` estimates the integral of ``f L cos(theta_o)``
     over the hemisphere. The parameters are those of :func:`render_tile` without the cone
     (``scheme``, ``theta_max``, ``include_principal``); ``geo`` rows may use any orthonormal
-    basis; ``mon_corr`` as there. The mirror (no lobe) is not accepted: render it with
+    basis; ``mon_corr`` and ``brdf_px`` (per-pixel rho and alphas, which also shape each
+    pixel's micro-normals) as there. The mirror (no lobe) is not accepted: render it with
     :func:`render_tile`.
     """
     if int(brdf[B_MODEL]) == MODEL_MIRROR:
@@ -847,6 +1135,12 @@ def render_tile_lobe(
     shared = rotation.shape[0] == 0
     ax = brdf[B_AX]
     ay = brdf[B_AY]
+    slopes = int(brdf[B_MODEL]) >= MODEL_SLOPE_TABLE
+    nord = _n_orders(brdf)
+    osx = np.zeros(nord)
+    osy = np.zeros(nord)
+    ow = np.zeros(nord)
+    ocum = np.zeros(nord + 1)
     mx = np.empty(n)
     my = np.empty(n)
     mz = np.empty(n)
@@ -858,8 +1152,12 @@ def render_tile_lobe(
     fbuf = np.empty(n)
     table_ut = np.ascontiguousarray(table_u.T)
     table_vt = np.ascontiguousarray(table_v.T)
-    if shared:
-        _micronormals(u1, u2, 0.0, 0.0, ax, ay, mx, my, mz, mz3)
+    if shared and nord == 0:
+        if slopes:
+            _micronormals_slopes(u1, u2, 0.0, 0.0, brdf, osx, osy, ow, ocum, 1.0, mx, my, mz, mz3)
+        else:
+            _micronormals(u1, u2, 0.0, 0.0, ax, ay, mx, my, mz, mz3)
+    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -871,9 +1169,35 @@ def render_tile_lobe(
                     out_v[p, j] = np.nan
                     out_f[p, j] = 0.0
             continue
-        if not shared:
-            _micronormals(u1, u2, rotation[p, 0], rotation[p, 1], ax, ay, mx, my, mz, mz3)
-        ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+        wsum = 1.0
+        if nord > 0:  # the orders' centres depend on the pixel's incident direction
+            wsum = _order_centres(brdf, g[G_X], g[G_Y], g[G_Z], osx, osy, ow, ocum)
+            r1 = 0.0 if shared else rotation[p, 0]
+            r2 = 0.0 if shared else rotation[p, 1]
+            _micronormals_slopes(u1, u2, r1, r2, brdf, osx, osy, ow, ocum, wsum, mx, my, mz, mz3)
+        elif not shared:
+            if slopes:
+                _micronormals_slopes(u1, u2, rotation[p, 0], rotation[p, 1], brdf, osx, osy, ow,
+                                     ocum, 1.0, mx, my, mz, mz3)
+            else:
+                _micronormals(u1, u2, rotation[p, 0], rotation[p, 1], ax, ay, mx, my, mz, mz3)
+        if brdf_px is not None:  # spatially varying (Ward, Beckmann): the pixel's own lobe
+            pix[B_RHO] = brdf_px[p, 0]
+            pix[B_AX] = brdf_px[p, 1]
+            pix[B_AY] = brdf_px[p, 2]
+            _micronormals(u1, u2, 0.0 if shared else rotation[p, 0],
+                          0.0 if shared else rotation[p, 1], pix[B_AX], pix[B_AY],
+                          mx, my, mz, mz3)
+            ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, pix, wm, hm, ubuf, vbuf, iubuf,
+                                      ivbuf, fbuf)
+        else:
+            ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf,
+                                      ivbuf, fbuf)
+        if nord > 0 and wsum != 1.0:  # only the propagating orders' share leaves the surface
+            for j in range(n):
+                fbuf[j] *= wsum
+            ftot *= wsum
+            fhit *= wsum
         if mon_corr is not None:
             fhit = monitor_correction(g, mon_corr, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         out[p, OUT_FTOTAL] = ftot

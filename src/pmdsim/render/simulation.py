@@ -37,6 +37,7 @@ import numpy as np
 from ..kernels import bundle as kb
 from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
+from ..scene.brdf_variation import with_params
 from ..kernels import primary as kprim
 from ..kernels.synth import shifted_images
 from ..trace import bundle_geometry, cone_basis, trace_pixels
@@ -106,14 +107,16 @@ def reduce_subrays(out: np.ndarray, estimator: str) -> np.ndarray:
     miss the surface (NaN) see a black background; a pixel none of whose rays hits is NaN.
     """
     s = out.shape[1]
-    hit = np.isfinite(out[..., kb.OUT_FTOTAL])
+    ft = out[..., kb.OUT_FTOTAL]
+    hit = np.isfinite(ft)
     if estimator == "weighted_mean":
-        ft = out[..., kb.OUT_FTOTAL]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scaled = out / ft[..., None]
         hit &= ft > 0
-        out = scaled
-    summed = np.where(hit[..., None], out, 0.0).sum(axis=1) / s
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = out / ft[..., None]
+    elif not hit.all():
+        out = out.copy()
+    out[~hit] = 0.0  # a ray that misses the surface sees black
+    summed = out.sum(axis=1) / s
     if estimator == "weighted_mean":
         summed[:, kb.OUT_FTOTAL] = 1.0
     summed[~hit.any(axis=1)] = np.nan
@@ -276,8 +279,19 @@ class Simulation:
         full = (np.empty((cam.height, width, ncols))
                 if self.scheduler in ("threads", "synchronous") else None)
 
+        var = None if delta else scene.brdf_variation
+
         def kernel(geo, rot, out=None):
             out = np.empty((geo.shape[0], ncols)) if out is None else out
+            if var is not None:  # spatially varying alpha/rho_s: per-pixel parameters
+                px = var.geometry_params(geo, scene.monitor, brdf)
+                args = (geo, brdf, u1, u2, rot)
+                tail = (table_u, table_v, k_u, k_v, images, dots, out, none, none, none, mc, px)
+                if lobe:
+                    kb.render_tile_lobe(*args, mshape, mode, *tail)
+                else:
+                    kb.render_tile(*args, samp.scheme_id, samp.theta_max, True, mshape, mode, *tail)
+                return out
             if lobe:
                 kb.render_tile_lobe(
                     geo, brdf, u1, u2, rot, mshape, mode,
@@ -503,6 +517,10 @@ class Simulation:
         args = (np.array(scene.monitor.shape, np.int64), kb.MODE_TRANSPORT,
                 np.zeros((0, 1)), np.zeros((0, 1)), np.zeros(0), np.zeros(0),
                 np.zeros((0, 1, 1), np.float32), np.zeros((0, 4)), out, ou, ov, of)
+        px = None
+        if scene.brdf_variation is not None and not scene.brdf.is_delta:
+            px = scene.brdf_variation.geometry_params(geo, scene.monitor, scene.brdf.kernel_params())
+            args = args + (None, px)  # transport renders without the display model, as below
         if lobe:
             kb.render_tile_lobe(geo, scene.brdf.kernel_params(), u1, u2, rot, *args)
         else:
@@ -517,7 +535,8 @@ class Simulation:
                 frame = (hits.x_axis[0, p], hits.y_axis[0, p], hits.normal[0, p])
                 i_loc = np.array([hits.to_camera[0, p] @ b for b in frame])
                 off = rot[p] if rot.shape[0] else (0.0, 0.0)
-                loc = scene.brdf.sample(np.mod(u1 + off[0], 1.0), np.mod(u2 + off[1], 1.0), i_loc)
+                model = scene.brdf if px is None else with_params(scene.brdf, *px[p])
+                loc = model.sample(np.mod(u1 + off[0], 1.0), np.mod(u2 + off[1], 1.0), i_loc)
                 e1, e2, e3 = frame
             else:
                 e1, e2, e3 = (b[0, p] for b in cone)
@@ -528,3 +547,4 @@ class Simulation:
                     loc = samp.local_directions(off)
             dirs[p] = loc[:, :1] * e1 + loc[:, 1:2] * e2 + loc[:, 2:3] * e3
         return ou, ov, of, dirs, origin
+

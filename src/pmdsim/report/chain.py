@@ -42,6 +42,7 @@ CLASS_COLOURS = {
     "decode flagged": "#111111",
     "no valid reference": "#bdbdbd",
     "off surface": "#ffffff",
+    "bundle off monitor": "#8c564b",
 }
 DEV_CMAP = "RdBu_r"
 DIR_COLOURS = {"x": "#1f77b4", "y": "#ff7f0e"}
@@ -106,9 +107,19 @@ def _classes(ds, d: str):
     low = ds["low_modulation"].sel(direction=d).values.astype(bool)
     surface = ds["surface_mask"].values.astype(bool)
     considered = ds["reference_decode_flags"].sel(direction=d).values == 0
-    flagged = considered & ~valid & ~low
+    flagged = considered & ~valid & ~low & ~_off_monitor(ds, d)
     no_ref = surface & ~considered
     return valid, low, flagged, no_ref, ~surface
+
+
+def _off_monitor(ds, d: str) -> np.ndarray:
+    """Considered pixels excluded because their bundle hangs off the monitor (not low
+    modulation): their own class, ``lobe_off_monitor``; all False for older runs."""
+    if "lobe_off_monitor" not in ds:
+        return np.zeros(ds["surface_mask"].shape, bool)
+    considered = ds["reference_decode_flags"].sel(direction=d).values == 0
+    low = ds["low_modulation"].sel(direction=d).values.astype(bool)
+    return considered & ds["lobe_off_monitor"].values.astype(bool) & ~low
 
 
 def _overlay(ax, ds, d: str, legend: bool = False, counts: bool = True):
@@ -117,7 +128,8 @@ def _overlay(ax, ds, d: str, legend: bool = False, counts: bool = True):
     rgba = np.zeros(valid.shape + (4,))
     handles = []
     for name, m in (("off surface", off), ("no valid reference", no_ref),
-                    ("decode flagged", flagged), ("low modulation", low)):
+                    ("decode flagged", flagged), ("low modulation", low),
+                    ("bundle off monitor", _off_monitor(ds, d))):
         rgba[m] = to_rgba(CLASS_COLOURS[name])
         if m.any() or name in ("low modulation", "decode flagged"):
             lab = f"{name}: {int(m.sum()):,}" if counts else name
@@ -315,10 +327,10 @@ def plot_masks(ds, path, name: str | None = None) -> Path:
     name = _label(ds, name)
     dirs = _dirs(ds)
     cols = ["#9ecae1", CLASS_COLOURS["low modulation"], "#111111", "#fd8d3c", "#8c6d31",
-            CLASS_COLOURS["no valid reference"], "#ffffff"]
+            CLASS_COLOURS["no valid reference"], "#ffffff", CLASS_COLOURS["bundle off monitor"]]
     labels = ["valid", "low modulation (masked)", "flagged: low amplitude",
               "flagged: order residual", "flagged: out of range / other",
-              "no valid reference", "off surface"]
+              "no valid reference", "off surface", "bundle off the monitor (masked)"]
     cmap = ListedColormap(cols)
     h, w = ds["surface_mask"].shape
     fig = _figure((4.6 * len(dirs) + 0.4, 4.6 * h / w + 1.9))
@@ -335,8 +347,9 @@ def plot_masks(ds, path, name: str | None = None) -> Path:
         cls[flagged & (flags & 4 > 0)] = 3
         cls[flagged & (flags & 2 > 0)] = 2
         cls[low] = 1
+        cls[_off_monitor(ds, d)] = 7
         cls[valid] = 0
-        imshow(ax, cls, cmap=cmap, vmin=-0.5, vmax=6.5, interpolation="nearest")
+        imshow(ax, cls, cmap=cmap, vmin=-0.5, vmax=7.5, interpolation="nearest")
         handles = [Patch(facecolor=c, edgecolor="0.5", label=f"{lab}: {int((cls == k).sum()):,}")
                    for k, (c, lab) in enumerate(zip(cols, labels))]
         lax.legend(handles=handles, loc="upper center", ncol=2, fontsize=7, frameon=False)

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import os
+
 
 def _num(v, digits=4) -> str:
     if v is None:
@@ -152,11 +154,20 @@ def reconstruction_text(name: str, rec: dict) -> str:
 def description(cfg) -> str:
     b = cfg.brdf
     text = f"BRDF {b.model}"
-    if hasattr(b, "alphas"):
-        ax, ay = b.alphas
+    if b.model != "mirror":
+        from ..brdf import equivalent_alphas
+
+        ax, ay = equivalent_alphas(b)
         names = (("tangential", "radial") if cfg.anisotropy.frame == "rotational"
                  else ("x", "y"))
         text += f" alpha_{names[0]} {ax:g}, alpha_{names[1]} {ay:g}"
+        var = getattr(b, "variation", None)
+        if var is not None:  # spatially varying: the constants hold only where not varied
+            varied = [k for k in ("alpha_tangential", "alpha_radial", "rho_s_scale")
+                      if getattr(var, k) is not None] if var.radius_mm is not None else None
+            text += (f" (varying over the radius {var.radius_mm[0]:g}-{var.radius_mm[-1]:g} mm: "
+                     f"{', '.join(varied)})" if varied is not None
+                     else f" (varying: map {os.path.basename(var.file)})")
     s = cfg.sampling
     return (text + f"; {s.estimator} estimator, N = {s.n_rays}, theta_max {s.theta_max_deg:g} "
             f"deg, {s.mode}; monitor pixel model {cfg.monitor.pixel_model}")

@@ -28,11 +28,11 @@ class BudgetResult:
 
 
 def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrite: bool = False,
-               progress: Callable[[str], None] | None = None) -> BudgetResult:
+               progress: Callable[[str], None] | None = None, truth: str = "centre") -> BudgetResult:
     """Compute :func:`pmdsim.studies.budget.budget` and write it into ``outdir``."""
     final = Path(outdir).absolute()
     pio.check_output_dir(final, overwrite, MARKER)
-    rows = budget(cfg, progress)
+    rows = budget(cfg, progress, truth)
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
         with open(tmp / "budget.csv", "w", newline="") as fh:
             wr = csv.DictWriter(fh, fieldnames=TABLE_COLUMNS, extrasaction="ignore")
@@ -40,7 +40,8 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
             for r in rows:
                 wr.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
         (tmp / "budget.json").write_text(json.dumps(
-            {"name": cfg.name, "rows": rows, "config": cfg.model_dump(mode="json")}, indent=2) + "\n")
+            {"name": cfg.name, "truth": truth, "rows": rows, "config": cfg.model_dump(mode="json")},
+            indent=2) + "\n")
         fig = None
         if figure:
             from ..report.budget import plot_budget

@@ -169,8 +169,10 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     result = RunResult(
         outdir=folder, dataset_path=folder / DATASET_NAME, image_paths=tuple(image_paths),
         figure_paths=tuple(figure_paths), exposure=exposure, shape=sim.shape,
-        surface_pixels=surface_pixels, rays_per_pixel=sim.scene.rays_per_pixel,
-        rays_traced=surface_pixels * sim.scene.rays_per_pixel * n_calls, timings=timings,
+        surface_pixels=surface_pixels,
+        rays_per_pixel=sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel,
+        rays_traced=surface_pixels * sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel
+        * n_calls, timings=timings,
         config=cfg, statistics=statistics, notes=tuple(notes),
         warnings=() if diagnosed is None else diagnosed.warnings)
     return result, ds

@@ -26,8 +26,14 @@ def reconstruct_coords(cfg, scene, u, v, valid):
     """:class:`~pmdsim.measure.reconstruct.Reconstruction` and its
     :class:`~pmdsim.measure.reconstruct.SurfaceErrors` (None, message on failure)."""
     rc = cfg.reconstruct
+    if rc.prior is None:
+        prior = scene.surface
+    else:
+        from ..scene.surfaces import surface_from_config
+
+        prior = surface_from_config(rc.prior)
     try:
-        rec = reconstruct(u, v, scene.camera, scene.monitor, scene.surface, valid=valid,
+        rec = reconstruct(u, v, scene.camera, scene.monitor, prior, valid=valid,
                           spacing_mm=rc.spacing_mm, anchor=rc.anchor, order=rc.order)
     except ValueError as err:
         return None, None, str(err)

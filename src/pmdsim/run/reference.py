@@ -71,12 +71,15 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
         q = (res.monitor_coord_px - exact)[res.valid]
         rms = float(np.sqrt(np.mean(q**2))) if q.size else 0.0
         if rms > 0.05:
+            real = (cfg.sensor.enabled or not sim.scene.camera.is_simple_pinhole
+                    or not sim.scene.monitor.is_linear or sim.scene.monitor.correction_params() is not None)
+            why = ("the modelled camera, sensor and display (pmdsim budget splits it by effect)"
+                   if real else "on a 'nearest' monitor a mirror sees single pixels, so every "
+                   "deviation contains that quantisation; monitor.pixel_model = 'continuous' shows "
+                   "the scattering alone")
             notes.append(
                 f"the specular reference decodes {rms:.2f} monitor px RMS ({d.upper()}) away from "
-                "the exact specular points: on a 'nearest' monitor a mirror sees single pixels, "
-                "so every deviation contains that quantisation; monitor.pixel_model = "
-                "'continuous' shows the scattering alone (statistics.json: "
-                "reference_vs_exact_px)")
+                f"the exact specular points: {why} (statistics.json: reference_vs_exact_px)")
             break
     from . import reconstruction as recon
 

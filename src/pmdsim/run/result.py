@@ -31,9 +31,10 @@ class RunResult:
     surface_pixels : int
         Pixels whose vision ray hits the surface.
     rays_per_pixel : int
-        Rays of each pixel's bundle (N, P included; 1 for the mirror).
+        Scattered rays per pixel: N (P included; 1 for the mirror) times the camera's vision
+        rays per pixel (sub-pixels x aperture samples).
     rays_traced : int
-        Scattered rays traced in all render passes (surface pixels x N x passes).
+        Scattered rays traced in all render passes (surface pixels x rays per pixel x passes).
     timings : dict
         Wall times in s: ``geometry``, ``render``, ``write``, ``figures``, ``total``.
     config : RunConfig

@@ -10,6 +10,7 @@ from ..brdf import BRDF, Mirror, brdf_from_config
 from ..config import RunConfig
 from .sampling import ConeSampling
 from .anisotropy import AnisotropyFrame
+from .brdf_variation import BrdfVariation
 from .camera import Camera
 from .monitor import Monitor
 from .surfaces import FlatRectangle, SagSurface, Surface, surface_from_config
@@ -33,6 +34,8 @@ class Scene:
     brdf: BRDF
     sampling: ConeSampling
     estimator: str = "paper"
+    #: spatially varying alpha/rho_s (``[brdf.variation]``); None = the BRDF's constants
+    brdf_variation: BrdfVariation | None = None
 
     def __post_init__(self):
         if self.estimator not in ESTIMATORS:
@@ -46,7 +49,10 @@ class Scene:
         if isinstance(surface, SagSurface) and anisotropy.kind == "rotational" and anisotropy.axis is None:
             # a curved surface is turned about its vertex normal, not each point's normal
             anisotropy = replace(anisotropy, axis=surface.normal.copy())
+        var = getattr(cfg.brdf, "variation", None)
         return cls(
+            brdf_variation=(None if var is None
+                            else BrdfVariation.from_config(var, surface, anisotropy)),
             camera=Camera.from_config(cfg.camera).focused_on(surface),
             monitor=Monitor.from_config(cfg.monitor),
             surface=surface,
@@ -60,7 +66,7 @@ class Scene:
 
     def specular(self) -> "Scene":
         """The same scene with the ideal mirror: the reference every deviation is measured from."""
-        return replace(self, brdf=Mirror())
+        return replace(self, brdf=Mirror(), brdf_variation=None)
 
     def replace(self, **changes) -> "Scene":
         return replace(self, **changes)
@@ -70,4 +76,4 @@ class Scene:
         return 1 if self.brdf.is_delta else self.sampling.n_rays
 
 
-__all__ = ["Scene", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]
+__all__ = ["Scene", "BrdfVariation", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]

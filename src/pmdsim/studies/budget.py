@@ -156,11 +156,23 @@ class Truth:
     finest_width_px: float
 
 
-def ground_truth(cfg: RunConfig) -> Truth:
+TRUTHS = ("centre", "footprint")
+
+
+def ground_truth(cfg: RunConfig, truth: str = "centre") -> Truth:
+    """The exact reflection points: of the chief ray through each pixel centre (``centre``),
+    or averaged over the pixel's vision rays of ``cfg``'s camera (``footprint``: sub-pixels
+    x aperture samples; NaN where any of them misses)."""
+    if truth not in TRUTHS:
+        raise ValueError(f"truth must be one of {TRUTHS}, got {truth!r}")
     sim = Simulation.from_config(mirror(ideal_config(cfg)))
     geo = sim.geometry()
     dist = surface_to_monitor_mm(sim, geo)
-    return Truth({"x": geo.specular_u, "y": geo.specular_v}, dist, float(cfg.monitor.pixel_pitch_mm),
+    coord = {"x": geo.specular_u, "y": geo.specular_v}
+    if truth == "footprint":
+        u, v = Simulation.from_config(mirror(cfg)).footprint_specular()
+        coord = {"x": u, "y": v}
+    return Truth(coord, dist, float(cfg.monitor.pixel_pitch_mm),
                  float(min(cfg.patterns.fringes.widths_px)))
 
 
@@ -183,13 +195,16 @@ def _row(effect: str, label: str, part: str, direction: str, dev_px: np.ndarray,
     return row
 
 
-def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None) -> list[dict]:
+def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
+           truth: str = "centre") -> list[dict]:
     """The error budget of ``cfg`` (module docstring): a list of table rows, one per
-    (effect or part, direction); every row has ``rms_*`` and ``p95_*`` in ``QUANTITIES``."""
+    (effect or part, direction); every row has ``rms_*`` and ``p95_*`` in ``QUANTITIES``.
+    ``truth``: the ground truth of the system rows, ``centre`` (the chief ray through the
+    pixel centre) or ``footprint`` (averaged over the pixel's vision rays)."""
     if cfg.patterns.fringes is None:
         raise ValueError("patterns.fringes: the budget decodes fringes; configure some")
     say = progress or (lambda msg: None)
-    truth = ground_truth(cfg)
+    truth = ground_truth(cfg, truth)
     rows: list[dict] = []
     dirs = cfg.patterns.fringes.directions
 

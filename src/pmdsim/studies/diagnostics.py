@@ -234,7 +234,19 @@ def energy_fraction(scene, grid: PixelGrid, theta_max: float | None = None, targ
         raise ValueError("energy_fraction: the mirror has no lobe (all its energy is in P)")
     theta_max = scene.sampling.theta_max if theta_max is None else float(theta_max)
     valid, i_local = incidence(scene, grid.pixel_rows, grid.pixel_cols)
-    frac, need, albedo = lobe_energy(scene.brdf, i_local, theta_max, n_samples, target)
+    if scene.brdf_variation is None:
+        frac, need, albedo = lobe_energy(scene.brdf, i_local, theta_max, n_samples, target)
+    else:  # spatially varying BRDF: each pixel's lobe with its own alphas and rho_s
+        from ..scene.brdf_variation import with_params
+        from ..trace import trace_pixels
+
+        pts = trace_pixels(scene, grid.pixel_rows, grid.pixel_cols).point[0]
+        px = scene.brdf_variation.pixel_params(np.nan_to_num(pts), scene.brdf.kernel_params())
+        parts = [lobe_energy(with_params(scene.brdf, *px[k]), i_local[k:k + 1], theta_max,
+                             n_samples, target) for k in range(i_local.shape[0])]
+        frac = np.concatenate([p[0] for p in parts])
+        need = np.concatenate([p[1] for p in parts])
+        albedo = np.concatenate([p[2] for p in parts])
     shape = grid.grid_shape
     return EnergyFraction(
         math.degrees(theta_max), target, frac[:, 0].reshape(shape),
@@ -490,6 +502,11 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
         phase_se = rays.phase_se
     else:
         phase_se = phase_error_seeds(sim, pgrid, widths, directions, n_seeds)
+    vision = scene.camera.rays_per_pixel
+    if phase_se is not None and vision > 1 and scene.sampling.mode == "random":
+        # camera optics: a pixel averages S vision rays with independently rotated bundles
+        # (docs/system.md); the transport above is the chief ray's
+        phase_se = phase_se / math.sqrt(vision)
     excluded = None
     if exclude is not None:
         excluded = np.asarray(exclude, bool)[pgrid.pixel_rows, pgrid.pixel_cols].reshape(
@@ -503,6 +520,7 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
         "estimator": scene.estimator,
         "n_rays": scene.rays_per_pixel,
         "theta_max_deg": math.degrees(scene.sampling.theta_max),
+        "vision_rays_per_pixel": vision,
     }
     if energy is not None:
         summary["energy"] = energy.summary()
