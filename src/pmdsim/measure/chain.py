@@ -369,9 +369,32 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
     return rows
 
 
+def decode_specular_reference(cfg, sim, geometry, progress=None):
+    """Render, capture (with ``[sensor]``: its own noise stream 1) and decode the fringes of
+    the ideal specular reference of ``sim`` (mirror BRDF, one ray per pixel, the same camera,
+    surface and monitor model). Returns ``(decoded, distance_mm, points_mm)``: the decoded
+    directions (:func:`decode_fringes`), the surface-to-monitor distance and the surface
+    point of every pixel (:func:`surface_to_monitor_mm`)."""
+    from dataclasses import replace
 
+    from ..render import Simulation
+    from ..scene.sensor import Sensor, capture_dn
 
+    fr_cfg = cfg.patterns.fringes
+    ref_sim = Simulation(sim.scene.specular(), sim.tile_rows, sim.scheduler, sim.num_workers)
+    fr = ref_sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
+                                progress=progress)
+    sensor = Sensor.from_config(cfg.sensor)
+    if sensor.enabled:
+        fr = replace(fr, images=capture_dn(sensor, fr.images, 1))
+    decoded = decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
+                             sensor.saturation_dn if sensor.enabled else None)
+    del fr
+    points = np.full(sim.shape + (3,), np.nan)
+    distance = surface_to_monitor_mm(sim, geometry, points_out=points)
+    return decoded, distance, points
 
 
 __all__ = ["DirectionChain", "ChainResult", "decode_problem", "decode_fringes", "compare",
+           "decode_specular_reference",
            "surface_to_monitor_mm", "SlopeGeometry", "slope_deviation_urad", "statistics", "dot_table", "DOT_COLUMNS", "QUANTITIES", "STATISTICS", "DOT_THRESHOLD_FRACTION"]

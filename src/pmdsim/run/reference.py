@@ -4,14 +4,13 @@ shared by the variants)."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..config import ConfigError, RunConfig
 from ..measure import chain
 from ..render import Geometry, Simulation
-from ..scene.sensor import Sensor, capture_dn
 from .result import _Steps
 
 
@@ -51,20 +50,10 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     """Render and decode the fringes of the ideal specular reference (mirror BRDF, one ray
     per pixel, the same camera, surface and monitor model)."""
     t = time.perf_counter()
-    fr_cfg = cfg.patterns.fringes
-    ref_sim = Simulation(sim.scene.specular(), sim.tile_rows, sim.scheduler, sim.num_workers)
     base = steps.done
-    fr = ref_sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
-                                progress=steps.tiles())
+    decoded, distance, points = chain.decode_specular_reference(cfg, sim, geometry,
+                                                                progress=steps.tiles())
     steps.finish_render(base, n_tiles)
-    sensor = Sensor.from_config(cfg.sensor)
-    if sensor.enabled:  # the reference is captured too (its own noise: stream 1)
-        fr = replace(fr, images=capture_dn(sensor, fr.images, 1))
-    decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
-                                   sensor.saturation_dn if sensor.enabled else None)
-    del fr
-    points = np.full(sim.shape + (3,), np.nan)
-    distance = chain.surface_to_monitor_mm(sim, geometry, points_out=points)
     notes = []
     for d, res in decoded.items():
         exact = geometry.specular_u if d == "x" else geometry.specular_v

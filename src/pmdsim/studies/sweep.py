@@ -47,7 +47,7 @@ POINT_VARIABLES = {
     "deviation_stats": (("direction", "quantity", "statistic"), np.float64, {
         "description": "deviation statistics over the valid pixels of the finest width; "
                        "units per quantity: phase_mrad mrad, coord_px monitor px, coord_mm mm, "
-                       "slope_urad urad (see pmdsim.chain.statistics)"}),
+                       "slope_urad urad (see pmdsim.measure.chain.statistics)"}),
     "modulation_median": (("direction", "width"), np.float64, {
         "units": "1", "description": "median fringe modulation B/A of the surface over its "
                                      "validly decoded pixels, per width"}),
@@ -294,28 +294,13 @@ def reference_key(cfg: RunConfig) -> str:
 
 def _reference(cfg: RunConfig, sim, geometry):
     from ..measure import chain
-    from ..render import Simulation
 
     key = reference_key(cfg)
     with _REFERENCES_LOCK:
         if key in _REFERENCES:
             _REFERENCES.move_to_end(key)
             return _REFERENCES[key]
-    from dataclasses import replace
-
-    from ..scene.sensor import Sensor, capture_dn
-
-    fr_cfg = cfg.patterns.fringes
-    ref_sim = Simulation(sim.scene.specular(), sim.tile_rows, sim.scheduler, sim.num_workers)
-    fr = ref_sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts)
-    sensor = Sensor.from_config(cfg.sensor)
-    if sensor.enabled:  # as a run: the reference is captured too (its own stream, 1)
-        fr = replace(fr, images=capture_dn(sensor, fr.images, 1))
-    decoded = chain.decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
-                                   sensor.saturation_dn if sensor.enabled else None)
-    del fr
-    points = np.full(sim.shape + (3,), np.nan)
-    distance = chain.surface_to_monitor_mm(sim, geometry, points_out=points)
+    decoded, distance, points = chain.decode_specular_reference(cfg, sim, geometry)
     value = (decoded, distance, points)
     with _REFERENCES_LOCK:
         _REFERENCES[key] = value
