@@ -1,0 +1,210 @@
+"""Memory and CPU time of a run, estimated from its configuration alone, and the check
+that refuses a run which cannot fit this machine before anything is allocated."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+# the package's models, defined before it imports this module (at its end)
+from . import ConfigError, MirrorConfig, RunConfig
+
+# ----------------------------------------------------------------------------- resources
+#: Scattered rays per CPU-second of a whole run (geometry, rendering, decoding, diagnostics,
+#: writing and figures): the Fig. 3 example took 45 CPU-s for 1.3e8 rays (the kernels alone
+#: trace tens of millions per CPU-second, ``benchmarks/bench_render.py``).
+RAYS_PER_CPU_SECOND = 3.0e6
+#: Resident memory of the interpreter with NumPy, Numba, xarray and Dask loaded.
+BASE_MEMORY_BYTES = 400 * 2**20
+#: Harmonics of a non-linear (gamma != 1) display in the continuous pixel model
+#: (``pmdsim.render.GAMMA_HARMONICS``; config imports nothing of the package).
+_GAMMA_HARMONICS = 16
+#: Grid pixels of the diagnostics' ray transport keep every ray: float64 u, v, weight,
+#: a 3-vector direction and scratch, per ray.
+_TRANSPORT_BYTES_PER_RAY = 64
+
+
+@dataclass(frozen=True)
+class ResourceEstimate:
+    """The memory and CPU time a run of a configuration needs, estimated from the
+    configuration alone (before anything is allocated).
+
+    ``memory_bytes`` is the peak working set (the largest step, plus what stays resident);
+    ``parts`` names each contribution in bytes by the setting that drives it (the field to
+    change); ``rays`` counts the scattered rays of all render passes (every camera pixel
+    counted, an upper bound) and ``cpu_seconds`` their time at ``RAYS_PER_CPU_SECOND``.
+    """
+
+    memory_bytes: int
+    rays: float
+    cpu_seconds: float
+    parts: dict
+
+    def seconds(self, cores: int | None = None) -> float:
+        """Wall time on ``cores`` cores (default: this machine's)."""
+        return self.cpu_seconds / max(1, cores or os.cpu_count() or 1)
+
+    def describe(self) -> str:
+        return (f"about {_human_bytes(self.memory_bytes)} of memory and "
+                f"{_human_seconds(self.cpu_seconds)} of CPU time "
+                f"({self.rays:.3g} scattered rays)")
+
+
+def _human_bytes(n: float) -> str:
+    for unit in ("B", "KB", "MB", "GB", "TB"):
+        if abs(n) < 1024 or unit == "TB":
+            return f"{n:.3g} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:.3g} TB"  # pragma: no cover
+
+
+def _human_seconds(s: float) -> str:
+    if s < 120:
+        return f"{s:.2g} s"
+    if s < 7200:
+        return f"{s / 60:.3g} min"
+    return f"{s / 3600:.3g} h"
+
+
+def _member_estimate(cfg: "RunConfig", n_px: float, width: int) -> tuple[dict, float]:
+    """(memory parts in bytes, scattered rays) of one configuration without variants."""
+    mirror = isinstance(cfg.brdf, MirrorConfig)
+    rpp = 1 if mirror else cfg.sampling.n_rays
+    mon_w, mon_h = cfg.monitor.resolution
+    render: dict[str, float] = {}
+    after: dict[str, float] = {}
+    passes = 0
+    fr = cfg.patterns.fringes
+    workers = cfg.compute.num_workers or os.cpu_count() or 1
+    tile_px = min(cfg.compute.tile_rows, cfg.camera.resolution[1]) * width
+    tiles = 0.0
+    if fr is not None:
+        nd, nw, k = len(fr.directions), len(fr.widths_px), fr.shifts
+        linear = cfg.monitor.gamma == 1.0
+        if cfg.monitor.pixel_model == "continuous":
+            ncols = 2 + 2 * nd * nw * (1 if linear else _GAMMA_HARMONICS)
+        else:
+            ncols = 2 + nd * nw * (2 if linear else k)
+        # the tiles' float64 outputs and their concatenation, the float32 images, the
+        # complex sums; then the decoded maps (phases, coordinates, modulation, flags)
+        render["patterns.fringes"] = n_px * (16 * ncols + 4 * nd * nw * k + 16 * nd * nw)
+        after["patterns.fringes"] = n_px * (8 * nd * nw * k + 16 * nd * nw + 48 * nd * nw + 96 * nd)
+        tiles = max(tiles, tile_px * ncols * 8 * workers)
+        passes += 1
+    dots = cfg.patterns.dots
+    if dots is not None:
+        q = len(dots.positions_px) + (dots.grid[0] * dots.grid[1] if dots.grid else 0)
+        render["patterns.dots"] = n_px * (16 * (2 + q) + 4 * q)
+        after["patterns.dots"] = n_px * 8 * q
+        tiles = max(tiles, tile_px * (2 + q) * 8 * workers)
+        passes += 1
+    images = cfg.patterns.images
+    if images is not None:
+        q = len(images.files)
+        levels = q * mon_w * mon_h * 8
+        render["patterns.images"] = n_px * (16 * (2 + q) + 4 * q) + levels
+        after["patterns.images"] = n_px * 8 * q + levels
+        tiles = max(tiles, tile_px * (2 + q) * 8 * workers)
+        passes += 1
+    parts = {k: max(render.get(k, 0.0), after.get(k, 0.0)) for k in set(render) | set(after)}
+    if tiles:
+        parts["compute.tile_rows"] = tiles
+    if not mirror:
+        # per-thread ray buffers of the kernels, and the diagnostics' ray transport
+        gx, gy = cfg.diagnostics.grid
+        parts["sampling.n_rays"] = rpp * (48 * workers + _TRANSPORT_BYTES_PER_RAY * gx * gy)
+    return parts, n_px * rpp * passes
+
+
+def estimate_resources(cfg: "RunConfig") -> ResourceEstimate:
+    """Estimate the peak memory and the CPU time of running ``cfg`` (see
+    :class:`ResourceEstimate`); pure arithmetic on the configuration."""
+    width, height = cfg.camera.resolution
+    n_px = float(width) * float(height)
+    cam = cfg.camera
+    # vision rays per pixel (sub-pixels x thin-lens aperture samples): every one carries a
+    # bundle of scattered rays
+    vision = cam.subpixels ** 2 * (cam.aperture_samples if cam.f_number is not None else 1)
+    # the vision-ray geometry of the whole camera (25 float64 per vision ray and the
+    # specular monitor coordinates), the masks and the dataset's copies of the maps
+    parts = {"camera.resolution": n_px * (25 * 8 * vision + 16 + 64)}
+    rays = 0.0
+    member_parts = []
+    for _, member in cfg.expand():
+        p, r = _member_estimate(member, n_px, width)
+        member_parts.append(p)
+        rays += r * vision
+    # the members run one after the other: the largest counts
+    biggest = max(member_parts, key=lambda p: sum(p.values()))
+    for k, v in biggest.items():
+        parts[k] = parts.get(k, 0.0) + v
+    if cfg.patterns.fringes is not None and cfg.decode.enabled is not False:
+        # the ideal specular reference: rendered (one ray per pixel) and kept decoded
+        fr = cfg.patterns.fringes
+        nd, nw = len(fr.directions), len(fr.widths_px)
+        parts["patterns.fringes"] = parts.get("patterns.fringes", 0.0) + n_px * (48 * nd * nw + 96 * nd)
+        rays += n_px * vision
+    memory = BASE_MEMORY_BYTES + sum(parts.values())
+    return ResourceEstimate(int(memory), rays, rays / RAYS_PER_CPU_SECOND,
+                            {k: int(v) for k, v in parts.items()})
+
+
+def available_memory_bytes() -> int | None:
+    """Memory this process may still use: ``MemAvailable`` of ``/proc/meminfo`` (Linux),
+    else the physical memory; None when unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+_FIX = {
+    "camera.resolution": "a smaller camera.resolution (or fewer patterns: "
+                         "patterns.fringes.widths_px/shifts/directions, dots, images)",
+    "patterns.fringes": "fewer fringe images (patterns.fringes.widths_px, .shifts, .directions)",
+    "patterns.dots": "fewer dots (patterns.dots.positions_px / grid) per run",
+    "patterns.images": "fewer monitor images (patterns.images.files) per run",
+    "compute.tile_rows": "a smaller compute.tile_rows or compute.num_workers",
+    "sampling.n_rays": "fewer sampling.n_rays (or a coarser diagnostics.grid)",
+}
+
+
+def check_resources(cfg: "RunConfig", available_bytes: int | None = None,
+                    *, max_cpu_hours: float | None = None) -> ResourceEstimate:
+    """Stop a run that cannot fit this machine before anything is allocated.
+
+    Raises :class:`ConfigError` naming the setting that drives the memory (the largest part
+    of :func:`estimate_resources`) when the estimate exceeds ``available_bytes`` (default:
+    :func:`available_memory_bytes`), or the one that drives the time when the CPU time
+    exceeds ``max_cpu_hours`` (default ``compute.max_cpu_hours``). Returns the estimate.
+    """
+    est = estimate_resources(cfg)
+    avail = available_memory_bytes() if available_bytes is None else available_bytes
+    if avail is not None and est.memory_bytes > avail:
+        field, part = max(est.parts.items(), key=lambda kv: kv[1])
+        width, height = cfg.camera.resolution
+        if field.startswith("patterns.") and width * height > 4096 * 4096:
+            # the images of an enormous camera, not too many patterns
+            field = "camera.resolution"
+        raise ConfigError(
+            f"invalid configuration:\n  {field}: this run needs {est.describe()}, but this "
+            f"machine has {_human_bytes(avail)} of memory available ({field} alone takes "
+            f"{_human_bytes(part)}); use {_FIX[field]}, or split the run (variants, "
+            f"separate runs) or run it on a machine/cluster with more memory "
+            f"(compute.scheduler = \"distributed\")")
+    limit = cfg.compute.max_cpu_hours if max_cpu_hours is None else max_cpu_hours
+    if est.cpu_seconds > limit * 3600:
+        field = "sampling.n_rays" if cfg.sampling.n_rays > 1 else "camera.resolution"
+        raise ConfigError(
+            f"invalid configuration:\n  {field}: this run needs {est.describe()}, more than "
+            f"compute.max_cpu_hours = {limit:g}; use fewer {field} or raise "
+            f"compute.max_cpu_hours if you mean it (or run on a cluster: "
+            f"compute.scheduler = \"distributed\")")
+    return est
