@@ -521,6 +521,24 @@ class BrdfVariationConfig(_Model):
         return self
 
 
+def _check_alpha_pair(names: tuple[str, str], by_axis: tuple, by_dir: tuple) -> None:
+    """The alphas of a lobe are given either per local axis (``names``) or per direction
+    (``alpha_tangential``/``alpha_radial``), completely and not both ways."""
+    x, y = names
+    if any(v is not None for v in by_axis) and any(v is not None for v in by_dir):
+        raise ValueError(f"give either {x}/{y} or alpha_tangential/alpha_radial, not both")
+    if all(v is None for v in by_dir) and None in by_axis:
+        raise ValueError(f"give both {x} and {y} (or alpha_tangential and alpha_radial)")
+    if all(v is None for v in by_axis) and None in by_dir:
+        raise ValueError("give both alpha_tangential and alpha_radial")
+
+
+def _alpha_pair(by_axis: tuple, by_dir: tuple) -> tuple[float, float]:
+    """(alpha along local x, alpha along local y) from a pair checked by _check_alpha_pair."""
+    pair = by_axis if by_axis[0] is not None else by_dir
+    return float(pair[0]), float(pair[1])
+
+
 class WardConfig(_Model):
     """Anisotropic Ward BRDF (the paper's form). ``alpha_x`` acts along the local x axis,
     ``alpha_y`` along y. In a ``rotational`` frame x is tangential and y radial, and the
@@ -537,24 +555,15 @@ class WardConfig(_Model):
 
     @model_validator(mode="after")
     def _check(self) -> "WardConfig":
-        by_axis = (self.alpha_x, self.alpha_y)
-        by_dir = (self.alpha_tangential, self.alpha_radial)
-        if any(v is not None for v in by_axis) and any(v is not None for v in by_dir):
-            raise ValueError(
-                "give either alpha_x/alpha_y or alpha_tangential/alpha_radial, not both"
-            )
-        if all(v is None for v in by_dir) and None in by_axis:
-            raise ValueError("give both alpha_x and alpha_y (or alpha_tangential and alpha_radial)")
-        if all(v is None for v in by_axis) and None in by_dir:
-            raise ValueError("give both alpha_tangential and alpha_radial")
+        _check_alpha_pair(("alpha_x", "alpha_y"), (self.alpha_x, self.alpha_y),
+                          (self.alpha_tangential, self.alpha_radial))
         return self
 
     @property
     def alphas(self) -> tuple[float, float]:
         """(alpha along local x, alpha along local y)."""
-        if self.alpha_x is not None:
-            return float(self.alpha_x), float(self.alpha_y)
-        return float(self.alpha_tangential), float(self.alpha_radial)
+        return _alpha_pair((self.alpha_x, self.alpha_y),
+                           (self.alpha_tangential, self.alpha_radial))
 
 
 class MirrorConfig(_Model):
@@ -582,24 +591,15 @@ class BeckmannConfig(_Model):
 
     @model_validator(mode="after")
     def _check(self) -> "BeckmannConfig":
-        by_axis = (self.alpha_u, self.alpha_v)
-        by_dir = (self.alpha_tangential, self.alpha_radial)
-        if any(v is not None for v in by_axis) and any(v is not None for v in by_dir):
-            raise ValueError(
-                "give either alpha_u/alpha_v or alpha_tangential/alpha_radial, not both"
-            )
-        if all(v is None for v in by_dir) and None in by_axis:
-            raise ValueError("give both alpha_u and alpha_v (or alpha_tangential and alpha_radial)")
-        if all(v is None for v in by_axis) and None in by_dir:
-            raise ValueError("give both alpha_tangential and alpha_radial")
+        _check_alpha_pair(("alpha_u", "alpha_v"), (self.alpha_u, self.alpha_v),
+                          (self.alpha_tangential, self.alpha_radial))
         return self
 
     @property
     def alphas(self) -> tuple[float, float]:
         """(alpha along local x, alpha along local y)."""
-        if self.alpha_u is not None:
-            return float(self.alpha_u), float(self.alpha_v)
-        return float(self.alpha_tangential), float(self.alpha_radial)
+        return _alpha_pair((self.alpha_u, self.alpha_v),
+                           (self.alpha_tangential, self.alpha_radial))
 
 
 class _RoughnessFields(_Model):
@@ -694,9 +694,8 @@ class SlopeDensityConfig(_RoughnessFields):
         if self.density != "gaussian":
             raise AttributeError("alphas: only the gaussian density is given by alphas; "
                                  "use pmdsim.brdf.equivalent_alphas")
-        if self.alpha_x is not None:
-            return float(self.alpha_x), float(self.alpha_y)
-        return float(self.alpha_tangential), float(self.alpha_radial)
+        return _alpha_pair((self.alpha_x, self.alpha_y),
+                           (self.alpha_tangential, self.alpha_radial))
 
 
 class TurnedConfig(_RoughnessFields):

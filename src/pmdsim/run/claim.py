@@ -76,12 +76,7 @@ def claim_output(final: str | Path) -> Iterator[Path]:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     try:
-        if not _try_lock(fd):
-            owner = _read_pid(fd)
-            who = f"process {owner}" if owner else "another process"
-            raise OutputBusy(
-                f"output folder {Path(final)} is being written by {who} (lock {path}): wait "
-                "for that run to finish or choose another output folder (-o)")
+        _refuse_if_held(fd, final, path)
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
         try:
@@ -102,14 +97,19 @@ def check_free(final: str | Path) -> None:
     except OSError:
         return  # no lock file: nobody holds it
     try:
-        if not _try_lock(fd):
-            owner = _read_pid(fd)
-            who = f"process {owner}" if owner else "another process"
-            raise OutputBusy(
-                f"output folder {Path(final)} is being written by {who} (lock {path}): wait "
-                "for that run to finish or choose another output folder (-o)")
+        _refuse_if_held(fd, final, path)
     finally:
         os.close(fd)
+
+
+def _refuse_if_held(fd: int, final, path: Path) -> None:
+    """Raise :class:`OutputBusy`, naming the owner's pid, if another process holds ``fd``'s lock."""
+    if not _try_lock(fd):
+        owner = _read_pid(fd)
+        who = f"process {owner}" if owner else "another process"
+        raise OutputBusy(
+            f"output folder {Path(final)} is being written by {who} (lock {path}): wait "
+            "for that run to finish or choose another output folder (-o)")
 
 
 def _try_lock(fd: int) -> bool:
