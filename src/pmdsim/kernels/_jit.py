@@ -9,6 +9,8 @@ compilation.
 from __future__ import annotations
 
 import numba
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 JIT_OPTIONS = dict(nogil=True, cache=True, error_model="numpy")
 FAST_OPTIONS = dict(JIT_OPTIONS, fastmath=True)
@@ -36,3 +38,30 @@ def parallel_jit(fn=None, **overrides):
     if fn is None:
         return lambda f: numba.njit(**options)(f)
     return numba.njit(**options)(fn)
+
+
+@intrinsic
+def borrow(typingctx, arr):
+    """A view of ``arr`` without a reference count (no meminfo), for per-pixel loops.
+
+    Numba increments and decrements an array's reference count (an atomic operation)
+    whenever an array variable is copied, e.g. as the argument of a function inlined into
+    a loop body: tens of atomics per pixel, shared between threads when the tiles write into
+    one array. On a view without meminfo those operations fold away. The view does not own
+    its memory: the caller must keep ``arr`` alive (an argument, or a local array used
+    after the loop) for as long as the view is used, and never return it.
+    """
+
+    def codegen(context, builder, sig, args):
+        src = context.make_array(sig.args[0])(context, builder, args[0])
+        dst = context.make_array(sig.return_type)(context, builder)
+        dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
+        dst.parent = cgutils.get_null_value(dst.parent.type)
+        dst.nitems = src.nitems
+        dst.itemsize = src.itemsize
+        dst.data = src.data
+        dst.shape = src.shape
+        dst.strides = src.strides
+        return dst._getvalue()
+
+    return arr(arr), codegen

@@ -46,7 +46,7 @@ import math
 
 import numpy as np
 
-from ._jit import fastjit, jit
+from ._jit import borrow, fastjit, jit
 from .fastmath import exp_neg, sincos
 
 # --- per-pixel geometry row layout -------------------------------------------------------
@@ -939,6 +939,13 @@ def _phase2(p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_
             out_f[p, j] = fbuf[j]
 
 
+@jit
+def _keep_alive(*arrays):
+    """Uses its arguments: arrays whose :func:`~._jit.borrow` views a loop uses are passed
+    here after the loop, so that they live until then."""
+    return len(arrays)
+
+
 @fastjit
 def render_tile(
     geo,
@@ -1018,24 +1025,30 @@ def render_tile(
     beckmann = int(brdf[B_MODEL]) == MODEL_BECKMANN
     slopes = int(brdf[B_MODEL]) >= MODEL_SLOPE_TABLE
     nord = _n_orders(brdf)
-    osx = np.zeros(nord)
-    osy = np.zeros(nord)
-    ow = np.zeros(nord)
-    ocum = np.zeros(nord + 1)
-    a = np.empty(n)
-    b = np.empty(n)
-    c = np.empty(n)
-    ubuf = np.empty(n)
-    vbuf = np.empty(n)
-    iubuf = np.empty(n, dtype=np.int64)
-    ivbuf = np.empty(n, dtype=np.int64)
-    fbuf = np.empty(n)
-    table_ut = np.ascontiguousarray(table_u.T)
-    table_vt = np.ascontiguousarray(table_v.T)
+    ord_own = np.zeros((3, nord))
+    ocum_own = np.zeros(nord + 1)
+    a_own = np.empty(n)
+    b_own = np.empty(n)
+    c_own = np.empty(n)
+    buf_own = np.empty((3, n))
+    ibuf_own = np.empty((2, n), dtype=np.int64)
+    table_ut_own = np.ascontiguousarray(table_u.T)
+    table_vt_own = np.ascontiguousarray(table_v.T)
+    pix_own = brdf.copy()  # the pixel's own parameter vector (brdf_px)
+    # reference-count-free views for the pixel loop (kept alive by the owners' use below)
+    a, b, c = borrow(a_own), borrow(b_own), borrow(c_own)
+    osx, osy, ow = borrow(ord_own[0]), borrow(ord_own[1]), borrow(ord_own[2])
+    ocum = borrow(ocum_own)
+    ubuf, vbuf, fbuf = borrow(buf_own[0]), borrow(buf_own[1]), borrow(buf_own[2])
+    iubuf, ivbuf = borrow(ibuf_own[0]), borrow(ibuf_own[1])
+    table_ut, table_vt, pix = borrow(table_ut_own), borrow(table_vt_own), borrow(pix_own)
+    geo, brdf, u1, u2, rotation = borrow(geo), borrow(brdf), borrow(u1), borrow(u2), borrow(rotation)
+    table_u, table_v, k_u, k_v = borrow(table_u), borrow(table_v), borrow(k_u), borrow(k_v)
+    images, dots, out = borrow(images), borrow(dots), borrow(out)
+    out_u, out_v, out_f = borrow(out_u), borrow(out_v), borrow(out_f)
     if shared:
         _directions(u1, u2, 0.0, 0.0, scheme, theta_max, cos_tm, include_principal, a, b, c)
     nout = out.shape[1] - OUT_FIRST
-    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -1079,6 +1092,7 @@ def render_tile(
             p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_ut, table_vt,
             k_u, k_v, images, dots, out, out_u, out_v, out_f,
         )
+    _keep_alive(a_own, b_own, c_own, ord_own, ocum_own, buf_own, ibuf_own, table_ut_own, table_vt_own, pix_own)
 
 
 @fastjit
@@ -1137,27 +1151,30 @@ def render_tile_lobe(
     ay = brdf[B_AY]
     slopes = int(brdf[B_MODEL]) >= MODEL_SLOPE_TABLE
     nord = _n_orders(brdf)
-    osx = np.zeros(nord)
-    osy = np.zeros(nord)
-    ow = np.zeros(nord)
-    ocum = np.zeros(nord + 1)
-    mx = np.empty(n)
-    my = np.empty(n)
-    mz = np.empty(n)
-    mz3 = np.empty(n)
-    ubuf = np.empty(n)
-    vbuf = np.empty(n)
-    iubuf = np.empty(n, dtype=np.int64)
-    ivbuf = np.empty(n, dtype=np.int64)
-    fbuf = np.empty(n)
-    table_ut = np.ascontiguousarray(table_u.T)
-    table_vt = np.ascontiguousarray(table_v.T)
+    ord_own = np.zeros((3, nord))
+    ocum_own = np.zeros(nord + 1)
+    m_own = np.empty((4, n))
+    buf_own = np.empty((3, n))
+    ibuf_own = np.empty((2, n), dtype=np.int64)
+    table_ut_own = np.ascontiguousarray(table_u.T)
+    table_vt_own = np.ascontiguousarray(table_v.T)
+    pix_own = brdf.copy()  # the pixel's own parameter vector (brdf_px)
+    # reference-count-free views for the pixel loop (kept alive by the owners' use below)
+    osx, osy, ow = borrow(ord_own[0]), borrow(ord_own[1]), borrow(ord_own[2])
+    ocum = borrow(ocum_own)
+    mx, my, mz, mz3 = borrow(m_own[0]), borrow(m_own[1]), borrow(m_own[2]), borrow(m_own[3])
+    ubuf, vbuf, fbuf = borrow(buf_own[0]), borrow(buf_own[1]), borrow(buf_own[2])
+    iubuf, ivbuf = borrow(ibuf_own[0]), borrow(ibuf_own[1])
+    table_ut, table_vt, pix = borrow(table_ut_own), borrow(table_vt_own), borrow(pix_own)
+    geo, brdf, u1, u2, rotation = borrow(geo), borrow(brdf), borrow(u1), borrow(u2), borrow(rotation)
+    table_u, table_v, k_u, k_v = borrow(table_u), borrow(table_v), borrow(k_u), borrow(k_v)
+    images, dots, out = borrow(images), borrow(dots), borrow(out)
+    out_u, out_v, out_f = borrow(out_u), borrow(out_v), borrow(out_f)
     if shared and nord == 0:
         if slopes:
             _micronormals_slopes(u1, u2, 0.0, 0.0, brdf, osx, osy, ow, ocum, 1.0, mx, my, mz, mz3)
         else:
             _micronormals(u1, u2, 0.0, 0.0, ax, ay, mx, my, mz, mz3)
-    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -1206,3 +1223,4 @@ def render_tile_lobe(
             p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_ut, table_vt,
             k_u, k_v, images, dots, out, out_u, out_v, out_f,
         )
+    _keep_alive(ord_own, ocum_own, m_own, buf_own, ibuf_own, table_ut_own, table_vt_own, pix_own)
