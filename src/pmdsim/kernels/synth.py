@@ -7,6 +7,8 @@ from numba import prange
 
 from ._jit import parallel_jit
 
+_CHUNK = 4096  # pixels per parallel chunk
+
 
 @parallel_jit
 def shifted_images(sums_raw, cols, norm, f_hit, cos_d, sin_d, black, white, sums, out):
@@ -32,11 +34,18 @@ def shifted_images(sums_raw, cols, norm, f_hit, cos_d, sin_d, black, white, sums
     """
     n = sums_raw.shape[0]
     span = white - black
-    for p in prange(n):
-        base = black * f_hit[p] + span * 0.5 * f_hit[p]
+    nchunk = (n + _CHUNK - 1) // _CHUNK
+    for ch in prange(nchunk):  # a chunk's output rows stay in cache across the blocks
+        p0 = ch * _CHUNK
+        p1 = min(n, p0 + _CHUNK)
         for b in range(cols.shape[0]):
-            c = sums_raw[p, cols[b]] * norm[p]
-            s = sums_raw[p, cols[b] + 1] * norm[p]
-            sums[b, p] = complex(c, s)
+            col = cols[b]
+            for p in range(p0, p1):
+                sums[b, p] = complex(sums_raw[p, col] * norm[p], sums_raw[p, col + 1] * norm[p])
             for k in range(cos_d.shape[0]):
-                out[b, k, p] = base + span * 0.5 * (c * cos_d[k] - s * sin_d[k])
+                ck = 0.5 * span * cos_d[k]
+                sk = 0.5 * span * sin_d[k]
+                for p in range(p0, p1):
+                    z = sums[b, p]
+                    base = (black + 0.5 * span) * f_hit[p]
+                    out[b, k, p] = base + (ck * z.real - sk * z.imag)
