@@ -11,8 +11,17 @@ estimator). For each pixel they
    the samples),
 3. *phase 2*: accumulate the requested pattern sums from those buffers: 1-D profile tables
    gathered at the monitor pixel index (fringes, nearest-pixel monitor), cos/sin of k*u at
-   the exact hit (fringes, continuous monitor), gathers from arbitrary monitor images, or
-   rectangle indicators (dots); or store the rays themselves (transport).
+   the exact hit (fringes, continuous monitor; a frequency that is an integer multiple of a
+   smaller one, as for widths 3200, 400 and 50, as a power of that one's exp(i k u):
+   :func:`_harmonic_plan`), gathers from arbitrary monitor images, or rectangle indicators
+   (dots); or store the rays themselves (transport).
+
+Speed (issue 13; docs/render-kernels.md): the pixel loops use reference-count-free views
+(:func:`~._jit.borrow`: Numba's atomic incref/decref per array per pixel cost more than
+the rays at small N), the kernels ask LLVM for 512-bit vectors where the CPU has them
+(:func:`~._jit.prefer_wide_vectors`), Ward and Beckmann ray loops run over whole blocks of
+``RAY_BLOCK`` rays (padding rays of weight 0, so no ray runs in a scalar remainder loop),
+and phase 1 uses one division per ray.
 
 Directions are given as coefficients ``(a, b, c)`` in a per-pixel orthonormal basis
 ``(b1, b2, b3)``; every dot product the kernel needs is linear in them, so the per-pixel
