@@ -167,6 +167,8 @@ class Geometry:
     monitor_mask: np.ndarray
     specular_u: np.ndarray
     specular_v: np.ndarray
+    #: (H, W, 3) surface point of each pixel's vision ray (mm; NaN off the surface), or None
+    points: np.ndarray | None = None
 
     @property
     def specular_u_px(self) -> np.ndarray:
@@ -359,7 +361,18 @@ class Simulation:
         valid = geo[:, kb.G_VALID].reshape(h, w) > 0
         u = spec[:, 0].reshape(h, w)
         v = spec[:, 1].reshape(h, w)
-        return Geometry(valid, valid & np.isfinite(u), u, v)
+        return Geometry(valid, valid & np.isfinite(u), u, v, self._points(geo, valid))
+
+    def _points(self, geo: np.ndarray, valid: np.ndarray) -> np.ndarray:
+        """(H, W, 3) surface points from geometry rows: a row holds S in the monitor's
+        orthonormal frame (``G_U0``, ``G_V0``: monitor px; ``G_T``: distance along -n)."""
+        mon = self.scene.monitor
+        du = (geo[:, kb.G_U0] - (mon.width - 1) / 2.0) * mon.pitch
+        dv = (geo[:, kb.G_V0] - (mon.height - 1) / 2.0) * mon.pitch
+        pts = (mon.centre + du[:, None] * mon.e_u + dv[:, None] * mon.e_v
+               - geo[:, kb.G_T, None] * mon.normal)
+        pts[~valid.ravel()] = np.nan
+        return pts.reshape(valid.shape + (3,))
 
     def render_fringes(
         self,
