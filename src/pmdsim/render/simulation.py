@@ -357,20 +357,30 @@ class Simulation:
         """Vision-ray results for the whole camera: the chief ray through each pixel centre
         (no bundle)."""
         h, w = self.shape
-        geo, spec = scene_geometry_rows(self.scene, 0, h)
-        valid = geo[:, kb.G_VALID].reshape(h, w) > 0
-        u = spec[:, 0].reshape(h, w)
-        v = spec[:, 1].reshape(h, w)
-        return Geometry(valid, valid & np.isfinite(u), u, v, self._points(geo, valid))
+
+        def tile(r0, r1):  # per tile: the bundle rows are big (200 bytes a pixel)
+            geo, spec = scene_geometry_rows(self.scene, r0, r1)
+            valid = geo[:, kb.G_VALID].reshape(r1 - r0, w) > 0
+            return valid, spec.reshape(r1 - r0, w, 2), self._points(geo, valid)
+
+        rows = max(self.tile_rows, 64)
+        parts = self._compute(tile, [(r, min(r + rows, h)) for r in range(0, h, rows)], None)
+        valid = np.concatenate([p[0] for p in parts])
+        spec = np.concatenate([p[1] for p in parts])
+        points = np.concatenate([p[2] for p in parts])
+        del parts
+        u = np.ascontiguousarray(spec[..., 0])
+        v = np.ascontiguousarray(spec[..., 1])
+        return Geometry(valid, valid & np.isfinite(u), u, v, points)
 
     def _points(self, geo: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """(H, W, 3) surface points from geometry rows: a row holds S in the monitor's
         orthonormal frame (``G_U0``, ``G_V0``: monitor px; ``G_T``: distance along -n)."""
         mon = self.scene.monitor
-        du = (geo[:, kb.G_U0] - (mon.width - 1) / 2.0) * mon.pitch
-        dv = (geo[:, kb.G_V0] - (mon.height - 1) / 2.0) * mon.pitch
-        pts = (mon.centre + du[:, None] * mon.e_u + dv[:, None] * mon.e_v
-               - geo[:, kb.G_T, None] * mon.normal)
+        basis = np.stack([mon.pitch * mon.e_u, mon.pitch * mon.e_v, -mon.normal])
+        origin = mon.centre - ((mon.width - 1) / 2.0) * basis[0] - ((mon.height - 1) / 2.0) * basis[1]
+        pts = geo[:, [kb.G_U0, kb.G_V0, kb.G_T]] @ basis
+        pts += origin
         pts[~valid.ravel()] = np.nan
         return pts.reshape(valid.shape + (3,))
 
