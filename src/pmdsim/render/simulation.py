@@ -503,8 +503,9 @@ class Simulation:
         lum = mon.black_level * out[..., kb.OUT_FHIT][..., None] + (mon.white_level - mon.black_level) * hit
         return np.moveaxis(lum * norm[..., None], -1, 0).astype(np.float32)
 
-    def transport(self, rows: Sequence[int], cols: Sequence[int]):
-        """The scattered rays of selected pixels.
+    def transport(self, rows: Sequence[int], cols: Sequence[int], directions: bool = True):
+        """The scattered rays of selected pixels (``directions=False``: without the world
+        directions, returned as None; the other results are the same).
 
         Returns
         -------
@@ -531,9 +532,11 @@ class Simulation:
             rot = np.zeros((0, 2))
         else:
             u1, u2 = samp.lobe_unit_points() if lobe else samp.unit_points()
-            rot = (np.concatenate([samp.rotations(int(r), int(r) + 1, scene.camera.width)[[c]]
-                                   for r, c in zip(rows, cols)])
-                   if samp.mode == "random" else np.zeros((0, 2)))
+            rot = np.zeros((0, 2))
+            if samp.mode == "random":  # one draw per camera row (the render's streams)
+                by_row = {r: samp.rotations(r, r + 1, scene.camera.width)
+                          for r in np.unique(rows).tolist()}
+                rot = np.stack([by_row[int(r)][int(c)] for r, c in zip(rows, cols)])
         n = u1.size if lobe else u1.size + 1
         ou, ov, of = (np.empty((len(rows), n)) for _ in range(3))
         out = np.empty((len(rows), kb.OUT_FIRST))
@@ -549,6 +552,8 @@ class Simulation:
         else:
             kb.render_tile(geo, scene.brdf.kernel_params(), u1, u2, rot, samp.scheme_id,
                            samp.theta_max, True, *args)
+        if not directions:
+            return ou, ov, of, None, hits.point[0].copy()
         dirs = np.empty((len(rows), n, 3))
         origin = np.empty((len(rows), 3))
         cone = cone_basis(hits)
