@@ -237,12 +237,13 @@ def _check_all_modes(cfg, mode_random):
                  naive.weighted_sums(rays, np.sin(k * rays[c]))]
     check(out, refs, "harmonic")
 
-    # harmonic, integer frequency ratios: exp(i k c) as a power of a smaller frequency's
-    # (kernels.bundle._harmonic_plan), fused passes (m = 2, 4, 8) and the generic one (3, 5)
+    # harmonic, integer frequency ratios: exp(i k c) as the power m = 2, 4 or 8 of a smaller
+    # frequency's (kernels.bundle._harmonic_plan); ratios 3 and 5 by sin/cos
     k0, k1 = 2 * np.pi / 640, 2 * np.pi / 37
     ku, kv = k0 * np.array([8.0, 1.0, 2.0, 64.0, 3.0]), k1 * np.array([5.0, 1.0])
     plan = kb._harmonic_plan(ku, kv)
-    assert list(plan[1]) == [2, -1, 1, 0, 1, 6, -1] and list(plan[2]) == [4, 1, 2, 8, 3, 5, 1]
+    assert list(plan[0]) == [1, 2, 4, 0, 3, 6, 5]
+    assert list(plan[1]) == [2, -1, 1, 0, -1, -1, -1] and list(plan[2]) == [4, 1, 2, 8, 1, 1, 1]
     out = _render_tile(scene, geo, rot, kb.MODE_HARMONIC, kb.OUT_FIRST + 14, k_u=ku, k_v=kv)[0]
     refs = []
     for k, c in [(k, "u") for k in ku] + [(k, "v") for k in kv]:

@@ -70,23 +70,3 @@ def borrow(typingctx, arr):
         return dst._getvalue()
 
     return arr(arr), codegen
-
-
-@intrinsic
-def prefer_wide_vectors(typingctx):
-    """Let LLVM vectorise the calling kernel with the widest vectors the CPU has.
-
-    On AVX-512 CPUs LLVM prefers 256-bit vectors by default (``prefer-vector-width``); the
-    ray loops of the render kernels are arithmetic-bound, and 512-bit vectors run them about
-    1.9x faster (measured: polynomial sin/cos 2.0 -> 1.05 ns per ray). Call it first thing
-    in a kernel: it sets that function attribute on the compiled function (the code
-    inlined into it included). Harmless where the CPU has no 512-bit vectors. (llvmlite
-    validates attribute names against its list of keywords; this string attribute is added
-    to the set directly.)
-    """
-
-    def codegen(context, builder, sig, args):
-        set.add(builder.function.attributes, '"prefer-vector-width"="512"')
-        return context.get_dummy_value()
-
-    return types.none(), codegen

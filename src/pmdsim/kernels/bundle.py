@@ -11,17 +11,16 @@ estimator). For each pixel they
    the samples),
 3. *phase 2*: accumulate the requested pattern sums from those buffers: 1-D profile tables
    gathered at the monitor pixel index (fringes, nearest-pixel monitor), cos/sin of k*u at
-   the exact hit (fringes, continuous monitor; a frequency that is an integer multiple of a
-   smaller one, as for widths 3200, 400 and 50, as a power of that one's exp(i k u):
+   the exact hit (fringes, continuous monitor; a frequency 2, 4 or 8 times a smaller one,
+   as for widths 3200, 400 and 50, as a power of that one's exp(i k u):
    :func:`_harmonic_plan`), gathers from arbitrary monitor images, or rectangle indicators
    (dots); or store the rays themselves (transport).
 
 Speed (issue 13; docs/render-kernels.md): the pixel loops use reference-count-free views
 (:func:`~._jit.borrow`: Numba's atomic incref/decref per array per pixel cost more than
-the rays at small N), the kernels ask LLVM for 512-bit vectors where the CPU has them
-(:func:`~._jit.prefer_wide_vectors`), Ward and Beckmann ray loops run over whole blocks of
-``RAY_BLOCK`` rays (padding rays of weight 0, so no ray runs in a scalar remainder loop),
-and phase 1 uses one division per ray.
+the rays at small N), Ward and Beckmann ray loops run over whole blocks of ``RAY_BLOCK``
+rays (padding rays of weight 0, so no ray runs in a scalar remainder loop), and phase 1
+uses one division per ray.
 
 Directions are given as coefficients ``(a, b, c)`` in a per-pixel orthonormal basis
 ``(b1, b2, b3)``; every dot product the kernel needs is linear in them, so the per-pixel
@@ -55,7 +54,7 @@ import math
 
 import numpy as np
 
-from ._jit import borrow, fastjit, jit, prefer_wide_vectors
+from ._jit import borrow, fastjit, jit
 from .fastmath import exp_neg, sincos
 
 # --- per-pixel geometry row layout -------------------------------------------------------
@@ -900,17 +899,23 @@ def _harmonic_plan(k_u, k_v):
     """How :func:`_harmonic_sums` gets each frequency's exp(i k c) per ray: (3, nu + nv) int64,
     frequencies numbered u first, then v. Row 0: per group, the frequencies in ascending
     order; row 1: -1 = polynomial sin/cos, else a smaller frequency r of the same group with
-    k = m k_r for an integer m (to 4 ulp); row 2: that m (1..64). Then exp(i k c) =
-    exp(i k_r c)^m by repeated squaring, exact to m times the rounding of exp(i k_r c) (so
-    as exact as the polynomial of the larger argument k c): widths 3200, 400 and 50 need one
-    sin/cos per ray and direction instead of three."""
+    k = m k_r, m = 2, 4 or 8 (to 4 ulp); row 2: that m (1 for sin/cos). Then exp(i k c) =
+    exp(i k_r c)^m by one to three squarings, exact to m times the rounding of
+    exp(i k_r c) (as exact as the polynomial of the larger argument k c): widths 3200, 400
+    and 50 need one sin/cos per ray and direction instead of three. (Other integer ratios
+    would work the same way; each power needs its own loop, and compile time counts.)"""
     nu = k_u.shape[0]
     nv = k_v.shape[0]
     plan = np.empty((3, nu + nv), dtype=np.int64)
     for grp in range(2):
         k = k_u if grp == 0 else k_v
         off = 0 if grp == 0 else nu
-        order = np.argsort(k)
+        order = np.arange(k.shape[0])  # ascending k (insertion sort: a few frequencies)
+        for i in range(1, k.shape[0]):
+            h = i
+            while h > 0 and k[order[h - 1]] > k[order[h]]:
+                order[h - 1], order[h] = order[h], order[h - 1]
+                h -= 1
         for i in range(k.shape[0]):
             q = order[i]
             plan[0, off + i] = off + q
@@ -921,58 +926,11 @@ def _harmonic_plan(k_u, k_v):
                 if k[r] > 0.0 and k[q] > 0.0:
                     ratio = k[q] / k[r]
                     m = np.rint(ratio)
-                    if 1.0 <= m <= 64.0 and abs(ratio - m) <= 8.9e-16 * m:
+                    if (m == 2.0 or m == 4.0 or m == 8.0) and abs(ratio - m) <= 8.9e-16 * m:
                         plan[1, off + q] = off + r
                         plan[2, off + q] = np.int64(m)
                         break
     return plan
-
-
-@fastjit(inline="always")
-def _power_rows(n, m, bc, bs, zc, zs):
-    """(zc + i zs)[:n] = (bc + i bs)[:n] ** m, m >= 1, by left-to-right binary powering: one
-    vectorised pass over the rays per bit of m."""
-    if m == 1:
-        for j in range(n):
-            zc[j] = bc[j]
-            zs[j] = bs[j]
-        return
-    nb = 0
-    while (m >> nb) > 0:
-        nb += 1
-    first = True
-    for i in range(nb - 2, -1, -1):
-        odd = ((m >> i) & 1) == 1
-        if first:  # (base^2) or (base^2 * base), read from the base rows
-            if odd:
-                for j in range(n):
-                    c = bc[j]
-                    s = bs[j]
-                    c2 = c * c - s * s
-                    s2 = 2.0 * c * s
-                    zc[j] = c2 * c - s2 * s
-                    zs[j] = c2 * s + s2 * c
-            else:
-                for j in range(n):
-                    c = bc[j]
-                    s = bs[j]
-                    zc[j] = c * c - s * s
-                    zs[j] = 2.0 * c * s
-            first = False
-        elif odd:
-            for j in range(n):
-                c = zc[j]
-                s = zs[j]
-                c2 = c * c - s * s
-                s2 = 2.0 * c * s
-                zc[j] = c2 * bc[j] - s2 * bs[j]
-                zs[j] = c2 * bs[j] + s2 * bc[j]
-        else:
-            for j in range(n):
-                c = zc[j]
-                s = zs[j]
-                zc[j] = c * c - s * s
-                zs[j] = 2.0 * c * s
 
 
 @fastjit(inline="always")
@@ -995,47 +953,28 @@ def _harmonic_sums(p, n, coord, fbuf, k, off, plan, zcb, zsb, out):
                 zs[j] = s_
                 acc_c += fbuf[j] * c_
                 acc_s += fbuf[j] * s_
-        elif plan[2, q] == 8:  # the common ratios in one pass each, squarings in registers
+        else:  # m = 2, 4 or 8: up to three squarings in registers, in one loop for all
+            m = plan[2, q]
+            w2 = 1.0 if m == 2 else 0.0
+            w4 = 1.0 if m == 4 else 0.0
+            w8 = 1.0 if m == 8 else 0.0
             bc = zcb[base]
             bs = zsb[base]
             for j in range(n):
                 c = bc[j]
                 s = bs[j]
-                c, s = c * c - s * s, 2.0 * c * s
-                c, s = c * c - s * s, 2.0 * c * s
-                c, s = c * c - s * s, 2.0 * c * s
+                c2 = c * c - s * s
+                s2 = 2.0 * c * s
+                c4 = c2 * c2 - s2 * s2
+                s4 = 2.0 * c2 * s2
+                c8 = c4 * c4 - s4 * s4
+                s8 = 2.0 * c4 * s4
+                c = w2 * c2 + w4 * c4 + w8 * c8  # exact: weights 0 and 1, |c_m| <= 1
+                s = w2 * s2 + w4 * s4 + w8 * s8
                 zc[j] = c
                 zs[j] = s
                 acc_c += fbuf[j] * c
                 acc_s += fbuf[j] * s
-        elif plan[2, q] == 4:
-            bc = zcb[base]
-            bs = zsb[base]
-            for j in range(n):
-                c = bc[j]
-                s = bs[j]
-                c, s = c * c - s * s, 2.0 * c * s
-                c, s = c * c - s * s, 2.0 * c * s
-                zc[j] = c
-                zs[j] = s
-                acc_c += fbuf[j] * c
-                acc_s += fbuf[j] * s
-        elif plan[2, q] == 2:
-            bc = zcb[base]
-            bs = zsb[base]
-            for j in range(n):
-                c = bc[j]
-                s = bs[j]
-                c, s = c * c - s * s, 2.0 * c * s
-                zc[j] = c
-                zs[j] = s
-                acc_c += fbuf[j] * c
-                acc_s += fbuf[j] * s
-        else:
-            _power_rows(n, plan[2, q], zcb[base], zsb[base], zc, zs)
-            for j in range(n):
-                acc_c += fbuf[j] * zc[j]
-                acc_s += fbuf[j] * zs[j]
         out[p, OUT_FIRST + 2 * q] = acc_c
         out[p, OUT_FIRST + 2 * q + 1] = acc_s
 
@@ -1157,7 +1096,6 @@ def render_tile(
         ``brdf[B_AY]`` (spatially varying parameters; Ward and Beckmann); omitted = the
         vector's constants for every pixel.
     """
-    prefer_wide_vectors()
     npix = geo.shape[0]
     m = u1.shape[0]
     n = m + (1 if include_principal else 0)
@@ -1295,7 +1233,6 @@ def render_tile_lobe(
     pixel's micro-normals) as there. The mirror (no lobe) is not accepted: render it with
     :func:`render_tile`.
     """
-    prefer_wide_vectors()
     if int(brdf[B_MODEL]) == MODEL_MIRROR:
         raise ValueError("render_tile_lobe: the mirror has no lobe to sample; use render_tile")
     npix = geo.shape[0]
