@@ -55,6 +55,7 @@ __all__ = [
     "height_stats",
     "HeightStats",
     "TERM_LEVELS",
+    "clear_operator_cache",
 ]
 
 
@@ -111,75 +112,30 @@ def _prepare(slope_x, slope_y, mask):
 
 
 # --------------------------------------------------------------------------- Southwell
-def _derivative_along(s, m, axis, h):
-    """ds/d(axis) from valid neighbours: central where both exist, one-sided 3-point
-    (2nd order) where two on one side exist, 2-point otherwise, 0 for isolated points."""
-    s = np.moveaxis(s, axis, -1)
-    m = np.moveaxis(m, axis, -1)
-    n = s.shape[-1]
-    d = np.zeros_like(s)
-    if n < 2:
-        return np.moveaxis(d, -1, axis)
-
-    def sh(a, k, fill):
-        # value at index i + k (fill outside)
-        out = np.full_like(a, fill)
-        if k > 0:
-            out[..., :-k] = a[..., k:]
-        elif k < 0:
-            out[..., -k:] = a[..., :k]
-        else:
-            out[...] = a
-        return out
-
-    mp1, mm1 = sh(m, 1, False), sh(m, -1, False)
-    mp2, mm2 = sh(m, 2, False), sh(m, -2, False)
-    sp1, sm1, sp2, sm2 = sh(s, 1, 0.0), sh(s, -1, 0.0), sh(s, 2, 0.0), sh(s, -2, 0.0)
-    central = m & mp1 & mm1
-    fwd3 = m & ~central & mp1 & mp2
-    bwd3 = m & ~central & ~fwd3 & mm1 & mm2
-    fwd2 = m & ~central & ~fwd3 & ~bwd3 & mp1
-    bwd2 = m & ~central & ~fwd3 & ~bwd3 & ~fwd2 & mm1
-    d = np.where(central, (sp1 - sm1) / (2 * h), d)
-    d = np.where(fwd3, (-3 * s + 4 * sp1 - sp2) / (2 * h), d)
-    d = np.where(bwd3, (3 * s - 4 * sm1 + sm2) / (2 * h), d)
-    d = np.where(fwd2, (sp1 - s) / h, d)
-    d = np.where(bwd2, (s - sm1) / h, d)
-    return np.moveaxis(d, -1, axis)
-
-
-def _southwell_differences(sx, sy, m, dx, dy, order):
-    """Right-hand sides of the neighbour equations z_j - z_i = b along x and y, and the
-    masks of valid pairs ((H, W-1) and (H-1, W))."""
-    px = m[:, :-1] & m[:, 1:]
-    py = m[:-1, :] & m[1:, :]
-    bx = dx * 0.5 * (sx[:, :-1] + sx[:, 1:])
-    by = dy * 0.5 * (sy[:-1, :] + sy[1:, :])
-    if order == 4:
-        dsx = _derivative_along(sx, m, 1, dx)
-        dsy = _derivative_along(sy, m, 0, dy)
-        bx = bx - dx * dx / 12.0 * (dsx[:, 1:] - dsx[:, :-1])
-        by = by - dy * dy / 12.0 * (dsy[1:, :] - dsy[:-1, :])
-    elif order != 2:
+def _southwell_rhs(sx, sy, m, dx, dy, order):
+    """(H, W) right-hand side A^T b of the Southwell normal equations (one value per node;
+    0 outside ``m``): the compiled :func:`pmdsim.kernels.reconstruct.southwell_rhs`."""
+    if order not in (2, 4):
         raise ValueError(f"order must be 2 (classic Southwell) or 4 (higher-order), got {order!r}")
-    return np.where(px, bx, 0.0), np.where(py, by, 0.0), px, py
+    from ..kernels.reconstruct import southwell_rhs
+
+    rhs = np.empty(m.shape)
+    southwell_rhs(np.ascontiguousarray(sx), np.ascontiguousarray(sy), np.ascontiguousarray(m),
+                  float(dx), float(dy), int(order), rhs)
+    return rhs
 
 
 def _dct_poisson(rhs):
     """Solve L z = rhs for the Neumann grid Laplacian L = Dx^T Dx + Dy^T Dy (forward
     differences, unit step) on a full rectangle; the zero-mean solution."""
-    h, w = rhs.shape
-    lx = 2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w)
-    ly = 2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h)
-    lam = ly[:, None] + lx[None, :]
     c = scipy.fft.dctn(rhs, type=2, norm="ortho", workers=-1)
-    lam[0, 0] = 1.0
-    c = c / lam
+    c /= _dct_eigenvalues(rhs.shape)
     c[0, 0] = 0.0
     return scipy.fft.idctn(c, type=2, norm="ortho", workers=-1)
 
 
-def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", remove="piston"):
+def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", remove="piston", x0=None,
+              rtol=1e-11):
     """Height (H, W) in mm from slopes by zonal least squares (Southwell grid).
 
     Parameters
@@ -193,13 +149,26 @@ def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", r
     order : {2, 4}
         2: classic Southwell (trapezoid between neighbours); 4: with the Euler-Maclaurin
         correction from slope derivatives (default; exact for quadratics either way).
-    solver : {"auto", "dct", "direct", "amg"}
-        ``dct`` needs a full rectangle (exact, O(N log N)); ``direct`` = SciPy's sparse LU;
-        ``amg`` = PyAMG smoothed-aggregation CG; ``auto``: ``dct`` on full rectangles,
-        ``direct`` below 50 000 points, ``amg`` above.
+    solver : {"auto", "dct", "pcg", "direct", "amg"}
+        ``dct`` needs a full rectangle (exact, O(N log N)); ``pcg``: conjugate gradients on
+        the masked system preconditioned by the ``dct`` solve on a rectangle holding the
+        mask (15-25 iterations on circles, annuli, holes; no set-up); ``direct`` = SciPy's
+        sparse LU; ``amg`` = PyAMG smoothed-aggregation CG; ``auto``: ``dct`` on full
+        rectangles, ``pcg`` otherwise. The iterative ones stop at a residual of ``rtol``
+        times the right-hand side's (the first guess's residual with ``x0``) and fall back
+        to ``direct`` when they do not get there. The
+        matrix, its LU factors and the AMG hierarchy depend only on the mask: they are kept
+        for the next call with the same mask (the iterations of a reconstruction).
     remove : str or sequence
         Terms removed from the result (:func:`remove_terms`); default: piston (mean zero
         per connected part of the aperture). Piston is always undetermined by slopes.
+    x0 : (H, W) ndarray, optional
+        A first guess of the height (mm) for the iterative solvers (``pcg``, ``amg``), e.g.
+        the previous iteration of a reconstruction; the others ignore it.
+    rtol : float
+        Residual reduction of the iterative solvers (default 1e-11: the exact least-squares
+        solution to round-off). A reconstruction passes its previous height as ``x0`` and a
+        looser ``rtol``: it only needs the correction to a few digits per iteration.
 
     Returns
     -------
@@ -207,89 +176,171 @@ def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", r
     """
     dx, dy = _spacing(spacing)
     sx, sy, m = _prepare(slope_x, slope_y, mask)
-    h, w = m.shape
-    bx, by, px, py = _southwell_differences(sx, sy, m, dx, dy, order)
+    rhs = _southwell_rhs(sx, sy, m, dx, dy, order)
     full = bool(m.all())
     if solver == "auto":
-        solver = "dct" if full else ("direct" if m.sum() < 50_000 else "amg")
+        solver = "dct" if full else "pcg"
     if solver == "dct":
         if not full:
-            raise ValueError("solver='dct' needs a full rectangle (no mask, all slopes finite); use 'direct' or 'amg'")
-        rhs = np.zeros((h, w))
-        rhs[:, :-1] -= bx
-        rhs[:, 1:] += bx
-        rhs[:-1, :] -= by
-        rhs[1:, :] += by
+            raise ValueError("solver='dct' needs a full rectangle (no mask, all slopes finite); "
+                             "use 'pcg', 'direct' or 'amg'")
         z = _dct_poisson(rhs)
-    elif solver in ("direct", "amg"):
-        z = _southwell_sparse(bx, by, px, py, m, solver)
+    elif solver in ("pcg", "direct", "amg"):
+        z = _southwell_sparse(rhs, m, solver, x0, rtol)
     else:
-        raise ValueError(f"solver must be 'auto', 'dct', 'direct' or 'amg', got {solver!r}")
+        raise ValueError(f"solver must be 'auto', 'dct', 'pcg', 'direct' or 'amg', got {solver!r}")
     z = np.where(m, z, np.nan)
     return remove_terms(z, m, *grid_coordinates(m.shape, (dx, dy)), terms=remove, _components=True)
 
 
-_AMG_CACHE: dict = {}  # one PyAMG hierarchy, keyed by the mask
+@dataclass(eq=False)
+class _SouthwellOperator:
+    """The normal matrix of the Southwell equations on one mask (the Neumann grid Laplacian
+    of the measured nodes; independent of the slopes and of the grid step) and its solver:
+    ``lu`` (SuperLU of the matrix with one node pinned per connected part), ``ml`` (the
+    PyAMG hierarchy of the singular matrix) or ``box`` (for ``pcg``: the slices of the
+    mask's bounding box and the shape of the DCT rectangle that holds it)."""
+
+    lap: object
+    ncomp: int
+    labels: np.ndarray
+    lu: object = None
+    ml: object = None
+    box: tuple = None
 
 
-def _southwell_sparse(bx, by, px, py, m, solver):
+_OPERATORS: dict = {}  # (shape, kind, mask digest) -> _SouthwellOperator, the latest two
+_OPERATORS_KEPT = 2
+
+
+def clear_operator_cache():
+    """Forget the kept Southwell factorisations and AMG hierarchies (their memory)."""
+    _OPERATORS.clear()
+
+
+def _laplacian(m):
+    """The Neumann grid Laplacian A^T A of the measured nodes' neighbour pairs (CSR)."""
     h, w = m.shape
     n = int(m.sum())
     idx = np.full((h, w), -1, np.int64)
     idx[m] = np.arange(n)
-    ix0, ix1 = idx[:, :-1][px], idx[:, 1:][px]
-    iy0, iy1 = idx[:-1, :][py], idx[1:, :][py]
-    i0 = np.concatenate([ix0, iy0])
-    i1 = np.concatenate([ix1, iy1])
-    b = np.concatenate([bx[px], by[py]])
-    k = len(b)
-    rows = np.repeat(np.arange(k), 2)
-    cols = np.stack([i0, i1], axis=1).ravel()
-    vals = np.tile([-1.0, 1.0], k)
-    a = sp.csr_matrix((vals, (rows, cols)), shape=(k, n))
-    lap = (a.T @ a).tocsr()
-    rhs = a.T @ b
+    px = m[:, :-1] & m[:, 1:]
+    py = m[:-1, :] & m[1:, :]
+    i0 = np.concatenate([idx[:, :-1][px], idx[:-1, :][py]])
+    i1 = np.concatenate([idx[:, 1:][px], idx[1:, :][py]])
+    deg = np.bincount(i0, minlength=n) + np.bincount(i1, minlength=n)
+    rows = np.concatenate([i0, i1, np.arange(n)])
+    cols = np.concatenate([i1, i0, np.arange(n)])
+    vals = np.concatenate([-np.ones(2 * len(i0)), deg.astype(np.float64)])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+def _operator(m, kind):
+    import hashlib
+
+    key = (m.shape, kind, hashlib.blake2b(np.packbits(m).tobytes(), digest_size=16).hexdigest())
+    op = _OPERATORS.get(key)
+    if op is not None:
+        return op
+    lap = _laplacian(m)
     ncomp, labels = scipy.sparse.csgraph.connected_components(lap, directed=False)
-    if solver == "amg" and ncomp > 16:
-        solver = "direct"  # many islands: the near-null space would be too wide
-    if solver == "direct":
-        # pin one point per connected part (piston is free; set afterwards)
+    op = _SouthwellOperator(lap, ncomp, labels)
+    if kind == "pcg":
+        rows = np.flatnonzero(m.any(axis=1))
+        cols = np.flatnonzero(m.any(axis=0))
+        box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+        # a DCT of a length with a large prime factor is several times slower: the
+        # rectangle of the preconditioner only has to hold the mask
+        shape = tuple(scipy.fft.next_fast_len(int(n), real=True)
+                      for n in (rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1))
+        op.box = (box, shape)
+    elif kind == "direct" or ncomp > 16:  # many islands: AMG's near-null space would be too wide
+        # pin one node per connected part (piston is free; set afterwards): since the
+        # right-hand side sums to zero over each part, the pinned node comes out 0 and
+        # the others solve the singular system exactly
         first = np.unique(labels, return_index=True)[1]
-        pin = np.zeros(n)
+        pin = np.zeros(lap.shape[0])
         pin[first] = 1.0
-        lap = (lap + sp.diags(pin)).tocsr()
-        z = scipy.sparse.linalg.spsolve(lap.tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
+        op.lu = scipy.sparse.linalg.splu((lap + sp.diags(pin)).tocsc(), permc_spec="MMD_AT_PLUS_A")
     else:
         try:
             import pyamg
         except ImportError as e:  # pragma: no cover - pyamg is a dependency
             raise ImportError("solver='amg' needs PyAMG (pip install pyamg)") from e
         # the singular Neumann system itself (consistent: rhs sums to zero per part), with
-        # the constants of each part as the near-null space; CG stays in the range. The
-        # hierarchy depends only on the mask: kept for the next call with the same mask
-        # (the reconstruction's iterations).
-        import hashlib
+        # the constants of each part as the near-null space; CG stays in the range
+        near_null = np.zeros((lap.shape[0], ncomp))
+        near_null[np.arange(lap.shape[0]), labels] = 1.0
+        op.ml = pyamg.smoothed_aggregation_solver(lap, B=near_null, symmetry="hermitian", max_coarse=500)
+    while len(_OPERATORS) >= _OPERATORS_KEPT:
+        _OPERATORS.pop(next(iter(_OPERATORS)))
+    _OPERATORS[key] = op
+    return op
 
-        key = (m.shape, hashlib.blake2b(np.packbits(m).tobytes(), digest_size=16).hexdigest())
-        ml = _AMG_CACHE.get(key)
-        if ml is None:
-            near_null = np.zeros((n, ncomp))
-            near_null[np.arange(n), labels] = 1.0
-            ml = pyamg.smoothed_aggregation_solver(lap, B=near_null, symmetry="hermitian", max_coarse=500)
-            _AMG_CACHE.clear()
-            _AMG_CACHE[key] = ml
-        import warnings
 
-        with warnings.catch_warnings():
-            # CG stops with "indefinite preconditioner" once the residual reaches round-off
-            warnings.simplefilter("ignore", UserWarning)
-            z = ml.solve(rhs, tol=1e-11, accel="cg", maxiter=300)
-        res = np.linalg.norm(lap @ z - rhs)
-        if not res <= 1e-8 * max(np.linalg.norm(rhs), 1e-300):  # not converged: the sure way
-            return _southwell_sparse(bx, by, px, py, m, "direct")
-    out = np.zeros((h, w))
+def _southwell_sparse(rhs, m, solver, x0=None, rtol=1e-11):
+    op = _operator(m, solver)
+    b = rhs[m]
+    if op.lu is not None:
+        z = op.lu.solve(b)
+    else:
+        guess = None
+        if x0 is not None:
+            guess = np.asarray(x0, np.float64)[m]
+            if not np.isfinite(guess).all():
+                guess = None
+        norm_b = max(float(np.linalg.norm(b)), 1e-300)
+        # the residual to reach: rtol of the first guess's residual (of b without one)
+        target = rtol * (norm_b if guess is None else float(np.linalg.norm(b - op.lap @ guess)))
+        if op.box is not None:
+            z = _pcg(op, m, b, guess, target)
+        else:
+            import warnings
+
+            with warnings.catch_warnings():
+                # CG stops with "indefinite preconditioner" once the residual reaches round-off
+                warnings.simplefilter("ignore", UserWarning)
+                z = op.ml.solve(b, x0=guess, tol=target / norm_b, accel="cg", maxiter=300)
+        res = np.linalg.norm(op.lap @ z - b)
+        if not res <= max(1e-8 * norm_b, 2.0 * target):  # not converged: the sure way
+            return _southwell_sparse(rhs, m, "direct")
+    out = np.zeros(m.shape)
     out[m] = z
     return out
+
+
+def _pcg(op, m, b, x0, atol, maxiter=200):
+    """CG on the masked Southwell system to a residual of ``atol``, preconditioned by the
+    exact solve of the system on a rectangle holding the mask (:func:`_dct_poisson`) with
+    the residual put on the mask's nodes and zeros around: a fictitious-domain
+    preconditioner, symmetric and positive definite."""
+    (box, shape) = op.box
+    mb = m[box]
+    h, w = mb.shape
+    lam = _dct_eigenvalues(shape)
+    pad = np.zeros(shape)
+    inner = pad[:h, :w]
+
+    def precondition(r):
+        inner[mb] = r
+        c = scipy.fft.dctn(pad, type=2, norm="ortho", workers=-1)
+        c /= lam
+        c[0, 0] = 0.0
+        return scipy.fft.idctn(c, type=2, norm="ortho", workers=-1)[:h, :w][mb]
+
+    n = len(b)
+    prec = scipy.sparse.linalg.LinearOperator((n, n), matvec=precondition, dtype=np.float64)
+    z, _ = scipy.sparse.linalg.cg(op.lap, b, x0=x0, rtol=0.0, atol=atol, maxiter=maxiter, M=prec)
+    return z
+
+
+def _dct_eigenvalues(shape):
+    """Eigenvalues of the Neumann grid Laplacian of ``shape`` in the DCT-II basis ([0, 0]
+    set to 1: the constant mode is dropped by the caller)."""
+    h, w = shape
+    lam = (2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h))[:, None] + (2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w))[None, :]
+    lam[0, 0] = 1.0
+    return lam
 
 
 # ------------------------------------------------------------------ Frankot-Chellappa
@@ -409,19 +460,28 @@ def legendre_terms(n_terms):
     return out[:n_terms]
 
 
-def _legendre(i, j, u, v):
-    """sqrt((2i+1)(2j+1)) P_i(u) P_j(v) (RMS 1 on [-1, 1]^2) and its (u, v) gradient."""
-    from numpy.polynomial import legendre as L
+def _legendre_table(t, degree):
+    """P_k(t) and P_k'(t) for k = 0..degree (Bonnet's recurrence), each (degree + 1, N)."""
+    p = np.empty((degree + 1,) + t.shape)
+    d = np.zeros_like(p)
+    p[0] = 1.0
+    if degree >= 1:
+        p[1] = t
+        d[1] = 1.0
+    for k in range(1, degree):
+        p[k + 1] = ((2 * k + 1) * t * p[k] - k * p[k - 1]) / (k + 1)
+        d[k + 1] = d[k - 1] + (2 * k + 1) * p[k]
+    return p, d
 
-    ci = np.zeros(i + 1)
-    ci[i] = 1.0
-    cj = np.zeros(j + 1)
-    cj[j] = 1.0
+
+def _legendre(i, j, u, v, tables=None):
+    """sqrt((2i+1)(2j+1)) P_i(u) P_j(v) (RMS 1 on [-1, 1]^2) and its (u, v) gradient;
+    ``tables``: the :func:`_legendre_table` of u and of v, to share between terms."""
+    if tables is None:
+        tables = (_legendre_table(u, i), _legendre_table(v, j))
+    (pu, du), (pv, dv) = tables
     norm = math.sqrt((2 * i + 1) * (2 * j + 1))
-    pu, pv = L.legval(u, ci), L.legval(v, cj)
-    du = L.legval(u, L.legder(ci)) if i > 0 else np.zeros_like(u)
-    dv = L.legval(v, L.legder(cj)) if j > 0 else np.zeros_like(v)
-    return norm * pu * pv, norm * du * pv, norm * pu * dv
+    return norm * pu[i] * pv[j], norm * du[i] * pv[j], norm * pu[i] * dv[j]
 
 
 @dataclass(frozen=True)
@@ -469,13 +529,16 @@ def modal_fit(slope_x, slope_y, spacing, mask=None, *, basis="zernike", n_terms=
         u, v = xm / scale[0], ym / scale[1]
         terms = legendre_terms(n_terms)
         names = tuple(f"L{i}{j}" for i, j in terms)
-        funcs = [lambda uu, vv, i=i, j=j: _legendre(i, j, uu, vv) for i, j in terms]
+        degree = max(max(t) for t in terms)
+        tables = (_legendre_table(u, degree), _legendre_table(v, degree))
+        funcs = [lambda uu, vv, i=i, j=j: _legendre(i, j, uu, vv, tables) for i, j in terms]
     else:
         raise ValueError(f"basis must be 'zernike' or 'legendre', got {basis!r}")
     gx = np.empty((len(u), len(funcs)))
     gy = np.empty_like(gx)
+    zv = np.empty_like(gx)
     for k, f in enumerate(funcs):
-        _, a, b = f(u, v)
+        zv[:, k], a, b = f(u, v)
         gx[:, k] = a / scale[0]
         gy[:, k] = b / scale[1]
     a = np.vstack([gx[:, 1:], gy[:, 1:]])
@@ -485,9 +548,8 @@ def modal_fit(slope_x, slope_y, spacing, mask=None, *, basis="zernike", n_terms=
     res = a @ coef[1:] - rhs
     # height on the grid; piston chosen so the fitted terms have zero mean on the aperture
     zval = np.zeros(len(u))
-    for k, f in enumerate(funcs):
-        if k:
-            zval += coef[k] * f(u, v)[0]
+    for k in range(1, len(funcs)):
+        zval += coef[k] * zv[:, k]
     zval -= zval.mean()
     height = np.full(m.shape, np.nan)
     height[m] = zval

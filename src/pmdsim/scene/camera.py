@@ -189,7 +189,8 @@ class Camera:
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (..., 2) = (col, row) of world points (mm), OpenCV's model."""
-        pc = (np.asarray(points, np.float64) - self.position) @ self.rotation
+        # einsum, not matmul: OpenBLAS takes ~10x longer for an (N, 3) @ (3, 3) product
+        pc = np.einsum("...j,jk->...k", np.asarray(points, np.float64) - self.position, self.rotation)
         with np.errstate(divide="ignore", invalid="ignore"):
             x = pc[..., 0] / pc[..., 2]
             y = pc[..., 1] / pc[..., 2]
