@@ -27,12 +27,12 @@ import numpy as np
 from ._jit import jit, parallel_jit
 
 
-@jit
+@jit(inline="always")
 def _measured(m, r, c):
     return 0 <= r < m.shape[0] and 0 <= c < m.shape[1] and m[r, c]
 
 
-@jit
+@jit(inline="always")
 def _slope_derivative(s, m, r, c, dr, dc, h):
     """ds along (dr, dc) at node (r, c) from the measured neighbours (see module doc)."""
     if not m[r, c]:
@@ -84,30 +84,50 @@ def southwell_rhs(sx, sy, m, dx, dy, order, rhs):
             rhs[r, c] = acc
 
 
+@jit(inline="always")
+def _bisector_slope(px, py, pz, camera_position, mx, my, mz, rotation):
+    ax = camera_position[0] - px
+    ay = camera_position[1] - py
+    az = camera_position[2] - pz
+    bx = mx - px
+    by = my - py
+    bz = mz - pz
+    la = 1.0 / math.sqrt(ax * ax + ay * ay + az * az)
+    lb = 1.0 / math.sqrt(bx * bx + by * by + bz * bz)
+    nx = ax * la + bx * lb
+    ny = ay * la + by * lb
+    nz = az * la + bz * lb
+    # local components n . (column j of rotation); the scale of n cancels in the ratios
+    l0 = nx * rotation[0, 0] + ny * rotation[1, 0] + nz * rotation[2, 0]
+    l1 = nx * rotation[0, 1] + ny * rotation[1, 1] + nz * rotation[2, 1]
+    l2 = nx * rotation[0, 2] + ny * rotation[1, 2] + nz * rotation[2, 2]
+    if l2 == 0.0:
+        return math.nan, math.nan
+    return -l0 / l2, -l1 / l2
+
+
 @parallel_jit(fastmath=False)
 def bisector_slopes(points, camera_position, monitor_points, rotation, out_sx, out_sy):
     """Slopes (dz/dx, dz/dy) in the frame whose axes are the columns of ``rotation`` of the
     normals bisecting the unit directions from ``points`` (N, 3) to ``camera_position`` (3,)
     and to ``monitor_points`` (N, 3); NaN where the normal lies in the frame's x-y plane."""
     for k in numba.prange(points.shape[0]):
-        ax = camera_position[0] - points[k, 0]
-        ay = camera_position[1] - points[k, 1]
-        az = camera_position[2] - points[k, 2]
-        bx = monitor_points[k, 0] - points[k, 0]
-        by = monitor_points[k, 1] - points[k, 1]
-        bz = monitor_points[k, 2] - points[k, 2]
-        la = 1.0 / math.sqrt(ax * ax + ay * ay + az * az)
-        lb = 1.0 / math.sqrt(bx * bx + by * by + bz * bz)
-        nx = ax * la + bx * lb
-        ny = ay * la + by * lb
-        nz = az * la + bz * lb
-        # local components n . (column j of rotation); the scale of n cancels in the ratios
-        l0 = nx * rotation[0, 0] + ny * rotation[1, 0] + nz * rotation[2, 0]
-        l1 = nx * rotation[0, 1] + ny * rotation[1, 1] + nz * rotation[2, 1]
-        l2 = nx * rotation[0, 2] + ny * rotation[1, 2] + nz * rotation[2, 2]
-        if l2 == 0.0:
-            out_sx[k] = math.nan
-            out_sy[k] = math.nan
-        else:
-            out_sx[k] = -l0 / l2
-            out_sy[k] = -l1 / l2
+        out_sx[k], out_sy[k] = _bisector_slope(points[k, 0], points[k, 1], points[k, 2], camera_position,
+                                               monitor_points[k, 0], monitor_points[k, 1],
+                                               monitor_points[k, 2], rotation)
+
+
+@parallel_jit(fastmath=False)
+def bisector_slopes_planar(points, camera_position, u, v, centre, e_u, e_v, pitch, u_mid, v_mid,
+                           rotation, out_sx, out_sy):
+    """:func:`bisector_slopes` with the monitor points of a planar pixel grid: monitor
+    coordinates (u, v) (N,) px -> ``centre + (u - u_mid) pitch e_u + (v - v_mid) pitch e_v``
+    (the arithmetic of :meth:`pmdsim.scene.monitor.Monitor.pixel_to_world`)."""
+    for k in numba.prange(points.shape[0]):
+        du = (u[k] - u_mid) * pitch
+        dv = (v[k] - v_mid) * pitch
+        mx = centre[0] + du * e_u[0] + dv * e_v[0]
+        my = centre[1] + du * e_u[1] + dv * e_v[1]
+        mz = centre[2] + du * e_u[2] + dv * e_v[2]
+        out_sx[k], out_sy[k] = _bisector_slope(points[k, 0], points[k, 1], points[k, 2], camera_position,
+                                               mx, my, mz, rotation)

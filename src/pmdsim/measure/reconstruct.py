@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..kernels.reconstruct import bisector_slopes
+from ..kernels.reconstruct import bisector_slopes, bisector_slopes_planar
 from ..kernels.surface import bspline_eval_pair
 from .integrate import _lstsq, southwell
 
@@ -276,7 +276,8 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     node_ok = mask
     sx = sy = None
     it = 0
-    rot = pf.rotation
+    rot = np.ascontiguousarray(pf.rotation)
+    planar = _planar_monitor(monitor)
     # the aperture's nodes: their (x, y) part of the world point is fixed, z moves
     base = pf.centre + x[mask][:, None] * rot[:, 0] + y[mask][:, None] * rot[:, 1]
     ok_m = np.ones(len(base), bool)  # measured, among the aperture's nodes
@@ -295,11 +296,14 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         mv = np.empty(k)
         # = ndimage.map_coordinates(..., order=3, mode="mirror") of u and v, in one pass
         bspline_eval_pair(cu, cv, np.ascontiguousarray(row[ok_m]), np.ascontiguousarray(col[ok_m]), mu, mv)
-        m3 = np.ascontiguousarray(monitor.pixel_to_world(mu, mv), np.float64)
         a = np.empty(k)
         b = np.empty(k)
-        # = slopes_in_frame(bisector_normals(s, camera, m3), rotation), fused
-        bisector_slopes(np.ascontiguousarray(s[ok_m]), cam_pos, m3, np.ascontiguousarray(rot), a, b)
+        # = slopes_in_frame(bisector_normals(s, camera, monitor.pixel_to_world(mu, mv)), rotation)
+        if planar is not None:
+            bisector_slopes_planar(s[ok_m], cam_pos, mu, mv, *planar, rot, a, b)
+        else:
+            m3 = np.ascontiguousarray(monitor.pixel_to_world(mu, mv), np.float64)
+            bisector_slopes(s[ok_m], cam_pos, m3, rot, a, b)
         sx = np.full(x.shape, np.nan)
         sy = np.full(x.shape, np.nan)
         sx[node_ok] = a
@@ -319,6 +323,19 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     height = np.where(node_ok, z, np.nan)
     return Reconstruction(xs, ys, node_ok, height, sx, sy, np.where(mask, nominal, np.nan), it,
                           tuple(history), converged)
+
+
+def _planar_monitor(monitor):
+    """The plane parameters of a :class:`~pmdsim.scene.monitor.Monitor` (whose
+    ``pixel_to_world`` the compiled :func:`~pmdsim.kernels.reconstruct.bisector_slopes_planar`
+    repeats), None for any other monitor model (its own ``pixel_to_world`` is called)."""
+    from ..scene.monitor import Monitor
+
+    if getattr(type(monitor), "pixel_to_world", None) is not Monitor.pixel_to_world:
+        return None
+    f = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
+    return (f(monitor.centre), f(monitor.e_u), f(monitor.e_v), float(monitor.pitch),
+            (monitor.width - 1) / 2.0, (monitor.height - 1) / 2.0)
 
 
 def _settled(history, tol_mm):

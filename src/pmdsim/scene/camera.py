@@ -194,9 +194,11 @@ class Camera:
         with np.errstate(divide="ignore", invalid="ignore"):
             x = pc[..., 0] / pc[..., 2]
             y = pc[..., 1] / pc[..., 2]
-        xd, yd = self.distort(x, y)
-        return np.stack([self.focal_px * xd + self.principal_point[0],
-                         self.fy * yd + self.principal_point[1]], axis=-1)
+        xd, yd = self.distort(x, y) if self.has_distortion else (x, y)  # distort is the identity then
+        out = np.empty(x.shape + (2,))
+        out[..., 0] = self.focal_px * xd + self.principal_point[0]
+        out[..., 1] = self.fy * yd + self.principal_point[1]
+        return out
 
     def subpixel_offsets(self) -> np.ndarray:
         """(n^2, 2) (d_col, d_row) offsets of the n x n sub-pixel centres from the pixel centre."""
