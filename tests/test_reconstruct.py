@@ -296,3 +296,22 @@ def test_settled_rule():
     assert not _settled([1e-3, 1e-4], 1e-8)  # tail 1.1e-5
     assert not _settled([1e-6, 9e-7], 1e-8)  # q = 0.9: too slow to trust the estimate
     assert not _settled([1e-8, 2e-8], 1e-8)  # growing
+
+
+def test_nearest_valid_pixel_matches_the_distance_transform():
+    """Few invalid pixels (k-d tree of the valid edge) and many (distance transform): the
+    nearest valid pixel's distance equals SciPy's exact Euclidean distance transform."""
+    from scipy import ndimage
+
+    from pmdsim.measure.reconstruct import _nearest_valid
+
+    rng = np.random.default_rng(5)
+    for frac in (0.01, 0.3):
+        valid = ndimage.binary_opening(rng.random((90, 120)) > frac * 3, iterations=1) | (rng.random((90, 120)) > frac)
+        valid[:3, :] = False
+        bad = ~valid
+        rows, cols = _nearest_valid(valid)
+        assert valid[rows, cols].all()
+        got = np.hypot(rows - np.nonzero(bad)[0], cols - np.nonzero(bad)[1])
+        want = ndimage.distance_transform_edt(bad)[bad]
+        np.testing.assert_allclose(got, want, atol=1e-12)

@@ -534,22 +534,27 @@ def modal_fit(slope_x, slope_y, spacing, mask=None, *, basis="zernike", n_terms=
         funcs = [lambda uu, vv, i=i, j=j: _legendre(i, j, uu, vv, tables) for i, j in terms]
     else:
         raise ValueError(f"basis must be 'zernike' or 'legendre', got {basis!r}")
-    gx = np.empty((len(u), len(funcs)))
-    gy = np.empty_like(gx)
-    zv = np.empty_like(gx)
+    # one row per term (rows contiguous): values, d/dx and d/dy at the measured points
+    zv = np.empty((len(funcs), len(u)))
+    gx = np.empty_like(zv)
+    gy = np.empty_like(zv)
     for k, f in enumerate(funcs):
-        zv[:, k], a, b = f(u, v)
-        gx[:, k] = a / scale[0]
-        gy[:, k] = b / scale[1]
-    a = np.vstack([gx[:, 1:], gy[:, 1:]])
-    rhs = np.concatenate([sx[m], sy[m]])
-    coef = _lstsq(a, rhs)
+        zv[k], a, b = f(u, v)
+        gx[k] = a / scale[0]
+        gy[k] = b / scale[1]
+    gx, gy = gx[1:], gy[1:]
+    bx, by = sx[m], sy[m]
+    # least squares of [gx; gy]^T c = [bx; by] by its normal equations, without stacking
+    import scipy.linalg
+
+    try:
+        coef = scipy.linalg.solve(gx @ gx.T + gy @ gy.T, gx @ bx + gy @ by, assume_a="pos")
+    except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
+        coef = np.linalg.lstsq(np.hstack([gx, gy]).T, np.concatenate([bx, by]), rcond=None)[0]
     coef = np.concatenate([[0.0], coef])
-    res = a @ coef[1:] - rhs
+    res = np.concatenate([coef[1:] @ gx - bx, coef[1:] @ gy - by])
     # height on the grid; piston chosen so the fitted terms have zero mean on the aperture
-    zval = np.zeros(len(u))
-    for k in range(1, len(funcs)):
-        zval += coef[k] * zv[:, k]
+    zval = coef[1:] @ zv[1:]
     zval -= zval.mean()
     height = np.full(m.shape, np.nan)
     height[m] = zval

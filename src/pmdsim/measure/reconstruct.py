@@ -129,11 +129,12 @@ class Reconstruction:
         return (float(self.x_mm[1] - self.x_mm[0]), float(self.y_mm[1] - self.y_mm[0]))
 
 
-def _smooth_fill(a, valid, idx, degree=6, max_samples=50_000):
-    """``a`` with invalid pixels filled smoothly: a 2-D polynomial fitted to the valid
-    pixels plus the nearest valid pixel's residual (continuous at the boundary, so the
-    spline's prefilter does not ring into the valid region)."""
-    h, w = a.shape
+def _smooth_fill(maps, valid, near, degree=6, max_samples=50_000):
+    """The maps (each (H, W)) with invalid pixels filled smoothly: a 2-D polynomial fitted to
+    the valid pixels plus the nearest valid pixel's residual (continuous at the boundary, so
+    the spline's prefilter does not ring into the valid region). ``near``: the (rows, cols)
+    of the nearest valid pixel of each invalid one, in ``np.nonzero(~valid)`` order."""
+    h, w = valid.shape
     rows, cols = np.nonzero(valid)
     step = max(1, len(rows) // max_samples)
     rs, cs = rows[::step], cols[::step]
@@ -147,19 +148,38 @@ def _smooth_fill(a, valid, idx, degree=6, max_samples=50_000):
 
     vx, vy = vander(rs, cs)
     a_mat = np.stack([vx[:, i] * vy[:, j] for i, j in terms], axis=1)
-    coef = _lstsq(a_mat, a[rs, cs])
-    cmat = np.zeros((degree + 1, degree + 1))
-    for (i, j), c in zip(terms, coef):
-        cmat[i, j] = c
-    # the fit on the whole grid, separably: fit[r, c] = sum_ij C_ij Px_i(c) Py_j(r)
+    coefs = _lstsq(a_mat, np.stack([a[rs, cs] for a in maps], axis=1))
     gx, _ = vander(np.zeros(w), np.arange(w))
     _, gy = vander(np.arange(h), np.zeros(h))
-    fit = gy @ cmat.T @ gx.T
     bad = ~valid
-    near = tuple(i[bad] for i in idx)
-    out = a.copy()
-    out[bad] = fit[bad] + (a[near] - fit[near])
+    out = []
+    for a, coef in zip(maps, coefs.T):
+        cmat = np.zeros((degree + 1, degree + 1))
+        for (i, j), c in zip(terms, coef):
+            cmat[i, j] = c
+        # the fit on the whole grid, separably: fit[r, c] = sum_ij C_ij Px_i(c) Py_j(r)
+        fit = gy @ cmat.T @ gx.T
+        f = a.copy()
+        f[bad] = fit[bad] + (a[near] - fit[near])
+        out.append(f)
     return out
+
+
+def _nearest_valid(valid):
+    """(rows, cols) of the nearest valid pixel (Euclidean) of each invalid one, in
+    ``np.nonzero(~valid)`` order. The nearest valid pixel always has an invalid 4-neighbour
+    (a step from any other valid pixel towards the invalid one comes closer), so a k-d tree
+    of those edge pixels answers when few pixels are invalid; the exact distance transform
+    of the whole image otherwise."""
+    bad = ~valid
+    if bad.sum() > 0.05 * bad.size:
+        idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+        return tuple(i[bad] for i in idx)
+    from scipy.spatial import cKDTree
+
+    edge = np.argwhere(valid & ~ndimage.binary_erosion(valid, border_value=1))
+    k = cKDTree(edge).query(np.argwhere(bad))[1]
+    return edge[k, 0], edge[k, 1]
 
 
 def _spline_maps(u, v, valid):
@@ -169,9 +189,7 @@ def _spline_maps(u, v, valid):
     if valid.all():
         uf, vf = u, v
     else:
-        idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
-        uf = _smooth_fill(u, valid, idx)
-        vf = _smooth_fill(v, valid, idx)
+        uf, vf = _smooth_fill((u, v), valid, _nearest_valid(valid))
     cu = np.pad(ndimage.spline_filter(uf, order=3, mode="mirror"), 2, mode="reflect")
     cv = np.pad(ndimage.spline_filter(vf, order=3, mode="mirror"), 2, mode="reflect")
     return cu, cv
