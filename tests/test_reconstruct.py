@@ -315,3 +315,24 @@ def test_nearest_valid_pixel_matches_the_distance_transform():
         got = np.hypot(rows - np.nonzero(bad)[0], cols - np.nonzero(bad)[1])
         want = ndimage.distance_transform_edt(bad)[bad]
         np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_support_cells_kernel_matches_numpy():
+    """kernels.reconstruct.support_cells against the plain test: the fractional pixel's
+    2 x 2 cell lies inside the image and all four pixels are valid; NaN, inf, negative and
+    edge coordinates included."""
+    from pmdsim.kernels.reconstruct import support_cells
+
+    rng = np.random.default_rng(11)
+    valid = rng.random((40, 50)) > 0.2
+    cols = np.concatenate([rng.uniform(-2, 52, 3000), [np.nan, np.inf, -np.inf, 0.0, 48.999, 49.0, -1e-12]])
+    rows = np.concatenate([rng.uniform(-2, 42, 3000), [1.0, 1.0, 1.0, 0.0, 38.5, 3.0, 2.0]])
+    ok = np.ones(len(cols), bool)
+    ok[5] = False  # stays False
+    want = np.zeros(len(cols), bool)
+    for k, (c, r) in enumerate(zip(cols, rows)):
+        if k != 5 and np.isfinite(c) and np.isfinite(r) and 0 <= c < 49 and 0 <= r < 39:
+            c0, r0 = int(np.floor(c)), int(np.floor(r))
+            want[k] = valid[r0:r0 + 2, c0:c0 + 2].all()
+    support_cells(valid, cols, rows, ok)
+    np.testing.assert_array_equal(ok, want)

@@ -14,7 +14,9 @@ Slow NumPy references: ``tests/naive_integrate.py`` (the right-hand side) and
   receives ``-b``, node j ``+b``.
 - :func:`bisector_slopes`: the surface slopes dz/dx, dz/dy in a local frame of the normals
   that bisect the unit directions from the surface points to the camera and to the
-  monitor points (the law of reflection).
+  monitor points (the law of reflection); :func:`bisector_slopes_planar` with the monitor
+  points of a planar pixel grid computed inline.
+- :func:`support_cells`: which projected nodes fall in a cell of 2 x 2 valid camera pixels.
 """
 
 from __future__ import annotations
@@ -131,3 +133,21 @@ def bisector_slopes_planar(points, camera_position, u, v, centre, e_u, e_v, pitc
         mz = centre[2] + du * e_u[2] + dv * e_v[2]
         out_sx[k], out_sy[k] = _bisector_slope(points[k, 0], points[k, 1], points[k, 2], camera_position,
                                                mx, my, mz, rotation)
+
+
+@parallel_jit(fastmath=False)
+def support_cells(valid, cols, rows, ok):
+    """``ok[k] &=`` the fractional pixel (cols[k], rows[k]) lies in a cell of 2 x 2 valid
+    pixels of ``valid`` (H, W) (NaN coordinates: not)."""
+    h, w = valid.shape
+    for k in numba.prange(ok.shape[0]):
+        if not ok[k]:
+            continue
+        c = cols[k]
+        r = rows[k]
+        if not (c >= 0.0 and r >= 0.0 and c < w - 1.0 and r < h - 1.0):  # also NaN, inf
+            ok[k] = False
+            continue
+        c0 = int(math.floor(c))
+        r0 = int(math.floor(r))
+        ok[k] = valid[r0, c0] and valid[r0 + 1, c0] and valid[r0, c0 + 1] and valid[r0 + 1, c0 + 1]

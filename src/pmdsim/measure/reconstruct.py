@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..kernels.reconstruct import bisector_slopes, bisector_slopes_planar
+from ..kernels.reconstruct import bisector_slopes, bisector_slopes_planar, support_cells
 from ..kernels.surface import bspline_eval_pair
 from .integrate import _lstsq, southwell
 
@@ -195,25 +195,14 @@ def _spline_maps(u, v, valid):
     return cu, cv
 
 
-def _support_ok(valid, col, row):
-    """Nodes whose fractional pixel lies in a cell of 2 x 2 valid pixels (the invalid
-    pixels around were filled smoothly, so the spline's wider support may use them)."""
-    h, w = valid.shape
-    c0 = np.floor(col).astype(np.int64)
-    r0 = np.floor(row).astype(np.int64)
-    inside = (c0 >= 0) & (c0 <= w - 2) & (r0 >= 0) & (r0 <= h - 2)
-    c0 = np.where(inside, c0, 0)
-    r0 = np.where(inside, r0, 0)
-    return inside & valid[r0, c0] & valid[r0 + 1, c0] & valid[r0, c0 + 1] & valid[r0 + 1, c0 + 1]
-
-
-def _anchor(z, nominal, ok, anchor_idx):
+def _anchor(z, nominal, ok, anchor_idx, parts=None):
     """Tie each connected part of the measured grid to the nominal shape: the part holding
     the anchor node (or, when that node is not measured, the measured node nearest to it)
-    at that node, every other part (and all with ``anchor_idx`` None) by its mean."""
+    at that node, every other part (and all with ``anchor_idx`` None) by its mean.
+    ``parts``: ``ndimage.label(ok)`` when known."""
     if not ok.any():
         return z
-    labels, n = ndimage.label(ok)
+    labels, n = ndimage.label(ok) if parts is None else parts
     out = z.copy()
     if anchor_idx is not None and not ok[anchor_idx]:
         rr, cc = np.nonzero(ok)
@@ -299,14 +288,15 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     # the aperture's nodes: their (x, y) part of the world point is fixed, z moves
     base = pf.centre + x[mask][:, None] * rot[:, 0] + y[mask][:, None] * rot[:, 1]
     ok_m = np.ones(len(base), bool)  # measured, among the aperture's nodes
+    ok_pix = np.ascontiguousarray(ok_pix)
+    parts = None  # (node mask, its connected parts)
     for it in range(1, max_iter + 1):
         s = base + z[mask][:, None] * rot[:, 2]
         pix = camera.project(s)
-        col, row = pix[..., 0], pix[..., 1]
-        fin = np.isfinite(col) & np.isfinite(row)
-        col = np.where(fin, col, -10.0)
-        row = np.where(fin, row, -10.0)
-        ok_m = ok_m & fin & _support_ok(ok_pix, col, row)
+        col, row = np.ascontiguousarray(pix[..., 0]), np.ascontiguousarray(pix[..., 1])
+        # nodes whose fractional pixel lies in a cell of 2 x 2 valid pixels (the invalid
+        # pixels around were filled smoothly, so the spline's wider support may use them)
+        support_cells(ok_pix, col, row, ok_m)
         node_ok = np.zeros(mask.shape, bool)
         node_ok[mask] = ok_m
         k = int(ok_m.sum())
@@ -331,7 +321,9 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         # are below tol_mm, so the solver's error is below tol_mm * SOLVE_RTOL
         zi = southwell(sx, sy, (dx, dy), node_ok, order=order, solver=solver, remove="none", x0=z,
                        rtol=SOLVE_RTOL)
-        zi = _anchor(zi, nominal, node_ok, anchor_idx)
+        if parts is None or not np.array_equal(node_ok, parts[0]):
+            parts = (node_ok, ndimage.label(node_ok))
+        zi = _anchor(zi, nominal, node_ok, anchor_idx, parts[1])
         change = float(np.max(np.abs(zi - z)[node_ok])) if k else 0.0
         history.append(change)
         z = np.where(node_ok, zi, np.where(mask, nominal, 0.0))
