@@ -34,6 +34,7 @@ Methods
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -211,11 +212,13 @@ class _SouthwellOperator:
 
 _OPERATORS: dict = {}  # (shape, kind, mask digest) -> _SouthwellOperator, the latest two
 _OPERATORS_KEPT = 2
+_OPERATORS_LOCK = threading.Lock()  # runs and sweep points may integrate in threads
 
 
 def clear_operator_cache():
     """Forget the kept Southwell factorisations and AMG hierarchies (their memory)."""
-    _OPERATORS.clear()
+    with _OPERATORS_LOCK:
+        _OPERATORS.clear()
 
 
 def _laplacian(m):
@@ -239,7 +242,8 @@ def _operator(m, kind):
     import hashlib
 
     key = (m.shape, kind, hashlib.blake2b(np.packbits(m).tobytes(), digest_size=16).hexdigest())
-    op = _OPERATORS.get(key)
+    with _OPERATORS_LOCK:
+        op = _OPERATORS.get(key)
     if op is not None:
         return op
     lap = _laplacian(m)
@@ -272,9 +276,10 @@ def _operator(m, kind):
         near_null = np.zeros((lap.shape[0], ncomp))
         near_null[np.arange(lap.shape[0]), labels] = 1.0
         op.ml = pyamg.smoothed_aggregation_solver(lap, B=near_null, symmetry="hermitian", max_coarse=500)
-    while len(_OPERATORS) >= _OPERATORS_KEPT:
-        _OPERATORS.pop(next(iter(_OPERATORS)))
-    _OPERATORS[key] = op
+    with _OPERATORS_LOCK:
+        while len(_OPERATORS) >= _OPERATORS_KEPT:
+            _OPERATORS.pop(next(iter(_OPERATORS)))
+        _OPERATORS[key] = op
     return op
 
 
