@@ -128,11 +128,39 @@ def _southwell_rhs(sx, sy, m, dx, dy, order):
 
 def _dct_poisson(rhs):
     """Solve L z = rhs for the Neumann grid Laplacian L = Dx^T Dx + Dy^T Dy (forward
-    differences, unit step) on a full rectangle; the zero-mean solution."""
-    c = scipy.fft.dctn(rhs, type=2, norm="ortho", workers=-1)
-    c /= _dct_eigenvalues(rhs.shape)
-    c[0, 0] = 0.0
-    return scipy.fft.idctn(c, type=2, norm="ortho", workers=-1)
+    differences, unit step) on a full rectangle; the zero-mean solution.
+
+    Both axes by DCT-II when their lengths have small prime factors (or the grid is small);
+    otherwise (a DCT of a length like 1226 = 2 x 613 takes 3x longer) DCT along the axis
+    with the smaller largest prime factor only and, for each of its modes k, the tridiagonal
+    system (T + lambda_k I) y = c_k along the other axis
+    (:func:`pmdsim.kernels.reconstruct.neumann_tridiagonal_solve`; mode 0 by a 1-D DCT).
+    The two agree to ~1e-11 relative (the Thomas sweep of the near-singular low modes)."""
+    h, w = rhs.shape
+    if all(scipy.fft.next_fast_len(n, real=True) == n for n in (h, w)) or min(h, w) < 3 or h * w < 65_536:
+        c = scipy.fft.dctn(rhs, type=2, norm="ortho", workers=-1)
+        c /= _dct_eigenvalues(rhs.shape)
+        c[0, 0] = 0.0
+        return scipy.fft.idctn(c, type=2, norm="ortho", workers=-1)
+    from ..kernels.reconstruct import neumann_tridiagonal_solve
+
+    # the DCT axis: the length with the smaller largest prime factor; the other is solved directly
+    axis = 0 if _largest_prime_factor(h) <= _largest_prime_factor(w) else 1
+    c = scipy.fft.dct(rhs, type=2, norm="ortho", axis=axis, workers=-1)
+    c = np.ascontiguousarray(c if axis == 0 else c.T)  # (modes, positions)
+    k = c.shape[0]
+    lam = 2.0 - 2.0 * np.cos(np.pi * np.arange(k) / k)
+    y = np.zeros_like(c)
+    neumann_tridiagonal_solve(c, lam, y)
+    # mode 0: the singular 1-D Neumann problem, its zero-mean solution
+    n = c.shape[1]
+    c0 = scipy.fft.dct(c[0], type=2, norm="ortho")
+    lam1 = 2.0 - 2.0 * np.cos(np.pi * np.arange(n) / n)
+    lam1[0] = 1.0
+    c0 /= lam1
+    c0[0] = 0.0
+    y[0] = scipy.fft.idct(c0, type=2, norm="ortho")
+    return scipy.fft.idct(y if axis == 0 else y.T, type=2, norm="ortho", axis=axis, workers=-1)
 
 
 def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", remove="piston", x0=None,
@@ -337,6 +365,16 @@ def _pcg(op, m, b, x0, atol, maxiter=200):
     prec = scipy.sparse.linalg.LinearOperator((n, n), matvec=precondition, dtype=np.float64)
     z, _ = scipy.sparse.linalg.cg(op.lap, b, x0=x0, rtol=0.0, atol=atol, maxiter=maxiter, M=prec)
     return z
+
+
+def _largest_prime_factor(n):
+    p, largest = 2, 1
+    while p * p <= n:
+        while n % p == 0:
+            n //= p
+            largest = p
+        p += 1
+    return max(largest, n) if n > 1 else largest
 
 
 def _dct_eigenvalues(shape):
