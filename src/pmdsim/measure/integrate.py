@@ -205,6 +205,14 @@ def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", r
     """
     dx, dy = _spacing(spacing)
     sx, sy, m = _prepare(slope_x, slope_y, mask)
+    z = _integrate(sx, sy, m, dx, dy, order, solver, x0, rtol)
+    z[~m] = np.nan
+    return remove_terms(z, m, *grid_coordinates(m.shape, (dx, dy)), terms=remove, _components=True)
+
+
+def _integrate(sx, sy, m, dx, dy, order=4, solver="auto", x0=None, rtol=1e-11):
+    """:func:`southwell` on prepared input (slopes finite everywhere, 0 outside the bool
+    mask ``m``): a height (H, W), no term removed, any value outside ``m``."""
     rhs = _southwell_rhs(sx, sy, m, dx, dy, order)
     full = bool(m.all())
     if solver == "auto":
@@ -218,8 +226,7 @@ def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", r
         z = _southwell_sparse(rhs, m, solver, x0, rtol)
     else:
         raise ValueError(f"solver must be 'auto', 'dct', 'pcg', 'direct' or 'amg', got {solver!r}")
-    z = np.where(m, z, np.nan)
-    return remove_terms(z, m, *grid_coordinates(m.shape, (dx, dy)), terms=remove, _components=True)
+    return z
 
 
 @dataclass(eq=False)

@@ -34,7 +34,7 @@ from scipy import ndimage
 
 from ..kernels.reconstruct import bisector_slopes, bisector_slopes_planar, support_cells
 from ..kernels.surface import bspline_eval_pair
-from .integrate import _lstsq, southwell
+from .integrate import _integrate, _lstsq
 
 __all__ = [
     "Reconstruction",
@@ -209,6 +209,10 @@ def _anchor(z, nominal, ok, anchor_idx, parts=None):
         k = np.argmin((rr - anchor_idx[0]) ** 2 + (cc - anchor_idx[1]) ** 2)
         anchor_idx = (int(rr[k]), int(cc[k]))
     anchored = labels[anchor_idx] if anchor_idx is not None else 0
+    if n == 1 and anchored == 1:  # one part, holding the anchor: no part masks needed
+        out = z - z[anchor_idx] + nominal[anchor_idx]
+        out[~ok] = z[~ok]
+        return out
     for lab in range(1, n + 1):
         part = labels == lab
         if lab == anchored:
@@ -278,6 +282,7 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         anchor_idx = (int(np.argmin(np.abs(ys - anchor[1]))), int(np.argmin(np.abs(xs - anchor[0]))))
 
     z = np.where(mask, nominal, 0.0)
+    outside = z  # the height of nodes not measured (never changed in place)
     history = []
     converged = False
     node_ok = mask
@@ -312,24 +317,27 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         else:
             m3 = np.ascontiguousarray(monitor.pixel_to_world(mu, mv), np.float64)
             bisector_slopes(s[ok_m], cam_pos, m3, rot, a, b)
-        sx = np.full(x.shape, np.nan)
-        sy = np.full(x.shape, np.nan)
+        sx = np.zeros(x.shape)
+        sy = np.zeros(x.shape)
         sx[node_ok] = a
         sy[node_ok] = b
-        # the previous height as first guess; iterative solvers only refine the correction
+        # = southwell(sx, sy, (dx, dy), node_ok, ..., remove="none"), on the prepared slopes.
+        # The previous height as first guess; iterative solvers only refine the correction
         # to SOLVE_RTOL: the next iteration continues from there, and the last corrections
         # are below tol_mm, so the solver's error is below tol_mm * SOLVE_RTOL
-        zi = southwell(sx, sy, (dx, dy), node_ok, order=order, solver=solver, remove="none", x0=z,
-                       rtol=SOLVE_RTOL)
+        zi = _integrate(sx, sy, node_ok, dx, dy, order=order, solver=solver, x0=z, rtol=SOLVE_RTOL)
         if parts is None or not np.array_equal(node_ok, parts[0]):
             parts = (node_ok, ndimage.label(node_ok))
         zi = _anchor(zi, nominal, node_ok, anchor_idx, parts[1])
         change = float(np.max(np.abs(zi - z)[node_ok])) if k else 0.0
         history.append(change)
-        z = np.where(node_ok, zi, np.where(mask, nominal, 0.0))
+        z = np.where(node_ok, zi, outside)
         if _settled(history, tol_mm):
             converged = True
             break
+    if sx is not None:
+        sx[~node_ok] = np.nan
+        sy[~node_ok] = np.nan
     height = np.where(node_ok, z, np.nan)
     return Reconstruction(xs, ys, node_ok, height, sx, sy, np.where(mask, nominal, np.nan), it,
                           tuple(history), converged)
