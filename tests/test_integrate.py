@@ -265,8 +265,7 @@ def test_dct_solve_with_a_tridiagonal_axis():
     path: it agrees with the 2-D DCT solve and integrates a quadratic exactly."""
     import scipy.fft
 
-    from pmdsim.kernels.reconstruct import neumann_tridiagonal_solve
-    from pmdsim.measure.integrate import _dct_eigenvalues, _dct_poisson
+    from pmdsim.measure.integrate import _dct_eigenvalues, _dct_poisson, _neumann_tridiagonal_solve
 
     rng = np.random.default_rng(2)
     rhs = rng.standard_normal((263, 307))
@@ -276,14 +275,14 @@ def test_dct_solve_with_a_tridiagonal_axis():
     want = scipy.fft.idctn(c, type=2, norm="ortho")
     got = _dct_poisson(rhs)
     assert np.abs(got - want).max() < 1e-10 * np.abs(want).max()
-    # the kernel itself against a dense solve of one shifted Neumann system
-    n, s = 9, 0.37
+    # the tridiagonal sweep against dense solves of shifted Neumann systems
+    n = 9
     t = np.diag(np.r_[1.0, 2.0 * np.ones(n - 2), 1.0]) - np.eye(n, k=1) - np.eye(n, k=-1)
     b = rng.standard_normal((2, n))
-    out = np.zeros_like(b)
-    neumann_tridiagonal_solve(b, np.array([s, 0.0]), out)
-    np.testing.assert_allclose(out[0], np.linalg.solve(t + s * np.eye(n), b[0]), rtol=1e-12)
-    assert not out[1].any()  # shift 0: left alone
+    shifts = np.array([0.37, 1e-4])
+    out = _neumann_tridiagonal_solve(b, shifts)
+    for k in range(2):
+        np.testing.assert_allclose(out[k], np.linalg.solve(t + shifts[k] * np.eye(n), b[k]), rtol=1e-10)
     x, y = grid_coordinates(rhs.shape, H)
     sx, sy = quad_grad(x, y)
     z = southwell(sx, sy, H, solver="dct")

@@ -152,30 +152,3 @@ def support_cells(valid, cols, rows, ok):
         r0 = int(math.floor(r))
         ok[k] = valid[r0, c0] and valid[r0 + 1, c0] and valid[r0, c0 + 1] and valid[r0 + 1, c0 + 1]
 
-
-@parallel_jit(fastmath=False)
-def neumann_tridiagonal_solve(rhs, shift, out):
-    """For each row k of ``rhs`` (K, n) with ``shift[k] > 0``: solve
-    ``(T + shift[k] I) y = rhs[k]`` into ``out[k]``, T the 1-D Neumann grid Laplacian of
-    length n (diagonal 1, 2, ..., 2, 1; off-diagonals -1), by the Thomas algorithm
-    (stable: the matrix is symmetric, positive definite and diagonally dominant). Rows
-    with ``shift[k] <= 0`` are left alone."""
-    kk, n = rhs.shape
-    for k in numba.prange(kk):
-        s = shift[k]
-        if not s > 0.0:
-            continue
-        cp = np.empty(n)  # modified super-diagonal
-        if n == 1:
-            out[k, 0] = rhs[k, 0] / s
-            continue
-        b = 1.0 + s
-        cp[0] = -1.0 / b
-        out[k, 0] = rhs[k, 0] / b
-        for i in range(1, n):
-            b = (2.0 if i < n - 1 else 1.0) + s
-            den = b + cp[i - 1]  # b - a cp[i-1] with a = -1
-            cp[i] = -1.0 / den
-            out[k, i] = (rhs[k, i] + out[k, i - 1]) / den
-        for i in range(n - 2, -1, -1):
-            out[k, i] -= cp[i] * out[k, i + 1]

@@ -134,7 +134,7 @@ def _dct_poisson(rhs):
     otherwise (a DCT of a length like 1226 = 2 x 613 takes 3x longer) DCT along the axis
     with the smaller largest prime factor only and, for each of its modes k, the tridiagonal
     system (T + lambda_k I) y = c_k along the other axis
-    (:func:`pmdsim.kernels.reconstruct.neumann_tridiagonal_solve`; mode 0 by a 1-D DCT).
+    (:func:`_neumann_tridiagonal_solve`; mode 0 by a 1-D DCT).
     The two agree to ~1e-11 relative (the Thomas sweep of the near-singular low modes)."""
     h, w = rhs.shape
     if all(scipy.fft.next_fast_len(n, real=True) == n for n in (h, w)) or min(h, w) < 3 or h * w < 65_536:
@@ -142,8 +142,6 @@ def _dct_poisson(rhs):
         c /= _dct_eigenvalues(rhs.shape)
         c[0, 0] = 0.0
         return scipy.fft.idctn(c, type=2, norm="ortho", workers=-1)
-    from ..kernels.reconstruct import neumann_tridiagonal_solve
-
     # the DCT axis: the length with the smaller largest prime factor; the other is solved directly
     axis = 0 if _largest_prime_factor(h) <= _largest_prime_factor(w) else 1
     c = scipy.fft.dct(rhs, type=2, norm="ortho", axis=axis, workers=-1)
@@ -151,7 +149,7 @@ def _dct_poisson(rhs):
     k = c.shape[0]
     lam = 2.0 - 2.0 * np.cos(np.pi * np.arange(k) / k)
     y = np.zeros_like(c)
-    neumann_tridiagonal_solve(c, lam, y)
+    y[1:] = _neumann_tridiagonal_solve(c[1:], lam[1:])
     # mode 0: the singular 1-D Neumann problem, its zero-mean solution
     n = c.shape[1]
     c0 = scipy.fft.dct(c[0], type=2, norm="ortho")
@@ -372,6 +370,29 @@ def _pcg(op, m, b, x0, atol, maxiter=200):
     prec = scipy.sparse.linalg.LinearOperator((n, n), matvec=precondition, dtype=np.float64)
     z, _ = scipy.sparse.linalg.cg(op.lap, b, x0=x0, rtol=0.0, atol=atol, maxiter=maxiter, M=prec)
     return z
+
+
+def _neumann_tridiagonal_solve(rhs, shift):
+    """Solve ``(T + shift[k] I) y_k = rhs[k]`` for every row k of ``rhs`` (K, n) (all shifts
+    > 0), T the 1-D Neumann grid Laplacian of length n (diagonal 1, 2, ..., 2, 1;
+    off-diagonals -1): the Thomas algorithm, one sweep for all rows at once (stable: the
+    matrices are symmetric, positive definite and diagonally dominant)."""
+    k, n = rhs.shape
+    if n == 1:
+        return rhs / shift[:, None]
+    cp = np.empty((n, k))  # modified super-diagonal, position-major
+    y = np.empty((n, k))
+    r = rhs.T
+    den = 1.0 + shift
+    cp[0] = -1.0 / den
+    y[0] = r[0] / den
+    for i in range(1, n):
+        den = (2.0 if i < n - 1 else 1.0) + shift + cp[i - 1]  # b - a cp[i-1], a = -1
+        cp[i] = -1.0 / den
+        y[i] = (r[i] + y[i - 1]) / den
+    for i in range(n - 2, -1, -1):
+        y[i] -= cp[i] * y[i + 1]
+    return y.T
 
 
 def _largest_prime_factor(n):
