@@ -20,7 +20,8 @@ Methods
   al. 2013), fourth-order in the interior and still exact for quadratics. Any mask
   (circles, annuli, islands: piston is set per connected part). Full rectangles are
   solved exactly with a DCT (the normal matrix of the scheme is the Neumann Laplacian);
-  masked ones with a sparse direct solver or, for large maps, algebraic multigrid (PyAMG).
+  masked ones by conjugate gradients preconditioned with that DCT solve on a rectangle
+  holding the mask (or, on request, SciPy's sparse LU or PyAMG's algebraic multigrid).
 - :func:`frankot_chellappa`: the Fourier projection onto integrable fields for full
   rectangles (periodic FFT, optionally on the mirror-extended field). Documented edge error:
   see ``docs/reconstruction.md``.
