@@ -288,3 +288,9 @@ def test_dct_solve_with_a_tridiagonal_axis():
     z = southwell(sx, sy, H, solver="dct")
     truth = remove_terms(quad(x, y), np.ones(rhs.shape, bool), x, y, "piston")
     assert np.abs(z - truth).max() < 1e-9 * np.abs(truth).max()
+
+
+def test_southwell_on_an_empty_mask_is_all_nan():
+    for solver in ("auto", "pcg", "direct", "amg"):
+        z = southwell(np.zeros((6, 7)), np.zeros((6, 7)), H, np.zeros((6, 7), bool), solver=solver)
+        assert z.shape == (6, 7) and np.isnan(z).all()

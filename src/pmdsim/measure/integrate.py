@@ -213,6 +213,8 @@ def _integrate(sx, sy, m, dx, dy, order=4, solver="auto", x0=None, rtol=1e-11):
     """:func:`southwell` on prepared input (slopes finite everywhere, 0 outside the bool
     mask ``m``): a height (H, W), no term removed, any value outside ``m``."""
     rhs = _southwell_rhs(sx, sy, m, dx, dy, order)
+    if not m.any():
+        return np.zeros(m.shape)
     full = bool(m.all())
     if solver == "auto":
         solver = "dct" if full else "pcg"
