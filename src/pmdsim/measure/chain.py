@@ -37,6 +37,9 @@ import numpy as np
 from . import deviation as analysis
 from . import decode as dec
 
+#: Pixels per block of the 3-D slope conversion (:func:`slope_deviation_urad`).
+SLOPE_BLOCK_PIXELS = 1 << 18
+
 #: Background threshold of the dot moments, as a fraction of each dot image's maximum.
 DOT_THRESHOLD_FRACTION = 0.05
 
@@ -146,12 +149,20 @@ def slope_deviation_urad(direction, coord_px, geometry, slope_geometry, distance
     from .reconstruct import slope_deviation_3d
 
     su, sv = geometry.specular_u, geometry.specular_v
-    du = np.where(np.isfinite(coord_px), coord_px, np.nan)
-    u1, v1 = (su + du, sv) if direction == "x" else (su, sv + du)
-    with np.errstate(invalid="ignore"):
-        s = slope_deviation_3d(slope_geometry.points_mm, slope_geometry.camera_position,
-                               slope_geometry.monitor, su, sv, u1, v1)
-    return np.where(np.isfinite(coord_px), s * 1e6, np.nan)
+    out = np.full(np.shape(coord_px), np.nan)
+    # in blocks of rows: the 3-D conversion holds a dozen (rows, W, 3) float64 temporaries
+    # (about 1 GB for a whole 5 MP image)
+    step = max(1, SLOPE_BLOCK_PIXELS // max(1, out.shape[-1]))
+    for r0 in range(0, out.shape[0], step):
+        rows = slice(r0, r0 + step)
+        c = coord_px[rows]
+        du = np.where(np.isfinite(c), c, np.nan)
+        u1, v1 = (su[rows] + du, sv[rows]) if direction == "x" else (su[rows], sv[rows] + du)
+        with np.errstate(invalid="ignore"):
+            s = slope_deviation_3d(slope_geometry.points_mm[rows], slope_geometry.camera_position,
+                                   slope_geometry.monitor, su[rows], sv[rows], u1, v1)
+        out[rows] = np.where(np.isfinite(c), s * 1e6, np.nan)
+    return out
 
 
 @dataclass(frozen=True, eq=False)

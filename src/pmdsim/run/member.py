@@ -84,9 +84,6 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         # the image files are written by a thread while the chain runs (zlib and NumPy
         # release the GIL); on an error the with-block waits for it before unwinding
         writer = stack.enter_context(ThreadPoolExecutor(1, thread_name_prefix="pmdsim-images"))
-        images_written = writer.submit(pio.write_images, folder, cfg, fringes, dots,
-                                       dot_images, image_files, images, exposure,
-                                       workers=1) if out.write_images else None
         ds = build_dataset(cfg, geometry, fringes, dots, dot_images, image_files, images,
                            exposure, sim.scene.rays_per_pixel)
         if off_monitor is not None:
@@ -98,6 +95,9 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
             # the dataset holds the sums' real and imaginary parts: free the complex copy
             # (2 directions x 3 widths x 16 bytes per pixel, 480 MB at 5 MP)
             fringes = replace(fringes, sums=None)
+        images_written = writer.submit(pio.write_images, folder, cfg, fringes, dots,
+                                       dot_images, image_files, images, exposure,
+                                       workers=1) if out.write_images else None
         steps.advance()
         timings["write"] = time.perf_counter() - t
 
