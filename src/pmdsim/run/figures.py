@@ -318,6 +318,29 @@ class Drawing:
         self.proc = None
 
 
+#: Rough drawing cost of each figure (CPU-s on the Fig. 3 run), to share them out.
+_COST = {"overview": 1.5, "deviation": 1.2, "phase": 1.2, "masks": 0.8, "histograms": 0.6,
+         "modulation_ratio": 0.8, "fringes": 0.5, "modulation": 0.6, "setup": 0.5,
+         "surface_errors": 0.4}
+
+
+def start_drawings(names, folder: Path, run_name: str, description: str, ds, sim,
+                   workers: int | None = None) -> list[Drawing]:
+    """:class:`Drawing` jobs for ``names``: ``workers`` processes (default one per core, at
+    most one per figure), each given figures of about equal drawing cost."""
+    names = list(names)
+    if not names:
+        return []
+    workers = min(len(names), workers or os.cpu_count() or 1)
+    groups: list[list[str]] = [[] for _ in range(workers)]
+    load = [0.0] * workers
+    for n in sorted(names, key=lambda n: -_COST.get(n, 1.0)):
+        k = load.index(min(load))
+        groups[k].append(n)
+        load[k] += _COST.get(n, 1.0)
+    return [Drawing(g, folder, run_name, description, ds, sim) for g in groups if g]
+
+
 def early_names(names) -> list[str]:
     """The figures of ``names`` that need no measurement chain (set-up, fringe images,
     modulation): drawn as soon as the images exist."""
@@ -325,4 +348,4 @@ def early_names(names) -> list[str]:
 
 
 __all__ = ["FIGURES", "figure_names", "draw_figures", "draw_one", "default_workers",
-           "Drawing", "early_names", "can_fork", "import_in_background"]
+           "Drawing", "start_drawings", "early_names", "can_fork", "import_in_background"]

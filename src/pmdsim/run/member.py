@@ -105,12 +105,12 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         stack.callback(lambda: [d.close() for d in drawings])  # an error ends them
         decoding = reference is not None and fringes is not None
         if figures:
-            from .figures import Drawing, early_names, figure_plan
+            from .figures import early_names, figure_plan, start_drawings
 
             # the set-up and fringe figures need nothing of the chain: drawn meanwhile
             early = early_names(figure_plan(ds, out.figure_set, decoding))
-            drawings.append(Drawing(early, folder / "figures", cfg.name, description(cfg),
-                                    ds=ds, sim=sim))
+            drawings += start_drawings(early, folder / "figures", cfg.name, description(cfg),
+                                       ds, sim, out.figure_workers)
 
         t = time.perf_counter()
         stats: dict = {}
@@ -160,12 +160,12 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         timings["diagnostics"] = time.perf_counter() - t
 
         if figures:
-            from .figures import figure_names
+            from .figures import figure_names, start_drawings
 
             # the chain's figures are drawn while the dataset is written
             late = [n for n in figure_names(ds, out.figure_set) if n not in early]
-            drawings.append(Drawing(late, folder / "figures", cfg.name, description(cfg),
-                                    ds=ds, sim=sim))
+            drawings += start_drawings(late, folder / "figures", cfg.name, description(cfg),
+                                       ds, sim, out.figure_workers)
         t = time.perf_counter()
         write_dataset(ds, folder / DATASET_NAME)
         (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
