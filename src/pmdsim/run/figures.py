@@ -20,6 +20,7 @@ about 1.5 s), by default one per core for 4 figures or more (``--workers``).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import threading
@@ -221,6 +222,37 @@ def _imported() -> None:
         _IMPORTS.join()
 
 
+@contextlib.contextmanager
+def _signals_deferred():
+    """SIGINT and SIGTERM held back while the block runs, then delivered.
+
+    ``os.fork`` runs Python callbacks around the fork (``logging`` takes and releases its
+    lock in them); a KeyboardInterrupt raised inside one is swallowed by the interpreter
+    and can leave that lock taken, so that the run hangs at its next log call instead of
+    stopping. Outside the main thread (which runs every Python signal handler) nothing is
+    needed."""
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    sigs = (signal.SIGINT, signal.SIGTERM)
+    old = {s: signal.getsignal(s) for s in sigs}
+    if any(h is None for h in old.values()):  # a handler not set from Python: leave it
+        yield
+        return
+    for s in sigs:
+        signal.signal(s, lambda n, frame: pending.append(n))
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        for n in pending:
+            signal.raise_signal(n)
+
+
 def _draw_in_child(conn, names, folder, run_name, description, ds, sim) -> None:
     """Forked process: draw ``names`` from the inherited in-memory data; send back
     ``[(name, path or None, error or None)]``."""
@@ -272,8 +304,14 @@ class Drawing:
             self.proc = ctx.Process(target=_draw_in_child, name="pmdsim-figures",
                                     args=(send, self.names, str(self.folder), *self.args),
                                     daemon=True)
-            self.proc.start()
-            send.close()
+            try:
+                with _signals_deferred():
+                    self.proc.start()
+            except BaseException:
+                self.close()  # interrupted: end the process that was just started
+                raise
+            finally:
+                send.close()
             self.args = None  # the process holds what it needs
 
     def paths(self, notes: list | None = None) -> list[Path]:
