@@ -4,6 +4,7 @@ rendered and measured arrays, and loading it back (:func:`load_run`)."""
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import json
 import platform
 from pathlib import Path
@@ -208,22 +209,23 @@ def storage_form(ds, lazy: bool = False):
     With ``lazy`` the image-like variables are Dask arrays of one chunk per camera image,
     rounded chunk by chunk when computed: writing them holds a few images at a time instead
     of a rounded copy of the whole dataset."""
-    out = ds.copy(deep=False)
+    new = {}
     for name, var in ds.data_vars.items():
         if not _image_like(var):
             continue
         if lazy:
             import dask.array as da
 
-            chunks = (1,) * (var.ndim - 2) + tuple(var.shape[-2:])
-            dtype = np.dtype(np.float32) if var.dtype.kind == "f" else var.dtype
-            # already lazy (the chain's variables), or a view of the in-memory array
-            arr = (var.data.rechunk(chunks) if isinstance(var.data, da.Array)
-                   else lazy_array(var.data))
-            out[name] = var.copy(data=arr.map_blocks(_stored_block, name, dtype=dtype))
+            if isinstance(var.data, da.Array):  # already lazy (the chain's variables)
+                chunks = (1,) * (var.ndim - 2) + tuple(var.shape[-2:])
+                dtype = np.dtype(np.float32) if var.dtype.kind == "f" else var.dtype
+                arr = var.data.rechunk(chunks).map_blocks(_stored_block, name, dtype=dtype)
+            else:  # a view of the in-memory array, each chunk converted when read
+                arr = lazy_array(var.data, convert=functools.partial(_stored, name))
+            new[name] = var.copy(data=arr)
         elif var.dtype.kind == "f":
-            out[name] = var.copy(data=_stored(name, np.asarray(var.values)))
-    return out
+            new[name] = var.copy(data=_stored(name, np.asarray(var.values)))
+    return ds.assign(new)  # one merge (a merge per variable costs ~10 ms each)
 
 
 def write_dataset(ds, path: str | Path) -> Path:
@@ -310,24 +312,31 @@ class _View:
     ``scale`` chunk by chunk when indexed (what :func:`dask.array.from_array` wraps without
     copying: it copies arrays that have a ``copy`` method)."""
 
-    def __init__(self, data: np.ndarray, dtype=None, scale: float | None = None):
-        self.data, self.scale = data, scale
+    def __init__(self, data: np.ndarray, dtype=None, scale: float | None = None,
+                 convert=None):
+        self.data, self.scale, self.convert = data, scale, convert
         self.shape, self.ndim = data.shape, data.ndim
         self.dtype = np.dtype(dtype) if dtype is not None else (
             data.dtype if scale is None else np.result_type(data.dtype, scale))
+        if convert is not None:  # its output dtype
+            self.dtype = convert(np.zeros((1,) * data.ndim, self.dtype)).dtype
 
     def __getitem__(self, key) -> np.ndarray:
-        out = np.asarray(self.data[key]).astype(self.dtype, copy=False)
-        return out if self.scale is None else out * self.dtype.type(self.scale)
+        out = np.asarray(self.data[key]).astype(self.dtype if self.convert is None
+                                                else self.data.dtype, copy=False)
+        if self.scale is not None:
+            out = out * out.dtype.type(self.scale)
+        return out if self.convert is None else self.convert(out)
 
 
-def lazy_array(data: np.ndarray, dtype=None, scale: float | None = None):
-    """``data`` (converted to ``dtype``, times ``scale``) as a Dask array of one chunk per
-    camera image (the last two axes), referencing ``data`` without a copy."""
+def lazy_array(data: np.ndarray, dtype=None, scale: float | None = None, convert=None):
+    """``data`` (converted to ``dtype``, times ``scale``, passed through ``convert``) as a
+    Dask array of one chunk per camera image (the last two axes), referencing ``data``
+    without a copy."""
     import dask.array as da
 
     data = np.asarray(data)
-    view = _View(data, dtype, scale)
+    view = _View(data, dtype, scale, convert)
     chunks = (1,) * (data.ndim - 2) + tuple(data.shape[-2:]) if data.ndim >= 2 else data.shape
     # name=False: a random key instead of hashing the data
     return da.from_array(view, chunks=chunks, name=False, asarray=False,
