@@ -44,6 +44,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode="markdown",  # docstring lines join into paragraphs
 )
 
 #: Exit code for bad input (configuration, files, output folder).
@@ -258,19 +259,22 @@ def _print_statistics(console: Console, result) -> None:
                   "for the monitor coordinate, from the exact specular point P; RMS/P95 over "
                   "the valid pixels (all statistics: statistics.json, summary.txt)",
                   title_justify="left")
-    for col in ("variant", "dir", "phase mrad", "monitor px", "px vs exact P", "slope urad",
-                "valid"):
-        table.add_column(col, justify="left" if col in ("variant", "dir") else "right",
-                         no_wrap=True)
+    # fits 80 columns: the variant column only with variants (long names fold)
+    named = bool(result.variants)
+    if named:
+        table.add_column("variant", justify="left", overflow="fold")
+    for col in ("dir", "phase mrad", "monitor px", "vs exact P", "slope urad", "valid %"):
+        table.add_column(col, justify="left" if col == "dir" else "right", no_wrap=True)
 
     def pair(s):
         return "nan" if not s or s["rms"] is None else f"{s['rms']:.3g}/{s['p95']:.3g}"
 
     for name, st in per.items():
         for d, s in st["directions"].items():
-            table.add_row(name, d.upper(), pair(s["phase_mrad"]), pair(s["coord_px"]),
-                          pair(s.get("coord_vs_exact_px")), pair(s["slope_urad"]),
-                          f"{100 * s['coord_px']['valid_fraction']:.1f} %")
+            cells = (d.upper(), pair(s["phase_mrad"]), pair(s["coord_px"]),
+                     pair(s.get("coord_vs_exact_px")), pair(s["slope_urad"]),
+                     f"{100 * s['coord_px']['valid_fraction']:.1f}")
+            table.add_row(*((name,) + cells if named else cells))
     console.print(table)
 
 
@@ -619,11 +623,11 @@ def sweep(
 def report(
     run: Path = typer.Argument(..., help="A run folder written by pmdsim simulate."),
     all_figures: bool = typer.Option(False, "--all", help="Every figure (default: the "
-                                     "summary: setup and overview)."),
+                                     "summary, as a run draws it)."),
     figure: list[str] | None = typer.Option(None, "--figure", help="A figure by name "
                                             "(repeatable): setup, fringes, modulation, "
                                             "overview, phase, deviation, histograms, "
-                                            "modulation_ratio, masks."),
+                                            "modulation_ratio, masks, surface_errors."),
     variant: str | None = typer.Option(None, "--variant", help="Only this variant of a run "
                                        "with variants (default: all)."),
     output: Path | None = typer.Option(None, "-o", "--output", help="Folder for the figures "
@@ -670,7 +674,7 @@ def report(
 @app.command()
 def warmup() -> None:
     """Compile every kernel once into Numba's on-disk cache (run once after installing, so
-    that the first simulation does not pay for compilation); a few seconds of tiny runs."""
+    that the first simulation does not pay for compilation); tiny runs that reach every kernel, about a minute on 2 cores."""
     from .run.warmup import CASES, warmup as run_warmup
 
     console = _console()

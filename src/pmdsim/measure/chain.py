@@ -37,9 +37,6 @@ import numpy as np
 from . import deviation as analysis
 from . import decode as dec
 
-#: Pixels per block of the 3-D slope conversion (:func:`slope_deviation_urad`).
-SLOPE_BLOCK_PIXELS = 1 << 18
-
 #: Background threshold of the dot moments, as a fraction of each dot image's maximum.
 DOT_THRESHOLD_FRACTION = 0.05
 
@@ -119,6 +116,12 @@ def surface_to_monitor_mm(sim, geometry, rows_per_chunk: int = 128, points_out=N
 
     scene = sim.scene
     h, w = sim.shape
+    if geometry.points is not None:  # the vision rays' surface points, traced already
+        target = scene.monitor.pixel_to_world(geometry.specular_u, geometry.specular_v)
+        target -= geometry.points
+        if points_out is not None:
+            points_out[...] = geometry.points
+        return np.sqrt(np.einsum("...k,...k->...", target, target))
     out = np.full((h, w), np.nan)
     for r0 in range(0, h, rows_per_chunk):
         r1 = min(h, r0 + rows_per_chunk)
@@ -146,23 +149,22 @@ def slope_deviation_urad(direction, coord_px, geometry, slope_geometry, distance
     the small-angle coord / (2 d)."""
     if slope_geometry is None:
         return analysis.slope_deviation(coord_px * pitch_mm, distance_mm) * 1e6
-    from .reconstruct import slope_deviation_3d
+    from ..kernels.slopes import slope_deviation_3d
 
     su, sv = geometry.specular_u, geometry.specular_v
-    out = np.full(np.shape(coord_px), np.nan)
-    # in blocks of rows: the 3-D conversion holds a dozen (rows, W, 3) float64 temporaries
-    # (about 1 GB for a whole 5 MP image)
-    step = max(1, SLOPE_BLOCK_PIXELS // max(1, out.shape[-1]))
-    for r0 in range(0, out.shape[0], step):
-        rows = slice(r0, r0 + step)
-        c = coord_px[rows]
-        du = np.where(np.isfinite(c), c, np.nan)
-        u1, v1 = (su[rows] + du, sv[rows]) if direction == "x" else (su[rows], sv[rows] + du)
-        with np.errstate(invalid="ignore"):
-            s = slope_deviation_3d(slope_geometry.points_mm[rows], slope_geometry.camera_position,
-                                   slope_geometry.monitor, su[rows], sv[rows], u1, v1)
-        out[rows] = np.where(np.isfinite(c), s * 1e6, np.nan)
-    return out
+    u1, v1 = (su + coord_px, sv) if direction == "x" else (su, sv + coord_px)
+    mon = slope_geometry.monitor
+    shape = np.shape(coord_px)
+    flat = [np.ascontiguousarray(np.broadcast_to(a, shape), np.float64).ravel()
+            for a in (su, sv, u1, v1)]
+    out = np.empty(flat[0].size)
+    # compiled per pixel; the NumPy reference is measure.reconstruct.slope_deviation_3d
+    slope_deviation_3d(np.ascontiguousarray(slope_geometry.points_mm, np.float64).reshape(-1, 3),
+                       np.asarray(slope_geometry.camera_position, np.float64),
+                       np.asarray(mon.centre, np.float64), np.asarray(mon.e_u, np.float64),
+                       np.asarray(mon.e_v, np.float64), float(mon.pitch),
+                       (mon.width - 1) / 2.0, (mon.height - 1) / 2.0, *flat, out)
+    return out.reshape(shape) * 1e6
 
 
 @dataclass(frozen=True, eq=False)
@@ -401,8 +403,12 @@ def decode_specular_reference(cfg, sim, geometry, progress=None):
     decoded = decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
                              sensor.saturation_dn if sensor.enabled else None)
     del fr
-    points = np.full(sim.shape + (3,), np.nan)
-    distance = surface_to_monitor_mm(sim, geometry, points_out=points)
+    if geometry.points is not None:
+        points = geometry.points
+        distance = surface_to_monitor_mm(sim, geometry)
+    else:
+        points = np.full(sim.shape + (3,), np.nan)
+        distance = surface_to_monitor_mm(sim, geometry, points_out=points)
     return decoded, distance, points
 
 

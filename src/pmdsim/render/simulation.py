@@ -167,6 +167,8 @@ class Geometry:
     monitor_mask: np.ndarray
     specular_u: np.ndarray
     specular_v: np.ndarray
+    #: (H, W, 3) surface point of each pixel's vision ray (mm; NaN off the surface), or None
+    points: np.ndarray | None = None
 
     @property
     def specular_u_px(self) -> np.ndarray:
@@ -355,11 +357,32 @@ class Simulation:
         """Vision-ray results for the whole camera: the chief ray through each pixel centre
         (no bundle)."""
         h, w = self.shape
-        geo, spec = scene_geometry_rows(self.scene, 0, h)
-        valid = geo[:, kb.G_VALID].reshape(h, w) > 0
-        u = spec[:, 0].reshape(h, w)
-        v = spec[:, 1].reshape(h, w)
-        return Geometry(valid, valid & np.isfinite(u), u, v)
+
+        def tile(r0, r1):  # per tile: the bundle rows are big (200 bytes a pixel)
+            geo, spec = scene_geometry_rows(self.scene, r0, r1)
+            valid = geo[:, kb.G_VALID].reshape(r1 - r0, w) > 0
+            return valid, spec.reshape(r1 - r0, w, 2), self._points(geo, valid)
+
+        rows = max(self.tile_rows, 64)
+        parts = self._compute(tile, [(r, min(r + rows, h)) for r in range(0, h, rows)], None)
+        valid = np.concatenate([p[0] for p in parts])
+        spec = np.concatenate([p[1] for p in parts])
+        points = np.concatenate([p[2] for p in parts])
+        del parts
+        u = np.ascontiguousarray(spec[..., 0])
+        v = np.ascontiguousarray(spec[..., 1])
+        return Geometry(valid, valid & np.isfinite(u), u, v, points)
+
+    def _points(self, geo: np.ndarray, valid: np.ndarray) -> np.ndarray:
+        """(H, W, 3) surface points from geometry rows: a row holds S in the monitor's
+        orthonormal frame (``G_U0``, ``G_V0``: monitor px; ``G_T``: distance along -n)."""
+        mon = self.scene.monitor
+        basis = np.stack([mon.pitch * mon.e_u, mon.pitch * mon.e_v, -mon.normal])
+        origin = mon.centre - ((mon.width - 1) / 2.0) * basis[0] - ((mon.height - 1) / 2.0) * basis[1]
+        pts = geo[:, [kb.G_U0, kb.G_V0, kb.G_T]] @ basis
+        pts += origin
+        pts[~valid.ravel()] = np.nan
+        return pts.reshape(valid.shape + (3,))
 
     def render_fringes(
         self,
@@ -480,8 +503,9 @@ class Simulation:
         lum = mon.black_level * out[..., kb.OUT_FHIT][..., None] + (mon.white_level - mon.black_level) * hit
         return np.moveaxis(lum * norm[..., None], -1, 0).astype(np.float32)
 
-    def transport(self, rows: Sequence[int], cols: Sequence[int]):
-        """The scattered rays of selected pixels.
+    def transport(self, rows: Sequence[int], cols: Sequence[int], directions: bool = True):
+        """The scattered rays of selected pixels (``directions=False``: without the world
+        directions, returned as None; the other results are the same).
 
         Returns
         -------
@@ -508,9 +532,11 @@ class Simulation:
             rot = np.zeros((0, 2))
         else:
             u1, u2 = samp.lobe_unit_points() if lobe else samp.unit_points()
-            rot = (np.concatenate([samp.rotations(int(r), int(r) + 1, scene.camera.width)[[c]]
-                                   for r, c in zip(rows, cols)])
-                   if samp.mode == "random" else np.zeros((0, 2)))
+            rot = np.zeros((0, 2))
+            if samp.mode == "random":  # one draw per camera row (the render's streams)
+                by_row = {r: samp.rotations(r, r + 1, scene.camera.width)
+                          for r in np.unique(rows).tolist()}
+                rot = np.stack([by_row[int(r)][int(c)] for r, c in zip(rows, cols)])
         n = u1.size if lobe else u1.size + 1
         ou, ov, of = (np.empty((len(rows), n)) for _ in range(3))
         out = np.empty((len(rows), kb.OUT_FIRST))
@@ -526,6 +552,8 @@ class Simulation:
         else:
             kb.render_tile(geo, scene.brdf.kernel_params(), u1, u2, rot, samp.scheme_id,
                            samp.theta_max, True, *args)
+        if not directions:
+            return ou, ov, of, None, hits.point[0].copy()
         dirs = np.empty((len(rows), n, 3))
         origin = np.empty((len(rows), 3))
         cone = cone_basis(hits)

@@ -175,7 +175,7 @@ class EnergyFraction:
 
 
 def lobe_energy(brdf, i_local: np.ndarray, theta_max: float | Sequence[float],
-                n_samples: int = 16384, target: float = 0.95, chunk: int = 16):
+                n_samples: int = 4096, target: float = 0.95, chunk: int = 16):
     """Importance-sampling quadrature of the lobe energy for incidence directions.
 
     Parameters
@@ -186,7 +186,8 @@ def lobe_energy(brdf, i_local: np.ndarray, theta_max: float | Sequence[float],
     theta_max : float or (T,) floats, rad
         Cone half angles about P = (-i_x, -i_y, i_z).
     n_samples : int
-        Fibonacci-lattice points per direction.
+        Fibonacci-lattice points per direction (4096: the fraction within 1e-3 and the
+        95 % angle within 0.01 deg of 65 536 points on the Fig. 3 and turned-sphere lobes).
     target : float
         Energy fraction whose cone angle is returned.
 
@@ -227,7 +228,7 @@ def lobe_energy(brdf, i_local: np.ndarray, theta_max: float | Sequence[float],
 
 
 def energy_fraction(scene, grid: PixelGrid, theta_max: float | None = None, target: float = 0.95,
-                    n_samples: int = 16384) -> EnergyFraction:
+                    n_samples: int = 4096) -> EnergyFraction:
     """Fraction of the lobe energy inside the cone of ``theta_max`` (rad; default: the
     scene's) at the grid pixels; see :class:`EnergyFraction`."""
     if scene.brdf.is_delta:
@@ -258,7 +259,7 @@ def energy_fraction(scene, grid: PixelGrid, theta_max: float | None = None, targ
 def _transport(sim, grid: PixelGrid):
     rows, cols = grid.pixel_rows, grid.pixel_cols
     valid, _ = incidence(sim.scene, rows, cols)
-    u, v, w, _, _ = sim.transport(rows, cols)
+    u, v, w, _, _ = sim.transport(rows, cols, directions=False)
     return valid, u, v, w
 
 
@@ -398,7 +399,7 @@ def phase_error_seeds(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
         samp = ConeSampling(s.n_rays, s.theta_max, s.scheme, "random", first_seed + k)
         run = Simulation(sim.scene.replace(sampling=samp), sim.tile_rows, sim.scheduler,
                          sim.num_workers)
-        u, v, w, _, _ = run.transport(rows, cols)
+        u, v, w, _, _ = run.transport(rows, cols, directions=False)
         phases.append(ray_phases(u, v, w, tuple(widths), tuple(directions), nearest))
     ph = np.stack(phases)  # (S, nd, nw, K)
     mean = np.angle(np.exp(1j * ph).sum(0))
@@ -466,7 +467,7 @@ def _pct(a, q):
 
 def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[str] = ("x", "y"),
              grid: tuple[int, int] = (24, 20), target_fraction: float = 0.95,
-             phase_method: str = "seeds", n_seeds: int = 8, n_samples: int = 16384,
+             phase_method: str = "seeds", n_seeds: int = 8, n_samples: int = 4096,
              exclude: np.ndarray | None = None) -> Diagnostics:
     """Energy fraction, effective sample size and phase standard error of a simulation.
 
