@@ -69,3 +69,47 @@ def test_report_redraws_any_figure_from_the_run_folder(decoded_run, tmp_path):
     assert bad.exit_code == 2 and "unknown figure" in bad.output
     missing = runner.invoke(app, ["report", str(tmp_path)])
     assert missing.exit_code == 2 and "no run.zarr" in missing.output
+
+
+@pytest.mark.skipif(not __import__("pmdsim.run.figures", fromlist=["can_fork"]).can_fork(),
+                    reason="forked drawing is Linux only")
+def test_forked_drawing_draws_the_same_picture_as_in_process(decoded_run, tmp_path):
+    """A run draws its figures in forked processes from its in-memory data; the pixels are
+    those of the same figure drawn in the process itself (nothing lost on the way)."""
+    from PIL import Image
+
+    from pmdsim.run.figures import Drawing, _simulation
+
+    ds = pipeline.load_run(decoded_run.outdir).load()
+    sim = _simulation(ds)
+    names = ["overview", "setup"]
+    forked = Drawing(names, tmp_path / "forked", "tiny", "", ds, sim, fork=True)
+    assert forked.proc is not None
+    here = Drawing(names, tmp_path / "here", "tiny", "", ds, sim, fork=False)
+    notes: list = []
+    a, b = forked.paths(notes), here.paths(notes)
+    assert notes == [] and [p.name for p in a] == [p.name for p in b] == [
+        "overview.png", "setup.png"]
+    for p, q in zip(a, b):
+        np.testing.assert_array_equal(np.asarray(Image.open(p)), np.asarray(Image.open(q)))
+    assert forked.proc is None  # the process was joined
+
+
+def test_a_figure_that_fails_in_a_drawing_process_is_a_note(tmp_path, monkeypatch):
+    """A figure that cannot be drawn (here: the overview raises) is a note of the run; the
+    other figures and all the data are written."""
+    from pmdsim.report import chain as plot_chain
+
+    def boom(*args, **kwargs):
+        raise ValueError("no overview today")
+
+    monkeypatch.setattr(plot_chain, "plot_overview", boom)
+    d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
+    d["output"] = {"figures": True, "write_images": True}
+    d["reconstruct"] = {"enabled": False}
+    res = pipeline.run_simulation(parse_config(d), tmp_path / "run")
+    assert [p.name for p in res.figure_paths] == ["setup.png"]
+    assert any("figure overview could not be drawn" in n and "no overview today" in n
+               for n in res.notes), res.notes
+    assert (res.outdir / "run.zarr").is_dir() and len(res.image_paths) == 2 * 3 * 4
+    assert sorted(p.name for p in (res.outdir / "figures").iterdir()) == ["setup.png"]

@@ -887,8 +887,9 @@ class OutputConfig(_Model):
         "setup, fringes, modulation); all: every figure (pmdsim report RUN --all draws them "
         "later from the run folder)")
     figure_workers: Annotated[Int, Field(ge=1, le=4096)] | None = Field(
-        None, description="processes drawing the figures; default: one per core when there "
-        "are 4 figures or more, else drawn in the run's own process")
+        None, description="processes drawing a run's figures (forked on Linux, drawing "
+        "from the run's data while it computes and writes); default: one per core, at most "
+        "one per figure")
 
 
 class ReconstructConfig(_Model):

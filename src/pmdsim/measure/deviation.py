@@ -134,8 +134,12 @@ def compare_direction(
         Monitor pixel pitch, mm.
     min_modulation_ratio : float
     """
-    modulation = np.asarray(modulation, np.float64)
-    ref_modulation = np.asarray(ref_modulation, np.float64)
+    # float32 modulations (the decoder's) give a float32 ratio: it is stored in float32, and
+    # float64 copies of the (n_widths, H, W) stacks would hold ~1 GB at 5 MP
+    dtype = np.result_type(np.asarray(modulation).dtype, np.asarray(ref_modulation).dtype,
+                           np.float32)
+    modulation = np.asarray(modulation, dtype)
+    ref_modulation = np.asarray(ref_modulation, dtype)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = modulation / ref_modulation
     considered = np.asarray(ref_valid, bool)

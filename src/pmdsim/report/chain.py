@@ -32,8 +32,9 @@ import numpy as np
 from matplotlib.colors import ListedColormap, to_rgba
 from matplotlib.lines import Line2D
 from matplotlib.patches import Ellipse, Patch
+from matplotlib.ticker import FixedLocator, MaxNLocator
 
-from .scene import DPI, _figure, _save, imshow
+from .scene import DPI, _axes_at, _figure, _fixed_figure, _save, imshow
 
 #: Colours of the pixel classes in deviation maps.
 CLASS_COLOURS = {
@@ -54,6 +55,10 @@ DEVIATIONS = (
     ("slope_deviation_urad", 1.0, "slope deviation (urad)", "slope (urad)"),
 )
 
+
+#: Resolution of the overview page (22 in wide: 2200 px; its smallest text, 7 pt, is
+#: 10 px high). The other figures use :data:`pmdsim.report.scene.DPI`.
+OVERVIEW_DPI = 100
 
 #: What each coordinate deviation is measured against, as the figures label it.
 VS_MIRROR = "vs decoded mirror reference"
@@ -367,9 +372,19 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
     st = _stats(ds)
     fine = float(min(ds["width"].values))
     h, w = ds["surface_mask"].shape
-    ph = 3.5 * h / w
-    fig = _figure((21.0, 2 * ph + 2.4))
-    gs = fig.add_gridspec(2, 5, width_ratios=[1, 1, 1, 1, 1.15])
+    # laid out by hand (inches): 4 image columns and a histogram column, two rows (X, Y),
+    # the colour bars under the bottom row
+    pw, ph = 3.5, 3.5 * h / w
+    left, gap, gap_hist, hist_w, right = 0.62, 0.72, 0.9, 4.0, 0.2
+    top, between, bottom = 1.0, 0.85, 1.2
+    fig = _fixed_figure((left + 4 * pw + 3 * gap + gap_hist + hist_w + right,
+                         top + 2 * ph + between + bottom))
+    x_hist = left + 4 * pw + 3 * gap + gap_hist
+    row_y = (bottom + ph + between, bottom)
+
+    def panel(row, col):
+        return _axes_at(fig, left + col * (pw + gap), row_y[row], pw, ph)
+
     maps = [ds["coord_deviation_px"].sel(direction=d).values for d in dirs]
     exact = [coord_vs_exact(ds, d) for d in dirs]
     lim = symmetric_limit(maps + exact)
@@ -377,13 +392,13 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
     vmax = max((float(np.nanmax(a)) for a in fr if np.isfinite(a).any()), default=1.0)
     last = {}
     for i, d in enumerate(dirs[:2]):
-        ax = fig.add_subplot(gs[i, 0])
+        ax = panel(i, 0)
         im = imshow(ax, fr[i], cmap="gray", vmin=0, vmax=vmax, interpolation="nearest")
         last["f"] = (ax, im)
         ax.set_title(f"{name}: {d.upper()} fringes, width {fine:g} monitor px, shift 0",
                      fontsize=9)
         _image_axes(ax)
-        ax = fig.add_subplot(gs[i, 1])
+        ax = panel(i, 1)
         r = ds["modulation_ratio"].sel(direction=d, width=fine).values
         im = imshow(ax, r, cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
         last["m"] = (ax, im)
@@ -393,7 +408,7 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
         _image_axes(ax)
         for col, (m, against, key) in enumerate(((maps[i], VS_MIRROR, "coord_px"),
                                                  (exact[i], VS_EXACT, "coord_vs_exact_px"))):
-            ax = fig.add_subplot(gs[i, 2 + col])
+            ax = panel(i, 2 + col)
             im = imshow(ax, m, cmap=DEV_CMAP, vmin=-lim, vmax=lim, interpolation="nearest")
             last["c" + str(col)] = (ax, im)
             _overlay(ax, ds, d, legend=(col == 0))
@@ -401,16 +416,20 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
             ax.set_title(f"{name}: {d.upper()} coordinate deviation\n{against}: "
                          f"RMS {_g(s.get('rms'))} px, P95 {_g(s.get('p95'))} px", fontsize=9)
             _image_axes(ax)
-    for key, label, extend in (("f", "camera value", "neither"),
-                               ("m", "modulation / reference modulation (1)", "max"),
-                               ("c0", f"coordinate deviation {VS_MIRROR} (monitor px), "
-                                      f"+-{lim:g}", "both"),
-                               ("c1", f"coordinate deviation {VS_EXACT} (monitor px), "
-                                      f"+-{lim:g}", "both")):
-        ax, im = last[key]
-        fig.colorbar(im, ax=ax, orientation="horizontal", shrink=0.85, pad=0.02,
-                     extend=extend).set_label(label, fontsize=8)
-    ax = fig.add_subplot(gs[0, 4])
+    for col, (key, label, extend) in enumerate((
+            ("f", "camera value", "neither"),
+            ("m", "modulation / reference modulation (1)", "max"),
+            ("c0", f"coordinate deviation {VS_MIRROR} (monitor px), +-{lim:g}", "both"),
+            ("c1", f"coordinate deviation {VS_EXACT} (monitor px), +-{lim:g}", "both"))):
+        cax = _axes_at(fig, left + col * (pw + gap) + 0.075 * pw, bottom - 0.62, 0.85 * pw,
+                       0.12)
+        cb = fig.colorbar(last[key][1], cax=cax, orientation="horizontal", extend=extend)
+        cb.set_label(label, fontsize=8)
+        # a narrow bar: five ticks (+-lim, +-lim/2, 0 on the symmetric deviation scales)
+        cb.ax.xaxis.set_major_locator(FixedLocator([-lim, -lim / 2, 0, lim / 2, lim])
+                                      if extend == "both" else MaxNLocator(6))
+        cb.ax.tick_params(labelsize=7)
+    ax = _axes_at(fig, x_hist, row_y[0], hist_w, ph)
     hist, colours, hstats, styles = {}, {}, {}, {}
     for i, d in enumerate(dirs):
         for m, tag, key, ls in ((maps[i], "vs mirror", "coord_px", "-"),
@@ -423,7 +442,7 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
                   "exact specular point", fontsize=7)
     ax.set_ylabel("pixels", fontsize=8)
     ax.set_title("histogram of the valid pixels", fontsize=9)
-    ax = fig.add_subplot(gs[1, 4])
+    ax = _axes_at(fig, x_hist, row_y[1], hist_w, ph)
     ax.axis("off")
     ax.text(0.0, 1.0, _stats_box(st), family="monospace", fontsize=7.2, va="top", ha="left",
             transform=ax.transAxes)
@@ -431,8 +450,8 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
              "(decoded mirror) and from the exact specular points")
     if description:
         title += f"\n{description}"
-    fig.suptitle(title, fontsize=11)
-    return _save(fig, path)
+    fig.suptitle(title, fontsize=11, y=1 - 0.08 / fig.get_size_inches()[1], va="top")
+    return _save(fig, path, dpi=OVERVIEW_DPI)
 
 
 def _stats_box(st: dict) -> str:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import _figure, _save
+from .scene import _axes_at, _fixed_figure, _save
 
 CMAP = "RdBu_r"
 
@@ -26,14 +26,22 @@ def plot_surface_errors(ds, name: str = "", description: str = ""):
     ext = (x[0] - (x[1] - x[0]) / 2, x[-1] + (x[1] - x[0]) / 2,
            y[0] - (y[1] - y[0]) / 2, y[-1] + (y[1] - y[0]) / 2)
     stats = json.loads(ds.attrs.get("statistics_json", "{}")).get("reconstruction", {})
-    fig = _figure((15.0, 4.8))
-    axes = fig.subplots(1, 3)
+    # laid out by hand (inches): three maps of the surface's aspect, each with its bar
+    left, pw, cb_gap, cb_w, cb_room = 0.8, 3.2, 0.12, 0.15, 0.85
+    aspect = abs(ext[3] - ext[2]) / max(abs(ext[1] - ext[0]), 1e-12)
+    ph = min(pw * aspect, 4.0)
+    pw = ph / aspect if ph < pw * aspect else pw
+    top, bottom = 1.05, 0.6
+    step = left + pw + cb_gap + cb_w + cb_room
+    fig = _fixed_figure((3 * step + 0.1, top + ph + bottom))
+    axes = [_axes_at(fig, left + k * step, bottom, pw, ph) for k in range(3)]
+    caxes = [_axes_at(fig, left + k * step + pw + cb_gap, bottom, cb_w, ph) for k in range(3)]
     panels = (
         ("slope_error_x_urad", "slope error dz/dx", "urad", stats.get("slope_error_x_urad")),
         ("slope_error_y_urad", "slope error dz/dy", "urad", stats.get("slope_error_y_urad")),
         ("height_error_nm", "height error", "nm", stats.get("height_error_nm")),
     )
-    for ax, (var, label, unit, st) in zip(axes, panels):
+    for ax, cax, (var, label, unit, st) in zip(axes, caxes, panels):
         a = ds[var].values
         lim = _limit(a) or 1.0
         im = ax.imshow(a, cmap=CMAP, vmin=-lim, vmax=lim, extent=ext, origin="lower",
@@ -46,10 +54,11 @@ def plot_surface_errors(ds, name: str = "", description: str = ""):
             rms = st.get("rms_about_zero", st["rms"])
             title += f"\nRMS {rms:.3g}  PV {st['pv']:.3g}  P95 {st['p95']:.3g} {unit}"
         ax.set_title(title, fontsize=10)
-        fig.colorbar(im, ax=ax, shrink=0.85, label=unit)
+        fig.colorbar(im, cax=cax, label=unit)
     removed = stats.get("removed", "")
     fig.suptitle(f"{name}: reconstructed minus true surface ({removed} removed from the height)"
-                 + (f"\n{description}" if description else ""), fontsize=11)
+                 + (f"\n{description}" if description else ""), fontsize=11,
+                 y=1 - 0.08 / fig.get_size_inches()[1], va="top")
     return fig
 
 

@@ -7,14 +7,23 @@ alone (the set-up figure rebuilds the simulation from ``attrs["config_json"]``),
 :func:`draw_figures` can draw them in separate processes that each open ``run.zarr``, and
 ``pmdsim report RUN`` can draw any of them later.
 
-Drawing in processes pays off only with several figures (each process imports matplotlib
-and pmdsim, about 1.5 s): by default a run draws its summary in its own process and uses
-one process per core for 4 figures or more (``output.figure_workers``).
+A run draws its figures off its critical path (:class:`Drawing`): on Linux a forked
+process draws from the run's *in-memory* data while the run goes on (the set-up figure
+and the fringe figures as soon as the images exist, the chain's figures while the Zarr
+store is written), so the run waits only for what is left when everything else is done.
+Elsewhere (no safe ``fork``) the run draws them itself at the end.
+
+``pmdsim report RUN`` draws from the folder: in separate (spawned) processes that each
+open ``run.zarr`` when there are several figures (each imports matplotlib and pmdsim,
+about 1.5 s), by default one per core for 4 figures or more (``--workers``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
+import threading
 from pathlib import Path
 
 from .dataset import DATASET_NAME
@@ -61,6 +70,17 @@ def figure_names(ds, which="summary") -> list[str]:
         if unknown:
             raise ValueError(f"unknown figure(s) {unknown}; choose from {list(FIGURES)}")
     return [n for n in names if _has(ds, FIGURES[n][1])]
+
+
+def figure_plan(ds, which, decoded: bool) -> list[str]:
+    """The figures of ``which`` that the run will draw once its chain is done (``decoded``):
+    :func:`figure_names` of the finished dataset, known before the chain runs."""
+    if which == "summary":
+        which = list(SUMMARY_DECODED if decoded else SUMMARY)
+    elif which == "all":
+        which = list(FIGURES)
+    names = figure_names(ds, which)  # checks the names
+    return [n for n in names if FIGURES[n][1] in (None, "fringes") or decoded]
 
 
 def _simulation(ds):
@@ -144,14 +164,18 @@ def draw_figures(run_folder: str | Path, names, run_name: str, description: str 
     names = list(names)
     workers = default_workers(len(names)) if workers is None else workers
     if workers <= 1 or len(names) <= 1:
+        import dask
+
         if ds is None:
             ds = open_dataset(run_folder)
         paths = []
-        for n in names:
-            try:
-                paths.append(draw_one(ds, n, folder, run_name, description, sim))
-            except Exception as err:  # noqa: BLE001 - reported in notes (or re-raised)
-                failed(n, err)
+        # lazy variables are read here, never shipped to a distributed cluster
+        with dask.config.set(scheduler="synchronous"):
+            for n in names:
+                try:
+                    paths.append(draw_one(ds, n, folder, run_name, description, sim))
+                except Exception as err:  # noqa: BLE001 - reported in notes (or re-raised)
+                    failed(n, err)
         return paths
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
@@ -170,4 +194,196 @@ def draw_figures(run_folder: str | Path, names, run_name: str, description: str 
         return paths
 
 
-__all__ = ["FIGURES", "figure_names", "draw_figures", "draw_one", "default_workers"]
+# ----------------------------------------------------------------------------- in a run
+def can_fork() -> bool:
+    """Whether a run may draw in forked processes: Linux only (macOS's system libraries are
+    not fork-safe once threads ran, Windows has no fork)."""
+    return sys.platform.startswith("linux")
+
+
+_IMPORTS: threading.Thread | None = None
+
+
+def import_in_background() -> None:
+    """Import matplotlib and the figure modules in a thread (while the run renders, with
+    the GIL released), so that neither the run nor the drawing processes wait for it."""
+    global _IMPORTS
+    if _IMPORTS is None:
+        def work():
+            from ..report import chain, reconstruction, scene  # noqa: F401
+            import mpl_toolkits.mplot3d  # noqa: F401
+
+        _IMPORTS = threading.Thread(target=work, name="pmdsim-figure-imports", daemon=True)
+        _IMPORTS.start()
+
+
+def _imported() -> None:
+    if _IMPORTS is not None:
+        _IMPORTS.join()
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """SIGINT and SIGTERM held back while the block runs, then delivered.
+
+    ``os.fork`` runs Python callbacks around the fork (``logging`` takes and releases its
+    lock in them); a KeyboardInterrupt raised inside one is swallowed by the interpreter
+    and can leave that lock taken, so that the run hangs at its next log call instead of
+    stopping. Outside the main thread (which runs every Python signal handler) nothing is
+    needed."""
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    sigs = (signal.SIGINT, signal.SIGTERM)
+    old = {s: signal.getsignal(s) for s in sigs}
+    if any(h is None for h in old.values()):  # a handler not set from Python: leave it
+        yield
+        return
+    for s in sigs:
+        signal.signal(s, lambda n, frame: pending.append(n))
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
+        for n in pending:
+            signal.raise_signal(n)
+
+
+def _draw_in_child(conn, names, folder, run_name, description, ds, sim) -> None:
+    """Forked process: draw ``names`` from the inherited in-memory data; send back
+    ``[(name, path or None, error or None)]``."""
+    import signal
+
+    import dask
+
+    # the run's process decides: it ends this one if it is interrupted
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    out = []
+    # the dataset's lazy variables are views of arrays this process already holds
+    with dask.config.set(scheduler="synchronous"):
+        for n in names:
+            try:
+                out.append((n, str(draw_one(ds, n, Path(folder), run_name, description, sim)),
+                            None))
+            except Exception as err:  # noqa: BLE001 - sent back, reported as a note
+                out.append((n, None, f"{type(err).__name__}: {err}"))
+    conn.send(out)
+    conn.close()
+
+
+class Drawing:
+    """Figures ``names`` of a run drawn from its in-memory dataset ``ds`` (and ``sim``)
+    while the run goes on: by a forked process where :func:`can_fork`, else here, when
+    :meth:`paths` is called. The data must not change until then (the run only adds
+    variables to a new dataset, and writes).
+
+    :meth:`paths` waits and returns the paths (a figure that could not be drawn is a note
+    in ``notes``); :meth:`close` ends the process if it still runs (on an error or an
+    interrupt of the run)."""
+
+    def __init__(self, names, folder: Path, run_name: str, description: str, ds, sim,
+                 fork: bool | None = None):
+        self.names = list(names)
+        self.folder = Path(folder)
+        self.args = (run_name, description, ds, sim)
+        self.proc = self.conn = None
+        if not self.names:
+            return
+        self.folder.mkdir(parents=True, exist_ok=True)
+        if can_fork() if fork is None else fork:
+            import multiprocessing as mp
+
+            _imported()  # fork after the imports, never in the middle of one
+            ctx = mp.get_context("fork")
+            self.conn, send = ctx.Pipe(duplex=False)
+            self.proc = ctx.Process(target=_draw_in_child, name="pmdsim-figures",
+                                    args=(send, self.names, str(self.folder), *self.args),
+                                    daemon=True)
+            try:
+                with _signals_deferred():
+                    self.proc.start()
+            except BaseException:
+                self.close()  # interrupted: end the process that was just started
+                raise
+            finally:
+                send.close()
+            self.args = None  # the process holds what it needs
+
+    def paths(self, notes: list | None = None) -> list[Path]:
+        def failed(name, msg):
+            if notes is None:
+                raise RuntimeError(f"figure {name} could not be drawn ({msg})")
+            notes.append(f"figure {name} could not be drawn ({msg}); the data are complete "
+                         "(run.zarr, statistics.json)")
+
+        if not self.names:
+            return []
+        if self.proc is None:
+            run_name, description, ds, sim = self.args
+            return draw_figures(self.folder, self.names, run_name, description, ds=ds,
+                                sim=sim, workers=1, folder=self.folder, notes=notes)
+        try:
+            results = self.conn.recv()
+        except EOFError:
+            results = [(n, None, f"the drawing process ended with code "
+                        f"{self.proc.exitcode}") for n in self.names]
+        finally:
+            self.close(wait=True)
+        out = []
+        for name, path, err in results:
+            if path is None:
+                failed(name, err)
+            else:
+                out.append(Path(path))
+        return out
+
+    def close(self, wait: bool = False) -> None:
+        """End the drawing process: with ``wait`` let it finish (it has sent its results),
+        else terminate it (the run failed or was interrupted)."""
+        if self.proc is None:
+            return
+        if wait:
+            self.proc.join(timeout=30.0)
+        if self.proc.is_alive():
+            self.proc.terminate()
+            self.proc.join()
+        self.conn.close()
+        self.proc = None
+
+
+#: Rough drawing cost of each figure (CPU-s on the Fig. 3 run), to share them out.
+_COST = {"overview": 1.5, "deviation": 1.2, "phase": 1.2, "masks": 0.8, "histograms": 0.6,
+         "modulation_ratio": 0.8, "fringes": 0.5, "modulation": 0.6, "setup": 0.5,
+         "surface_errors": 0.4}
+
+
+def start_drawings(names, folder: Path, run_name: str, description: str, ds, sim,
+                   workers: int | None = None) -> list[Drawing]:
+    """:class:`Drawing` jobs for ``names``: ``workers`` processes (default one per core, at
+    most one per figure), each given figures of about equal drawing cost."""
+    names = list(names)
+    if not names:
+        return []
+    workers = min(len(names), workers or os.cpu_count() or 1)
+    groups: list[list[str]] = [[] for _ in range(workers)]
+    load = [0.0] * workers
+    for n in sorted(names, key=lambda n: -_COST.get(n, 1.0)):
+        k = load.index(min(load))
+        groups[k].append(n)
+        load[k] += _COST.get(n, 1.0)
+    return [Drawing(g, folder, run_name, description, ds, sim) for g in groups if g]
+
+
+def early_names(names) -> list[str]:
+    """The figures of ``names`` that need no measurement chain (set-up, fringe images,
+    modulation): drawn as soon as the images exist."""
+    return [n for n in names if FIGURES[n][1] in (None, "fringes")]
+
+
+__all__ = ["FIGURES", "figure_names", "draw_figures", "draw_one", "default_workers",
+           "Drawing", "start_drawings", "early_names", "can_fork", "import_in_background"]

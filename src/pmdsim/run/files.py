@@ -75,10 +75,12 @@ def exposure_factor(arrays: Iterable[np.ndarray], bit_depth: int = 16,
 def to_integer_image(values: np.ndarray, exposure: float, bit_depth: int = 16) -> np.ndarray:
     """``round(clip(values * exposure, 0, full scale))`` as uint8/uint16; NaN -> 0."""
     top = full_scale(bit_depth)
-    scaled = np.asarray(values, np.float64) * exposure
-    scaled = np.where(np.isfinite(scaled), scaled, 0.0)
-    out = np.rint(np.clip(scaled, 0.0, top))
-    return out.astype(np.uint16 if bit_depth == 16 else np.uint8)
+    # one float64 temporary, changed in place (the same numbers as the plain expression)
+    scaled = np.multiply(values, exposure, dtype=np.float64)
+    scaled[~np.isfinite(scaled)] = 0.0
+    np.clip(scaled, 0.0, top, out=scaled)
+    np.rint(scaled, out=scaled)
+    return scaled.astype(np.uint16 if bit_depth == 16 else np.uint8)
 
 
 # ----------------------------------------------------------------------------- image files
@@ -269,7 +271,9 @@ def _safe_stem(name: str) -> str:
 
 
 def write_images(folder: Path, cfg, fringes, dots, dot_images, image_files,
-                  images, exposure: float) -> list[Path]:
+                 images, exposure: float, workers: int | None = None) -> list[Path]:
+    """Write every camera image of a run as an integer image file (``exposure``, see the
+    module docstring); ``workers`` threads (default up to 4) convert and compress."""
     out = cfg.output
     suffix = IMAGE_SUFFIX[out.image_format]
     jobs = []
@@ -299,7 +303,10 @@ def write_images(folder: Path, cfg, fringes, dots, dot_images, image_files,
         for q, f in enumerate(image_files):
             put(f"images/{q:02d}_{_safe_stem(f)}{suffix}", images[q], {"monitor_image": str(f)})
     # zlib and NumPy release the GIL: a few threads overlap compression and conversion.
-    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+    workers = min(4, os.cpu_count() or 1) if workers is None else workers
+    if workers <= 1:
+        return [write(job) for job in jobs]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
         return list(pool.map(write, jobs))
 
 

@@ -3,8 +3,10 @@ dataset, measure, diagnose, draw."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from dataclasses import replace
@@ -19,6 +21,7 @@ from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, write_dataset
 from ..report.text import description, summary_text_of
 from .dataset import assign_to_dataset, dot_dataset_variables
 from .diagnostics import diagnose_run
+from .figures import FIGURES, import_in_background
 from .result import RunResult, _Steps, draw_safely
 
 
@@ -35,6 +38,8 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     into the dataset, statistics.json and summary.txt, and their warnings into the result."""
     dots, image_files, levels, n_tiles = inputs
     folder.mkdir(parents=True, exist_ok=True)
+    if figures:
+        import_in_background()  # matplotlib, while the render runs without the GIL
     timings: dict[str, float] = {}
     fr_cfg = cfg.patterns.fringes
     n_calls = (fr_cfg is not None) + bool(dots) + (levels is not None)
@@ -75,95 +80,119 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
               if a is not None]
     exposure = (pio.exposure_factor(stacks, out.bit_depth) if not sensor.enabled
                 else 2.0 ** min(0, out.bit_depth - sensor.bit_depth))
-    image_paths = pio.write_images(folder, cfg, fringes, dots, dot_images, image_files, images,
-                                exposure) if out.write_images else []
-    steps.advance()
-    ds = build_dataset(cfg, geometry, fringes, dots, dot_images, image_files, images,
-                       exposure, sim.scene.rays_per_pixel)
-    if off_monitor is not None:
-        ds["lobe_off_monitor"] = (("row", "col"), off_monitor, {
-            "units": "bool", "description": "surface pixels whose bundle puts more than "
-            f"diagnostics.max_off_monitor_fraction = {cfg.diagnostics.max_off_monitor_fraction:g}"
-            " of its weight off the monitor (never valid; counted)"})
+    with contextlib.ExitStack() as stack:
+        # the image files are written by a thread while the chain runs (zlib and NumPy
+        # release the GIL); on an error the with-block waits for it before unwinding
+        writer = stack.enter_context(ThreadPoolExecutor(1, thread_name_prefix="pmdsim-images"))
+        ds = build_dataset(cfg, geometry, fringes, dots, dot_images, image_files, images,
+                           exposure, sim.scene.rays_per_pixel)
+        if off_monitor is not None:
+            ds["lobe_off_monitor"] = (("row", "col"), off_monitor, {
+                "units": "bool", "description": "surface pixels whose bundle puts more than "
+                f"diagnostics.max_off_monitor_fraction = {cfg.diagnostics.max_off_monitor_fraction:g}"
+                " of its weight off the monitor (never valid; counted)"})
+        if fringes is not None and fringes.sums is not None:
+            # the dataset holds the sums' real and imaginary parts: free the complex copy
+            # (2 directions x 3 widths x 16 bytes per pixel, 480 MB at 5 MP)
+            fringes = replace(fringes, sums=None)
+        images_written = writer.submit(pio.write_images, folder, cfg, fringes, dots,
+                                       dot_images, image_files, images, exposure,
+                                       workers=1) if out.write_images else None
+        steps.advance()
+        timings["write"] = time.perf_counter() - t
 
-    if fringes is not None and fringes.sums is not None:
-        # the dataset holds the sums' real and imaginary parts: free the complex copy
-        # (2 directions x 3 widths x 16 bytes per pixel, 480 MB at 5 MP)
-        fringes = replace(fringes, sums=None)
-    timings["write"] = time.perf_counter() - t
+        drawings = []
+        stack.callback(lambda: [d.close() for d in drawings])  # an error ends them
+        decoding = reference is not None and fringes is not None
+        if figures:
+            from .figures import early_names, figure_plan, start_drawings
 
-    t = time.perf_counter()
-    stats: dict = {}
-    if reference is not None and fringes is not None:
-        measured = chain.compare(
-            chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
-                                 sensor.saturation_dn if sensor.enabled else None),
-            reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
-            cfg.decode, len(fringes.shifts),
-            slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
-                reference.points_mm, sim.scene.camera.position, sim.scene.monitor),
-            off_monitor=off_monitor)
-        stats = chain.statistics(measured, cfg.name)
-        from . import reconstruction as recon
+            # the set-up and fringe figures need nothing of the chain: drawn meanwhile
+            early = early_names(figure_plan(ds, out.figure_set, decoding))
+            drawings += start_drawings(early, folder / "figures", cfg.name, description(cfg),
+                                       ds, sim, out.figure_workers)
 
-        if recon.wanted(cfg, measured.directions):
-            rvars, rstats = recon.from_chain(cfg, sim.scene, measured, reference.reconstruction)
-            stats.update(rstats)
-            for name in ("surface_x_mm", "surface_y_mm"):
-                if name in rvars:
-                    dims, data, attrs = rvars.pop(name)
-                    ds = ds.assign_coords({dims[0]: (dims, data, attrs)})
-            for name, var in rvars.items():
+        t = time.perf_counter()
+        stats: dict = {}
+        if decoding:
+            measured = chain.compare(
+                chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
+                                     sensor.saturation_dn if sensor.enabled else None),
+                reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
+                cfg.decode, len(fringes.shifts),
+                slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
+                    reference.points_mm, sim.scene.camera.position, sim.scene.monitor),
+                off_monitor=off_monitor)
+            stats = chain.statistics(measured, cfg.name)
+            from . import reconstruction as recon
+
+            if recon.wanted(cfg, measured.directions):
+                rvars, rstats = recon.from_chain(cfg, sim.scene, measured,
+                                                 reference.reconstruction)
+                stats.update(rstats)
+                for name in ("surface_x_mm", "surface_y_mm"):
+                    if name in rvars:
+                        dims, data, attrs = rvars.pop(name)
+                        ds = ds.assign_coords({dims[0]: (dims, data, attrs)})
+                for name, var in rvars.items():
+                    ds[name] = var
+            ds = assign_to_dataset(ds, measured, stats)
+            del measured
+        dot_table = []
+        if dot_images is not None:
+            dot_table = chain.dot_table(dot_images, dots, cfg.name)
+            for name, var in dot_dataset_variables(dot_table).items():
                 ds[name] = var
-        ds = assign_to_dataset(ds, measured, stats)
-        del measured
-    dot_table = []
-    if dot_images is not None:
-        dot_table = chain.dot_table(dot_images, dots, cfg.name)
-        for name, var in dot_dataset_variables(dot_table).items():
-            ds[name] = var
-        pio.write_dot_csv(folder / "dots.csv", dot_table)
-    timings["decode"] = time.perf_counter() - t
+            pio.write_dot_csv(folder / "dots.csv", dot_table)
+        timings["decode"] = time.perf_counter() - t
 
-    t = time.perf_counter()
-    statistics = dict(stats)  # statistics.json: the chain's (when decoded) + diagnostics
-    diagnosed = diagnose_run(cfg, sim, geometry, exclude=off_monitor) if diagnostics else None
-    if diagnosed is not None:
-        ds = ds.assign_coords(diagnosed.coords)
-        for name, var in diagnosed.variables.items():
-            ds[name] = var
-        statistics.setdefault("name", cfg.name)
-        statistics["diagnostics"] = diagnosed.summary
-        ds.attrs["statistics_json"] = json.dumps(statistics)
+        t = time.perf_counter()
+        statistics = dict(stats)  # statistics.json: the chain's (when decoded) + diagnostics
+        diagnosed = diagnose_run(cfg, sim, geometry, exclude=off_monitor) if diagnostics else None
+        if diagnosed is not None:
+            ds = ds.assign_coords(diagnosed.coords)
+            for name, var in diagnosed.variables.items():
+                ds[name] = var
+            statistics.setdefault("name", cfg.name)
+            statistics["diagnostics"] = diagnosed.summary
+            ds.attrs["statistics_json"] = json.dumps(statistics)
+            steps.advance()
+        timings["diagnostics"] = time.perf_counter() - t
+
+        if figures:
+            from .figures import figure_names, start_drawings
+
+            # the chain's figures are drawn while the dataset is written
+            late = [n for n in figure_names(ds, out.figure_set) if n not in early]
+            drawings += start_drawings(late, folder / "figures", cfg.name, description(cfg),
+                                       ds, sim, out.figure_workers)
+        t = time.perf_counter()
+        write_dataset(ds, folder / DATASET_NAME)
+        (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
+        if statistics:
+            (folder / "statistics.json").write_text(json.dumps(statistics, indent=2) + "\n")
+            (folder / "summary.txt").write_text(summary_text_of(statistics))
+        image_paths = images_written.result() if images_written is not None else []
         steps.advance()
-    timings["diagnostics"] = time.perf_counter() - t
+        timings["write"] += time.perf_counter() - t
 
-    t = time.perf_counter()
-    write_dataset(ds, folder / DATASET_NAME)
-    (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
-    if statistics:
-        (folder / "statistics.json").write_text(json.dumps(statistics, indent=2) + "\n")
-        (folder / "summary.txt").write_text(summary_text_of(statistics))
-    steps.advance()
-    timings["write"] += time.perf_counter() - t
+        figure_paths: list[Path] = []
+        notes: list[str] = []
+        t = time.perf_counter()
+        if figures:
+            # the run waits only for what the drawing processes have left to do
+            for d in drawings:
+                figure_paths += d.paths(notes)
+            order = {n: i for i, n in enumerate(FIGURES)}
+            figure_paths.sort(key=lambda p: order.get(p.stem, len(order)))
+            if dot_table and standalone:
+                from ..report import chain as plot_chain
 
-    figure_paths: list[Path] = []
-    notes: list[str] = []
-    t = time.perf_counter()
-    if figures:
-        from .figures import draw_figures, figure_names
-
-        figure_paths = draw_figures(folder, figure_names(ds, out.figure_set), cfg.name,
-                                    description(cfg), ds=ds, sim=sim,
-                                    workers=out.figure_workers, notes=notes)
-        if dot_table and standalone:
-            from ..report import chain as plot_chain
-
-            figure_paths += draw_safely(notes, "of the dots", plot_chain.dot_figures,
-                                        folder / "figures", {cfg.name: dot_images},
-                                        {cfg.name: dot_table}, sim, {})
-        steps.advance()
-    timings["figures"] = time.perf_counter() - t
+                figure_paths += draw_safely(notes, "of the dots", plot_chain.dot_figures,
+                                            folder / "figures", {cfg.name: dot_images},
+                                            {cfg.name: dot_table}, sim, {})
+            steps.advance()
+        timings["figures"] = time.perf_counter() - t
 
     surface_pixels = int(geometry.surface_mask.sum())
     result = RunResult(
