@@ -1,129 +1,147 @@
-"""Benchmark: scattered rays per second on the fringe path, and the paper's Fig. 3 run.
+"""Benchmark: the compiled render, this tree against a pinned baseline, in one run.
 
 Usage::
 
-    python benchmarks/bench_render.py [--config examples/paper_fig3.toml] [--repeat 3]
+    python benchmarks/bench_render.py [--baseline 4c74c4d] [--config examples/paper_fig3.toml]
+                                      [--repeat 5] [--workers 2] [--no-compile]
 
-Prints, all measured in this run after JIT compilation:
+The baseline commit (default ``4c74c4d``, the tree before issue 13's kernel work) is checked
+out with ``git worktree`` into a temporary folder. Both trees are measured by the same code
+in fresh subprocesses, alternately, with the same settings:
 
-- the compiled fringe path (X and Y, 4 shifts, one width): wall time and scattered rays
-  per second, per wall-second and per CPU-second;
-- the whole Fig. 3 sequence (X and Y, 3 widths, 4 shifts) at the configured camera size;
-- a plain NumPy implementation of the same estimator (vectorised over rays, no Numba),
-  timed on a subset of pixels and scaled, and the speed ratio;
-- the largest difference between the two on that subset (they compute the same numbers).
+- **compile**: the first ``render_fringes`` of the Fig. 3 sequence with an empty
+  ``NUMBA_CACHE_DIR`` minus the same call warm, i.e. the seconds of JIT compilation the
+  render kernels cost a first run (skipped with ``--no-compile``);
+- **fringe path**: X and Y, one width, 4 shifts, after compilation: wall and scattered
+  rays per CPU-second of the process (``time.process_time``: robust to other processes
+  sharing the cores, unlike wall time);
+- **Fig. 3 sequence**: X and Y, all configured widths, 4 shifts, at the configured camera
+  size: wall (best of ``--repeat``) and rays per CPU-second;
+- **agreement**: the largest difference between the two trees' Fig. 3 images, relative to
+  their largest value (both compute the same estimator; the kernels differ in rounding).
 
-Not a test: timings depend on the machine. Run it on an otherwise idle machine.
+It prints both columns, their ratio, the issue's aims (>= 200 M rays per CPU-second at
+N = 100; the Fig. 3 sequence in <= 0.3 s wall on 2 cores) and the load average before and
+after. **Wall times mean something only on an otherwise idle machine.**
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
-import time
+import shutil
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from pmdsim.config import load_config
-from pmdsim.geometry import dot, normalize
-from pmdsim.patterns import fringe_value, phase_shifts
-from pmdsim.render import Simulation
-from pmdsim.trace import cone_basis, trace_primary
-
 ROOT = Path(__file__).resolve().parents[1]
 
+CODE = r"""
+import json, sys, time
+import numpy as np
+from pmdsim.config import load_config
+from pmdsim.render import Simulation
+config, repeat, workers, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+cfg = load_config(config)
+sim = Simulation.from_config(cfg)
+sim.num_workers = workers
+fr = cfg.patterns.fringes
+widths, dirs, shifts = tuple(fr.widths_px), ("x", "y"), fr.shifts
 
-def numpy_fringes(sim: Simulation, rows: slice, widths, shifts: int):
-    """Plain NumPy: paper estimator (1/N) sum f_p L(u_p) for X and Y fringes, one row block.
+def timed(fn):
+    w0, c0 = time.perf_counter(), time.process_time()
+    res = fn()
+    return res, time.perf_counter() - w0, time.process_time() - c0
 
-    Straight from the formulas: world directions of every ray, monitor-plane intersection,
-    Ward weight, nearest monitor pixel, the fringe value there. Returns
-    (directions, widths, shifts, rows, cols) camera values.
-    """
-    scene = sim.scene
-    mon = scene.monitor
-    brdf = scene.brdf
-    hits = trace_primary(scene, rows.start, rows.stop)
-    e1, e2, p = cone_basis(hits)
-    local = scene.sampling.local_directions()  # (N, 3)
-    o = (local[:, 0, None, None, None] * e1 + local[:, 1, None, None, None] * e2
-         + local[:, 2, None, None, None] * p)  # (N, r, c, 3)
-    t = ((mon.centre - hits.point) @ mon.normal) / (o @ mon.normal)
-    x = hits.point + t[..., None] * o
-    uv = mon.world_to_pixel(x)
-    u, v = uv[..., 0], uv[..., 1]
-    on_monitor = ((o @ mon.normal) < 0) & (t > 0) & (u >= -0.5) & (u < mon.width - 0.5) \
-        & (v >= -0.5) & (v < mon.height - 0.5)
-    i = hits.to_camera
-    i_loc = np.stack([dot(i, hits.x_axis), dot(i, hits.y_axis), dot(i, hits.normal)], -1)
-    o_loc = np.stack([dot(o, hits.x_axis), dot(o, hits.y_axis), dot(o, hits.normal)], -1)
-    f = brdf.evaluate(np.broadcast_to(i_loc, o_loc.shape), o_loc)
-    f = np.where(on_monitor, f, 0.0)
-    iu = np.floor(np.where(on_monitor, u, 0) + 0.5)
-    iv = np.floor(np.where(on_monitor, v, 0) + 0.5)
-    n = local.shape[0]
-    out = np.empty((2, len(widths), shifts) + u.shape[1:])
-    for di, c in enumerate((iu, iv)):
-        for wi, w in enumerate(widths):
-            for k, delta in enumerate(phase_shifts(shifts)):
-                lum = mon.luminance(fringe_value(c, w, delta))
-                out[di, wi, k] = (f * lum).sum(axis=0) / n
-    return out
+mask = sim.geometry().surface_mask
+_, first, _ = timed(lambda: sim.render_fringes(widths, dirs, shifts))
+one = [timed(lambda: sim.render_fringes(widths[:1], dirs, shifts))[1:] for _ in range(repeat)]
+seq = []
+for _ in range(repeat):
+    res, w, c = timed(lambda: sim.render_fringes(widths, dirs, shifts))
+    seq.append((w, c))
+np.save(out, res.images[:, :, :, ::8, ::8])
+rays = int(mask.sum()) * sim.scene.rays_per_pixel
+print(json.dumps({"first": first, "one_wall": min(w for w, _ in one),
+                  "one_cpu": min(c for _, c in one), "seq_wall": min(w for w, _ in seq),
+                  "seq_cpu": min(c for _, c in seq), "rays": rays}))
+"""
 
 
-def _time(fn, repeat):
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        c0 = time.process_time()
-        res = fn()
-        wall = time.perf_counter() - t0
-        cpu = time.process_time() - c0
-        if wall < best:
-            best, best_cpu = wall, cpu
-    return res, best, best_cpu
+def _run(src: Path, cache: Path, args: list[str]) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(src), NUMBA_CACHE_DIR=str(cache))
+    p = subprocess.run([sys.executable, "-c", CODE, *args], env=env, cwd=src,
+                       capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"render failed in {src}:\n{p.stdout[-2000:]}\n{p.stderr[-3000:]}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--baseline", default="4c74c4d", help="git commit of the baseline tree")
     ap.add_argument("--config", default=str(ROOT / "examples" / "paper_fig3.toml"))
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--numpy-rows", type=int, default=8, help="camera rows for the NumPy baseline")
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--workers", type=int, default=os.cpu_count())
+    ap.add_argument("--no-compile", action="store_true", help="skip the empty-cache compile runs")
     args = ap.parse_args()
 
-    cfg = load_config(args.config)
-    sim = Simulation.from_config(cfg)
-    h, w = sim.shape
-    n = sim.scene.rays_per_pixel
-    widths = tuple(cfg.patterns.fringes.widths_px)
-    geo = sim.geometry()
-    n_valid = int(geo.surface_mask.sum())
-    rays = n_valid * n
-    print(f"camera {w} x {h} px, {n_valid} pixels on the surface, N = {n} rays per pixel, "
-          f"{os.cpu_count()} cores")
+    print(f"load average before: {os.getloadavg()}  ({os.cpu_count()} cores)", flush=True)
+    tmp = Path(tempfile.mkdtemp(prefix="pmdsim-bench-render-"))
+    base_src = tmp / "baseline"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base_src),
+                    args.baseline], check=True, capture_output=True)
+    trees = {"baseline": base_src / "src", "this tree": ROOT / "src"}
+    try:
+        res = {}
+        for name, src in trees.items():
+            cache = tmp / f"cache-{name.replace(' ', '-')}"
+            common = [args.config, str(args.repeat), str(args.workers)]
+            if not args.no_compile:  # empty cache: the first call compiles the kernels
+                print(f"[{name}] empty NUMBA_CACHE_DIR ...", flush=True)
+                cold = _run(src, cache, common + [str(tmp / f"cold-{len(res)}.npy")])
+            print(f"[{name}] cached kernels ...", flush=True)
+            warm = _run(src, cache, common + [str(tmp / f"img-{len(res)}.npy")])
+            warm["compile"] = None if args.no_compile else cold["first"] - warm["first"]
+            res[name] = warm
+        a = np.load(tmp / "img-0.npy")
+        b = np.load(tmp / "img-1.npy")
+        m = np.isfinite(a) & np.isfinite(b)
+        diff = np.max(np.abs(a[m] - b[m])) / np.max(np.abs(a[m]))
+    finally:
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base_src)],
+                       capture_output=True)
+        shutil.rmtree(tmp, ignore_errors=True)
 
-    sim.render_fringes(widths[:1], ("x", "y"), 4)  # compile
-    _, t1, c1 = _time(lambda: sim.render_fringes(widths[:1], ("x", "y"), 4), args.repeat)
-    print(f"fringe path, X+Y, 1 width, 4 shifts: {t1:.3f} s wall, "
-          f"{rays / t1 / 1e6:.0f} M rays/s, {rays / c1 / 1e6:.0f} M rays per CPU-second")
-    _, t3, c3 = _time(lambda: sim.render_fringes(widths, ("x", "y"), 4), args.repeat)
-    print(f"Fig. 3 sequence, X+Y, {len(widths)} widths {widths}, 4 shifts: {t3:.3f} s wall "
-          f"({c3:.3f} CPU-s), {rays / c3 / 1e6:.0f} M rays per CPU-second")
-
-    # NumPy baseline on a row block near the image centre, scaled to the same ray count.
-    r0 = h // 2
-    rows = slice(r0, r0 + args.numpy_rows)
-    ref, tn, _ = _time(lambda: numpy_fringes(sim, rows, widths, 4), 1)
-    sub_valid = int(geo.surface_mask[rows].sum())
-    numpy_rate = sub_valid * n / tn
-    fast_rate = rays / t3
-    print(f"plain NumPy, same estimator, {sub_valid} pixels: {tn:.3f} s -> "
-          f"{numpy_rate / 1e6:.2f} M rays/s; compiled/NumPy speed ratio {fast_rate / numpy_rate:.0f}x")
-    full = sim.render_fringes(widths, ("x", "y"), 4).images[:, :, :, rows]
-    m = np.isfinite(full) & np.isfinite(ref)
-    scale = np.nanmax(np.abs(ref))
-    print(f"max |compiled - NumPy| / max = {np.max(np.abs(full[m] - ref[m])) / scale:.2e}")
+    rays = res["this tree"]["rays"]
+    rows = [
+        ("render kernels' JIT compile, s", "compile", 1.0, None),
+        ("fringe path X+Y, 1 width: M rays per CPU-s", "one_cpu", None, 200.0),
+        ("fringe path X+Y, 1 width: wall, s", "one_wall", 1.0, None),
+        ("Fig. 3 sequence: M rays per CPU-s", "seq_cpu", None, 200.0),
+        ("Fig. 3 sequence: wall, s", "seq_wall", 1.0, 0.3),
+        ("Fig. 3 sequence: CPU, s", "seq_cpu", 1.0, None),
+    ]
+    print(f"\n{rays / 1e6:.0f} M scattered rays per Fig. 3 frame set, {args.workers} workers")
+    print(f"{'':46s} {'baseline':>10s} {'this tree':>10s} {'ratio':>7s} {'aim':>8s}")
+    for label, key, scale, aim in rows:
+        vals = []
+        for name in trees:
+            v = res[name][key]
+            if v is not None and scale is None:  # a rate
+                v = rays / v / 1e6
+            vals.append(v)
+        if any(v is None for v in vals):
+            continue
+        ratio = vals[1] / vals[0]
+        aim_s = "" if aim is None else (f">= {aim:g}" if scale is None else f"<= {aim:g}")
+        print(f"{label:46s} {vals[0]:10.3f} {vals[1]:10.3f} {ratio:7.2f} {aim_s:>8s}")
+    print(f"max |this - baseline| / max over the Fig. 3 images: {diff:.2e}")
+    print(f"load average after: {os.getloadavg()}")
 
 
 if __name__ == "__main__":

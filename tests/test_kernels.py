@@ -237,6 +237,19 @@ def _check_all_modes(cfg, mode_random):
                  naive.weighted_sums(rays, np.sin(k * rays[c]))]
     check(out, refs, "harmonic")
 
+    # harmonic, integer frequency ratios: exp(i k c) as a power of a smaller frequency's
+    # (kernels.bundle._harmonic_plan), fused passes (m = 2, 4, 8) and the generic one (3, 5)
+    k0, k1 = 2 * np.pi / 640, 2 * np.pi / 37
+    ku, kv = k0 * np.array([8.0, 1.0, 2.0, 64.0, 3.0]), k1 * np.array([5.0, 1.0])
+    plan = kb._harmonic_plan(ku, kv)
+    assert list(plan[1]) == [2, -1, 1, 0, 1, 6, -1] and list(plan[2]) == [4, 1, 2, 8, 3, 5, 1]
+    out = _render_tile(scene, geo, rot, kb.MODE_HARMONIC, kb.OUT_FIRST + 14, k_u=ku, k_v=kv)[0]
+    refs = []
+    for k, c in [(k, "u") for k in ku] + [(k, "v") for k in kv]:
+        refs += [naive.weighted_sums(rays, np.cos(k * rays[c])),
+                 naive.weighted_sums(rays, np.sin(k * rays[c]))]
+    check(out, refs, "harmonic powers")
+
     # images, float32 and float64
     for dtype in (np.float32, np.float64):
         imgs = rng.random((3, hm, wm)).astype(dtype)
@@ -305,3 +318,45 @@ def test_render_tile_sums_do_not_depend_on_the_tile_split():
     a = _render_tile(scene, geo[:cut], rot[:cut], kb.MODE_IMAGES, kb.OUT_FIRST + 2, images=imgs)[0]
     b = _render_tile(scene, geo[cut:], rot[cut:], kb.MODE_IMAGES, kb.OUT_FIRST + 2, images=imgs)[0]
     assert np.array_equal(np.concatenate([a, b]), whole, equal_nan=True)
+
+
+# --------------------------------------------------------------------------- memory
+_LEAK_CHECK = r"""
+import sys
+import numpy as np
+from numba.core.runtime import rtsys
+from conftest import make_config
+from pmdsim.render import Simulation
+
+def run():
+    for estimator in ("paper", "radiometric"):
+        sim = Simulation.from_config(make_config(sampling={"estimator": estimator}))
+        sim.render_fringes((12.0, 48.0))
+        sim.render_images(np.zeros((1,) + sim.scene.monitor.shape))
+        sim.transport([3, 40], [5, 100])
+
+run()  # compile or load
+before = rtsys.get_allocation_stats()
+run()
+after = rtsys.get_allocation_stats()
+d = [a - b for a, b in zip(after, before)]
+print(d)
+sys.exit(0 if d[0] > 0 and d[0] == d[1] and d[2] == d[3] else 1)
+"""
+
+
+def test_render_kernels_free_every_array_they_allocate(tmp_path):
+    """The kernels hand reference-count-free views (``kernels._jit.borrow``) to their pixel
+    loops: Numba's own allocation counters (NRT statistics, on only when the process starts
+    with NUMBA_NRT_STATS=1) must show as many frees as allocations after a render."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    env = dict(os.environ, NUMBA_NRT_STATS="1",
+               PYTHONPATH=os.pathsep.join([str(here.parent / "src"), str(here)]))
+    p = subprocess.run([sys.executable, "-c", _LEAK_CHECK], env=env, cwd=tmp_path,
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, f"allocations - frees: {p.stdout[-500:]} {p.stderr[-2000:]}"

@@ -559,9 +559,12 @@ MODES = [(kb.MODE_TABLES, 7), (kb.MODE_HARMONIC, 12), (kb.MODE_IMAGES, 4), (kb.M
 @pytest.mark.parametrize("sampling", [("polar", "stratified"), ("solid_angle", "random")])
 def test_existing_estimators_match_the_frozen_kernel(normalization, sampling):
     """The cone estimators did not change: phase 1 (weights, hits) and every phase-2 mode
-    are bit-identical to the frozen original, except the table sums, which are now added
-    ray by ray in a scalar pass (``_interleaved_sums``, faster than gathers) and so round
-    differently: those agree to 1e-13 of their magnitude."""
+    agree with the frozen original to rounding. They are not bit-identical: the table sums
+    are added ray by ray in a scalar pass (``_interleaved_sums``), phase 1 shares one
+    division between t, 1/hz^2 and 1/cos_o, the ray loops run over whole vector blocks (a
+    different summation order) and harmonics of integer frequency ratios are powers of one
+    exp(i k c) (issue 13). Every output column agrees to 1e-12 of its largest magnitude,
+    and is NaN exactly where the original is."""
     brdf = ({"__replace__": {"model": "mirror"}} if normalization == "mirror"
             else {"normalization": normalization})
     scheme, mode = sampling
@@ -573,14 +576,12 @@ def test_existing_estimators_match_the_frozen_kernel(normalization, sampling):
     for kmode, ncols in MODES:
         new, old = _legacy_case(scene, kmode, rot, ncols, scene.rays_per_pixel)
         for a, b in zip(new, old):
-            if kmode == kb.MODE_TABLES:
-                first = kb.OUT_FIRST
-                assert np.array_equal(a[:, :first], b[:, :first], equal_nan=True)
-                scale = np.nanmax(np.abs(b[:, first:]))
-                np.testing.assert_allclose(a[:, first:], b[:, first:], rtol=0, atol=1e-13 * scale)
-                assert np.array_equal(np.isnan(a), np.isnan(b))
-            else:
-                assert np.array_equal(a, b, equal_nan=True), f"mode {kmode} differs"
+            assert np.array_equal(np.isnan(a), np.isnan(b)), f"mode {kmode}: NaN differ"
+            assert np.isfinite(b).any()
+            err = np.where(np.isnan(b), 0.0, np.abs(a - b))
+            scale = np.max(np.where(np.isnan(b), 0.0, np.abs(b)), axis=0)
+            assert np.all(err <= 1e-12 * scale), (
+                f"mode {kmode}: worst |new - old| / column max {np.max(err / np.maximum(scale, 1e-300)):.2e}")
 
 
 # --------------------------------------------------------------------------- frozen kernel

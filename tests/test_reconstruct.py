@@ -242,3 +242,97 @@ def test_reconstruct_prior_config():
     bad["reconstruct"] = {"prior": {"type": "sphere", "radius_mm": 100.0}}
     with pytest.raises(ConfigError, match=r"reconstruct\.prior\.aperture"):
         parse_config(bad)
+
+
+def test_bisector_slope_kernels_match_numpy():
+    """The compiled per-node slopes (kernels.reconstruct) against the NumPy reference
+    slopes_in_frame(bisector_normals(...)), with a generic and with a planar monitor."""
+    from pmdsim.kernels.reconstruct import bisector_slopes, bisector_slopes_planar
+    from pmdsim.measure.reconstruct import _planar_monitor, bisector_normals, slopes_in_frame
+
+    scene, u, v = decoded(CASES["freeform"][0], npx=80, focal_px=650.0)
+    rng = np.random.default_rng(3)
+    n = 500
+    points = rng.uniform(-20, 20, (n, 3)) * [1, 1, 0.05]
+    mu = rng.uniform(0, 800, n)
+    mv = rng.uniform(0, 600, n)
+    q = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+    rot = np.ascontiguousarray(q * np.sign(np.linalg.det(q)))
+    cam = np.asarray(scene.camera.position, np.float64)
+    m3 = scene.monitor.pixel_to_world(mu, mv)
+    want = slopes_in_frame(bisector_normals(points, cam, m3), rot)
+    a, b = np.empty(n), np.empty(n)
+    bisector_slopes(points, cam, np.ascontiguousarray(m3), rot, a, b)
+    np.testing.assert_allclose(a, want[0], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(b, want[1], rtol=1e-12, atol=1e-15)
+    planar = _planar_monitor(scene.monitor)
+    assert planar is not None and _planar_monitor(object()) is None
+    bisector_slopes_planar(points, cam, mu, mv, *planar, rot, a, b)
+    np.testing.assert_allclose(a, want[0], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(b, want[1], rtol=1e-12, atol=1e-15)
+
+
+def test_iterative_solves_give_the_exact_solves_answer():
+    """The height-normal loop warm-starts an iterative Southwell solver and asks it for
+    three digits of each correction; it ends where exact (sparse LU) solves end, well
+    within tol_mm, and both stop on the geometric tail estimate, not at max_iter."""
+    truth, nominal = CASES["freeform"]
+    scene, u, v = decoded(truth)
+    got = reconstruct(u, v, scene.camera, scene.monitor, prior(nominal), spacing_mm=0.5, solver="pcg")
+    exact = reconstruct(u, v, scene.camera, scene.monitor, prior(nominal), spacing_mm=0.5, solver="direct")
+    assert np.array_equal(got.mask, exact.mask) and not got.mask.all()  # circular: a masked solve
+    assert np.nanmax(np.abs(got.height_mm - exact.height_mm)) < 1e-9
+    assert got.converged and exact.converged and got.iterations < 6
+
+
+def test_settled_rule():
+    """Stop when the last change is below tol, or when the contracting iteration's geometric
+    tail (last * q / (1 - q), q the ratio of the last two changes) is."""
+    from pmdsim.measure.reconstruct import _settled
+
+    assert _settled([1e-9], 1e-8)
+    assert not _settled([1e-3], 1e-8)
+    assert _settled([1e-3, 1e-6], 1e-8)  # tail 1e-6 * 1e-3 / (1 - 1e-3) = 1e-9
+    assert not _settled([1e-3, 1e-4], 1e-8)  # tail 1.1e-5
+    assert not _settled([1e-6, 9e-7], 1e-8)  # q = 0.9: too slow to trust the estimate
+    assert not _settled([1e-8, 2e-8], 1e-8)  # growing
+
+
+def test_nearest_valid_pixel_matches_the_distance_transform():
+    """Few invalid pixels (k-d tree of the valid edge) and many (distance transform): the
+    nearest valid pixel's distance equals SciPy's exact Euclidean distance transform."""
+    from scipy import ndimage
+
+    from pmdsim.measure.reconstruct import _nearest_valid
+
+    rng = np.random.default_rng(5)
+    for frac in (0.01, 0.3):
+        valid = ndimage.binary_opening(rng.random((90, 120)) > frac * 3, iterations=1) | (rng.random((90, 120)) > frac)
+        valid[:3, :] = False
+        bad = ~valid
+        rows, cols = _nearest_valid(valid)
+        assert valid[rows, cols].all()
+        got = np.hypot(rows - np.nonzero(bad)[0], cols - np.nonzero(bad)[1])
+        want = ndimage.distance_transform_edt(bad)[bad]
+        np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_support_cells_kernel_matches_numpy():
+    """kernels.reconstruct.support_cells against the plain test: the fractional pixel's
+    2 x 2 cell lies inside the image and all four pixels are valid; NaN, inf, negative and
+    edge coordinates included."""
+    from pmdsim.kernels.reconstruct import support_cells
+
+    rng = np.random.default_rng(11)
+    valid = rng.random((40, 50)) > 0.2
+    cols = np.concatenate([rng.uniform(-2, 52, 3000), [np.nan, np.inf, -np.inf, 0.0, 48.999, 49.0, -1e-12]])
+    rows = np.concatenate([rng.uniform(-2, 42, 3000), [1.0, 1.0, 1.0, 0.0, 38.5, 3.0, 2.0]])
+    ok = np.ones(len(cols), bool)
+    ok[5] = False  # stays False
+    want = np.zeros(len(cols), bool)
+    for k, (c, r) in enumerate(zip(cols, rows)):
+        if k != 5 and np.isfinite(c) and np.isfinite(r) and 0 <= c < 49 and 0 <= r < 39:
+            c0, r0 = int(np.floor(c)), int(np.floor(r))
+            want[k] = valid[r0:r0 + 2, c0:c0 + 2].all()
+    support_cells(valid, cols, rows, ok)
+    np.testing.assert_array_equal(ok, want)

@@ -9,6 +9,9 @@ compilation.
 from __future__ import annotations
 
 import numba
+from numba.core import cgutils, types
+from numba.core.imputils import impl_ret_borrowed
+from numba.extending import intrinsic
 
 JIT_OPTIONS = dict(nogil=True, cache=True, error_model="numpy")
 FAST_OPTIONS = dict(JIT_OPTIONS, fastmath=True)
@@ -36,3 +39,54 @@ def parallel_jit(fn=None, **overrides):
     if fn is None:
         return lambda f: numba.njit(**options)(f)
     return numba.njit(**options)(fn)
+
+
+@intrinsic
+def borrow(typingctx, arr):
+    """A view of ``arr`` without a reference count (no meminfo), for per-pixel loops.
+
+    Numba increments and decrements an array's reference count (an atomic operation)
+    whenever an array variable is copied, e.g. as the argument of a function inlined into
+    a loop body: tens of atomics per pixel, shared between threads when the tiles write into
+    one array. On a view without meminfo those operations fold away. The view does not own
+    its memory: the caller must keep ``arr`` alive (an argument, or a local array used
+    after the loop) for as long as the view is used, and never return it.
+    """
+
+    if not isinstance(arr, types.Array):  # anything else passes through unchanged
+        return arr(arr), lambda context, builder, sig, args: impl_ret_borrowed(
+            context, builder, sig.return_type, args[0])
+
+    def codegen(context, builder, sig, args):
+        src = context.make_array(sig.args[0])(context, builder, args[0])
+        dst = context.make_array(sig.return_type)(context, builder)
+        dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
+        dst.parent = cgutils.get_null_value(dst.parent.type)
+        dst.nitems = src.nitems
+        dst.itemsize = src.itemsize
+        dst.data = src.data
+        dst.shape = src.shape
+        dst.strides = src.strides
+        return dst._getvalue()
+
+    return arr(arr), codegen
+
+
+@intrinsic
+def prefer_wide_vectors(typingctx):
+    """Let LLVM vectorise the calling kernel with the widest vectors the CPU has.
+
+    On AVX-512 CPUs LLVM prefers 256-bit vectors by default (``prefer-vector-width``); the
+    ray loops of the render kernels are arithmetic-bound, and 512-bit vectors run them about
+    1.9x faster (measured: polynomial sin/cos 2.0 -> 1.05 ns per ray). Call it first thing
+    in a kernel: it sets that function attribute on the compiled function (the code
+    inlined into it included). Harmless where the CPU has no 512-bit vectors. (llvmlite
+    validates attribute names against its list of keywords; this string attribute is added
+    to the set directly.)
+    """
+
+    def codegen(context, builder, sig, args):
+        set.add(builder.function.attributes, '"prefer-vector-width"="512"')
+        return context.get_dummy_value()
+
+    return types.none(), codegen

@@ -11,8 +11,17 @@ estimator). For each pixel they
    the samples),
 3. *phase 2*: accumulate the requested pattern sums from those buffers: 1-D profile tables
    gathered at the monitor pixel index (fringes, nearest-pixel monitor), cos/sin of k*u at
-   the exact hit (fringes, continuous monitor), gathers from arbitrary monitor images, or
-   rectangle indicators (dots); or store the rays themselves (transport).
+   the exact hit (fringes, continuous monitor; a frequency that is an integer multiple of a
+   smaller one, as for widths 3200, 400 and 50, as a power of that one's exp(i k u):
+   :func:`_harmonic_plan`), gathers from arbitrary monitor images, or rectangle indicators
+   (dots); or store the rays themselves (transport).
+
+Speed (issue 13; docs/render-kernels.md): the pixel loops use reference-count-free views
+(:func:`~._jit.borrow`: Numba's atomic incref/decref per array per pixel cost more than
+the rays at small N), the kernels ask LLVM for 512-bit vectors where the CPU has them
+(:func:`~._jit.prefer_wide_vectors`), Ward and Beckmann ray loops run over whole blocks of
+``RAY_BLOCK`` rays (padding rays of weight 0, so no ray runs in a scalar remainder loop),
+and phase 1 uses one division per ray.
 
 Directions are given as coefficients ``(a, b, c)`` in a per-pixel orthonormal basis
 ``(b1, b2, b3)``; every dot product the kernel needs is linear in them, so the per-pixel
@@ -46,7 +55,7 @@ import math
 
 import numpy as np
 
-from ._jit import fastjit, jit
+from ._jit import borrow, fastjit, jit, prefer_wide_vectors
 from .fastmath import exp_neg, sincos
 
 # --- per-pixel geometry row layout -------------------------------------------------------
@@ -107,6 +116,9 @@ MODE_TRANSPORT = 4  # out_u/out_v/out_f (npix, nrays): the rays themselves
 
 OUT_FTOTAL = 0
 OUT_FHIT = 1
+#: Ray loops of :func:`render_tile` (Ward, Beckmann) run over a multiple of this many rays
+#: (padding rays of weight 0): a ray in a scalar remainder loop costs ~10 vector lanes.
+RAY_BLOCK = 16
 OUT_FIRST = 2
 
 _TWO_PI = 2.0 * math.pi
@@ -244,17 +256,20 @@ def _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
             oz = aj * Z1 + bj * Z2 + cj * Z3
             hz = Z0 + oz
             hz2 = hz * hz
-            # one division serves t = T / dn and 1 / hz^2
-            inv = 1.0 / (dn * hz2)
+            # one division serves t = T / dn, 1 / hz^2 and 1 / cos_o (the divider, not the
+            # FMAs, bounds this loop); cos_o clamped for the rays below the surface (f = 0)
+            ozp = max(oz, 1e-30)
+            d = dn * hz2
+            r = 1.0 / (d * ozp)
+            inv = r * ozp
             t = T * hz2 * inv
             u = U0 + t * (aj * B1 + bj * B2 + cj * B3)
             v = V0 + t * (aj * C1 + bj * C2 + cj * C3)
-            ozp = max(oz, 1e-300)
             e = exp_neg(-(hx * hx * iax2 + hy * hy * iay2) * dn * inv)
             if norm == NORM_WARD1992:
-                f = k0 * e / math.sqrt(ozp)
+                f = k0 * e * math.sqrt(ozp) * (r * d)
             elif norm == NORM_DUER2006:
-                f = k0 * e / ozp
+                f = k0 * e * (r * d)
             else:
                 hh = hx * hx + hy * hy + hz2
                 f = k0 * e * hh * (dn * inv) * (dn * inv)
@@ -880,37 +895,164 @@ def _interleaved_sums(n, idx, f, tab, out_row, col0):
         q += 1
 
 
+@fastjit
+def _harmonic_plan(k_u, k_v):
+    """How :func:`_harmonic_sums` gets each frequency's exp(i k c) per ray: (3, nu + nv) int64,
+    frequencies numbered u first, then v. Row 0: per group, the frequencies in ascending
+    order; row 1: -1 = polynomial sin/cos, else a smaller frequency r of the same group with
+    k = m k_r for an integer m (to 4 ulp); row 2: that m (1..64). Then exp(i k c) =
+    exp(i k_r c)^m by repeated squaring, exact to m times the rounding of exp(i k_r c) (so
+    as exact as the polynomial of the larger argument k c): widths 3200, 400 and 50 need one
+    sin/cos per ray and direction instead of three."""
+    nu = k_u.shape[0]
+    nv = k_v.shape[0]
+    plan = np.empty((3, nu + nv), dtype=np.int64)
+    for grp in range(2):
+        k = k_u if grp == 0 else k_v
+        off = 0 if grp == 0 else nu
+        order = np.argsort(k)
+        for i in range(k.shape[0]):
+            q = order[i]
+            plan[0, off + i] = off + q
+            plan[1, off + q] = -1
+            plan[2, off + q] = 1
+            for h in range(i - 1, -1, -1):  # the largest smaller frequency first
+                r = order[h]
+                if k[r] > 0.0 and k[q] > 0.0:
+                    ratio = k[q] / k[r]
+                    m = np.rint(ratio)
+                    if 1.0 <= m <= 64.0 and abs(ratio - m) <= 8.9e-16 * m:
+                        plan[1, off + q] = off + r
+                        plan[2, off + q] = np.int64(m)
+                        break
+    return plan
+
+
+@fastjit(inline="always")
+def _power_rows(n, m, bc, bs, zc, zs):
+    """(zc + i zs)[:n] = (bc + i bs)[:n] ** m, m >= 1, by left-to-right binary powering: one
+    vectorised pass over the rays per bit of m."""
+    if m == 1:
+        for j in range(n):
+            zc[j] = bc[j]
+            zs[j] = bs[j]
+        return
+    nb = 0
+    while (m >> nb) > 0:
+        nb += 1
+    first = True
+    for i in range(nb - 2, -1, -1):
+        odd = ((m >> i) & 1) == 1
+        if first:  # (base^2) or (base^2 * base), read from the base rows
+            if odd:
+                for j in range(n):
+                    c = bc[j]
+                    s = bs[j]
+                    c2 = c * c - s * s
+                    s2 = 2.0 * c * s
+                    zc[j] = c2 * c - s2 * s
+                    zs[j] = c2 * s + s2 * c
+            else:
+                for j in range(n):
+                    c = bc[j]
+                    s = bs[j]
+                    zc[j] = c * c - s * s
+                    zs[j] = 2.0 * c * s
+            first = False
+        elif odd:
+            for j in range(n):
+                c = zc[j]
+                s = zs[j]
+                c2 = c * c - s * s
+                s2 = 2.0 * c * s
+                zc[j] = c2 * bc[j] - s2 * bs[j]
+                zs[j] = c2 * bs[j] + s2 * bc[j]
+        else:
+            for j in range(n):
+                c = zc[j]
+                s = zs[j]
+                zc[j] = c * c - s * s
+                zs[j] = 2.0 * c * s
+
+
+@fastjit(inline="always")
+def _harmonic_sums(p, n, coord, fbuf, k, off, plan, zcb, zsb, out):
+    """out[p, OUT_FIRST + 2 (off + q) (+1)] = sum_j f_j cos (sin)(k_q coord_j) for the
+    frequencies of one group (``off``: its first number in ``plan``), each either by the
+    polynomial sin/cos or as an integer power of a smaller one (:func:`_harmonic_plan`)."""
+    for i in range(k.shape[0]):
+        q = plan[0, off + i]
+        base = plan[1, q]
+        zc = zcb[q]
+        zs = zsb[q]
+        acc_c = 0.0
+        acc_s = 0.0
+        if base < 0:
+            kq = k[q - off]
+            for j in range(n):
+                s_, c_ = sincos(kq * coord[j])
+                zc[j] = c_
+                zs[j] = s_
+                acc_c += fbuf[j] * c_
+                acc_s += fbuf[j] * s_
+        elif plan[2, q] == 8:  # the common ratios in one pass each, squarings in registers
+            bc = zcb[base]
+            bs = zsb[base]
+            for j in range(n):
+                c = bc[j]
+                s = bs[j]
+                c, s = c * c - s * s, 2.0 * c * s
+                c, s = c * c - s * s, 2.0 * c * s
+                c, s = c * c - s * s, 2.0 * c * s
+                zc[j] = c
+                zs[j] = s
+                acc_c += fbuf[j] * c
+                acc_s += fbuf[j] * s
+        elif plan[2, q] == 4:
+            bc = zcb[base]
+            bs = zsb[base]
+            for j in range(n):
+                c = bc[j]
+                s = bs[j]
+                c, s = c * c - s * s, 2.0 * c * s
+                c, s = c * c - s * s, 2.0 * c * s
+                zc[j] = c
+                zs[j] = s
+                acc_c += fbuf[j] * c
+                acc_s += fbuf[j] * s
+        elif plan[2, q] == 2:
+            bc = zcb[base]
+            bs = zsb[base]
+            for j in range(n):
+                c = bc[j]
+                s = bs[j]
+                c, s = c * c - s * s, 2.0 * c * s
+                zc[j] = c
+                zs[j] = s
+                acc_c += fbuf[j] * c
+                acc_s += fbuf[j] * s
+        else:
+            _power_rows(n, plan[2, q], zcb[base], zsb[base], zc, zs)
+            for j in range(n):
+                acc_c += fbuf[j] * zc[j]
+                acc_s += fbuf[j] * zs[j]
+        out[p, OUT_FIRST + 2 * q] = acc_c
+        out[p, OUT_FIRST + 2 * q + 1] = acc_s
+
+
 @fastjit(inline="always")
 def _phase2(p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_ut, table_vt,
-            k_u, k_v, images, dots, out, out_u, out_v, out_f):
+            k_u, k_v, plan, zcb, zsb, images, dots, out, out_u, out_v, out_f):
     """Phase 2 of pixel ``p``: the pattern sums of ``mode`` from the phase-1 buffers (monitor
-    coordinates, nearest monitor pixel indices and weights of the ``n`` rays)."""
+    coordinates, nearest monitor pixel indices and weights of the ``n`` rays). ``plan``,
+    ``zcb``, ``zsb``: :func:`_harmonic_plan` of (k_u, k_v) and its (n_freq, n) buffers."""
     nout = out.shape[1] - OUT_FIRST
     if mode == MODE_TABLES:
         _interleaved_sums(n, iubuf, fbuf, table_ut, out[p], OUT_FIRST)
         _interleaved_sums(n, ivbuf, fbuf, table_vt, out[p], OUT_FIRST + table_u.shape[0])
     elif mode == MODE_HARMONIC:
-        nu = k_u.shape[0]
-        for q in range(nu):
-            k = k_u[q]
-            acc_c = 0.0
-            acc_s = 0.0
-            for j in range(n):
-                s_, c_ = sincos(k * ubuf[j])
-                acc_c += fbuf[j] * c_
-                acc_s += fbuf[j] * s_
-            out[p, OUT_FIRST + 2 * q] = acc_c
-            out[p, OUT_FIRST + 2 * q + 1] = acc_s
-        for q in range(k_v.shape[0]):
-            k = k_v[q]
-            acc_c = 0.0
-            acc_s = 0.0
-            for j in range(n):
-                s_, c_ = sincos(k * vbuf[j])
-                acc_c += fbuf[j] * c_
-                acc_s += fbuf[j] * s_
-            out[p, OUT_FIRST + 2 * nu + 2 * q] = acc_c
-            out[p, OUT_FIRST + 2 * nu + 2 * q + 1] = acc_s
+        _harmonic_sums(p, n, ubuf, fbuf, k_u, 0, plan, zcb, zsb, out)
+        _harmonic_sums(p, n, vbuf, fbuf, k_v, k_u.shape[0], plan, zcb, zsb, out)
     elif mode == MODE_IMAGES:
         for q in range(nout):
             img = images[q]
@@ -937,6 +1079,13 @@ def _phase2(p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_
             out_u[p, j] = ubuf[j] if hit else np.nan
             out_v[p, j] = vbuf[j] if hit else np.nan
             out_f[p, j] = fbuf[j]
+
+
+@jit
+def _keep_alive(*arrays):
+    """Uses its arguments: arrays whose :func:`~._jit.borrow` views a loop uses are passed
+    here after the loop, so that they live until then."""
+    return len(arrays)
 
 
 @fastjit
@@ -1008,6 +1157,7 @@ def render_tile(
         ``brdf[B_AY]`` (spatially varying parameters; Ward and Beckmann); omitted = the
         vector's constants for every pixel.
     """
+    prefer_wide_vectors()
     npix = geo.shape[0]
     m = u1.shape[0]
     n = m + (1 if include_principal else 0)
@@ -1018,24 +1168,39 @@ def render_tile(
     beckmann = int(brdf[B_MODEL]) == MODEL_BECKMANN
     slopes = int(brdf[B_MODEL]) >= MODEL_SLOPE_TABLE
     nord = _n_orders(brdf)
-    osx = np.zeros(nord)
-    osy = np.zeros(nord)
-    ow = np.zeros(nord)
-    ocum = np.zeros(nord + 1)
-    a = np.empty(n)
-    b = np.empty(n)
-    c = np.empty(n)
-    ubuf = np.empty(n)
-    vbuf = np.empty(n)
-    iubuf = np.empty(n, dtype=np.int64)
-    ivbuf = np.empty(n, dtype=np.int64)
-    fbuf = np.empty(n)
-    table_ut = np.ascontiguousarray(table_u.T)
-    table_vt = np.ascontiguousarray(table_v.T)
+    # Ward and Beckmann run their ray loops over whole vector blocks: the padding rays point
+    # into the surface (weight 0, a miss), so sums are unchanged and no ray runs scalar
+    npad = n
+    if int(brdf[B_MODEL]) == MODEL_WARD or beckmann:
+        npad = (n + RAY_BLOCK - 1) // RAY_BLOCK * RAY_BLOCK
+    n2 = npad if mode == MODE_HARMONIC else n
+    ord_own = np.zeros((3, nord))
+    ocum_own = np.zeros(nord + 1)
+    a_own = np.zeros(npad)
+    b_own = np.zeros(npad)
+    c_own = np.full(npad, -1.0)
+    buf_own = np.zeros((3, npad))
+    ibuf_own = np.zeros((2, npad), dtype=np.int64)
+    table_ut_own = np.ascontiguousarray(table_u.T)
+    table_vt_own = np.ascontiguousarray(table_v.T)
+    plan_own = _harmonic_plan(k_u, k_v)
+    z_own = np.empty((2, k_u.shape[0] + k_v.shape[0], npad))
+    pix_own = brdf.copy()  # the pixel's own parameter vector (brdf_px)
+    # reference-count-free views for the pixel loop (kept alive by the owners' use below)
+    a, b, c = borrow(a_own), borrow(b_own), borrow(c_own)
+    osx, osy, ow = borrow(ord_own[0]), borrow(ord_own[1]), borrow(ord_own[2])
+    ocum = borrow(ocum_own)
+    ubuf, vbuf, fbuf = borrow(buf_own[0]), borrow(buf_own[1]), borrow(buf_own[2])
+    iubuf, ivbuf = borrow(ibuf_own[0]), borrow(ibuf_own[1])
+    table_ut, table_vt, pix = borrow(table_ut_own), borrow(table_vt_own), borrow(pix_own)
+    plan, zcb, zsb = borrow(plan_own), borrow(z_own[0]), borrow(z_own[1])
+    geo, brdf, u1, u2, rotation = borrow(geo), borrow(brdf), borrow(u1), borrow(u2), borrow(rotation)
+    table_u, table_v, k_u, k_v = borrow(table_u), borrow(table_v), borrow(k_u), borrow(k_v)
+    images, dots, out = borrow(images), borrow(dots), borrow(out)
+    out_u, out_v, out_f = borrow(out_u), borrow(out_v), borrow(out_f)
     if shared:
         _directions(u1, u2, 0.0, 0.0, scheme, theta_max, cos_tm, include_principal, a, b, c)
     nout = out.shape[1] - OUT_FIRST
-    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -1057,12 +1222,14 @@ def render_tile(
             pix[B_AX] = brdf_px[p, 1]
             pix[B_AY] = brdf_px[p, 2]
             if beckmann:
-                ftot, fhit = _phase1_beckmann(g, a, b, c, n, pix, wm, hm, ubuf, vbuf, iubuf,
+                ftot, fhit = _phase1_beckmann(g, a, b, c, npad, pix, wm, hm, ubuf, vbuf, iubuf,
                                               ivbuf, fbuf)
             else:
-                ftot, fhit = _phase1(g, a, b, c, n, pix, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+                ftot, fhit = _phase1(g, a, b, c, npad, pix, wm, hm, ubuf, vbuf, iubuf, ivbuf,
+                                     fbuf)
         elif beckmann:
-            ftot, fhit = _phase1_beckmann(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+            ftot, fhit = _phase1_beckmann(g, a, b, c, npad, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf,
+                                          fbuf)
         elif slopes:
             wsum = 1.0
             if nord > 0:
@@ -1070,15 +1237,17 @@ def render_tile(
             ftot, fhit = _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wm, hm, ubuf,
                                         vbuf, iubuf, ivbuf, fbuf)
         else:
-            ftot, fhit = _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+            ftot, fhit = _phase1(g, a, b, c, npad, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         if mon_corr is not None:
             fhit = monitor_correction(g, mon_corr, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         out[p, OUT_FTOTAL] = ftot
         out[p, OUT_FHIT] = fhit
         _phase2(
-            p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_ut, table_vt,
-            k_u, k_v, images, dots, out, out_u, out_v, out_f,
+            p, mode, n2, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_ut, table_vt,
+            k_u, k_v, plan, zcb, zsb, images, dots, out, out_u, out_v, out_f,
         )
+    _keep_alive(a_own, b_own, c_own, ord_own, ocum_own, buf_own, ibuf_own, table_ut_own, table_vt_own, pix_own,
+                plan_own, z_own)
 
 
 @fastjit
@@ -1126,6 +1295,7 @@ def render_tile_lobe(
     pixel's micro-normals) as there. The mirror (no lobe) is not accepted: render it with
     :func:`render_tile`.
     """
+    prefer_wide_vectors()
     if int(brdf[B_MODEL]) == MODEL_MIRROR:
         raise ValueError("render_tile_lobe: the mirror has no lobe to sample; use render_tile")
     npix = geo.shape[0]
@@ -1137,27 +1307,33 @@ def render_tile_lobe(
     ay = brdf[B_AY]
     slopes = int(brdf[B_MODEL]) >= MODEL_SLOPE_TABLE
     nord = _n_orders(brdf)
-    osx = np.zeros(nord)
-    osy = np.zeros(nord)
-    ow = np.zeros(nord)
-    ocum = np.zeros(nord + 1)
-    mx = np.empty(n)
-    my = np.empty(n)
-    mz = np.empty(n)
-    mz3 = np.empty(n)
-    ubuf = np.empty(n)
-    vbuf = np.empty(n)
-    iubuf = np.empty(n, dtype=np.int64)
-    ivbuf = np.empty(n, dtype=np.int64)
-    fbuf = np.empty(n)
-    table_ut = np.ascontiguousarray(table_u.T)
-    table_vt = np.ascontiguousarray(table_v.T)
+    ord_own = np.zeros((3, nord))
+    ocum_own = np.zeros(nord + 1)
+    m_own = np.empty((4, n))
+    buf_own = np.empty((3, n))
+    ibuf_own = np.empty((2, n), dtype=np.int64)
+    table_ut_own = np.ascontiguousarray(table_u.T)
+    table_vt_own = np.ascontiguousarray(table_v.T)
+    plan_own = _harmonic_plan(k_u, k_v)
+    z_own = np.empty((2, k_u.shape[0] + k_v.shape[0], n))
+    pix_own = brdf.copy()  # the pixel's own parameter vector (brdf_px)
+    # reference-count-free views for the pixel loop (kept alive by the owners' use below)
+    osx, osy, ow = borrow(ord_own[0]), borrow(ord_own[1]), borrow(ord_own[2])
+    ocum = borrow(ocum_own)
+    mx, my, mz, mz3 = borrow(m_own[0]), borrow(m_own[1]), borrow(m_own[2]), borrow(m_own[3])
+    ubuf, vbuf, fbuf = borrow(buf_own[0]), borrow(buf_own[1]), borrow(buf_own[2])
+    iubuf, ivbuf = borrow(ibuf_own[0]), borrow(ibuf_own[1])
+    table_ut, table_vt, pix = borrow(table_ut_own), borrow(table_vt_own), borrow(pix_own)
+    plan, zcb, zsb = borrow(plan_own), borrow(z_own[0]), borrow(z_own[1])
+    geo, brdf, u1, u2, rotation = borrow(geo), borrow(brdf), borrow(u1), borrow(u2), borrow(rotation)
+    table_u, table_v, k_u, k_v = borrow(table_u), borrow(table_v), borrow(k_u), borrow(k_v)
+    images, dots, out = borrow(images), borrow(dots), borrow(out)
+    out_u, out_v, out_f = borrow(out_u), borrow(out_v), borrow(out_f)
     if shared and nord == 0:
         if slopes:
             _micronormals_slopes(u1, u2, 0.0, 0.0, brdf, osx, osy, ow, ocum, 1.0, mx, my, mz, mz3)
         else:
             _micronormals(u1, u2, 0.0, 0.0, ax, ay, mx, my, mz, mz3)
-    pix = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     for p in range(npix):
         g = geo[p]
         if g[G_VALID] == 0.0:
@@ -1204,5 +1380,7 @@ def render_tile_lobe(
         out[p, OUT_FHIT] = fhit
         _phase2(
             p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_ut, table_vt,
-            k_u, k_v, images, dots, out, out_u, out_v, out_f,
+            k_u, k_v, plan, zcb, zsb, images, dots, out, out_u, out_v, out_f,
         )
+    _keep_alive(ord_own, ocum_own, m_own, buf_own, ibuf_own, table_ut_own, table_vt_own, pix_own,
+                plan_own, z_own)

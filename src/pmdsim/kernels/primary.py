@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ._jit import fastjit
+from ._jit import borrow, fastjit
 from .bundle import G_A, G_B, G_C, G_SIZE, G_T, G_U0, G_V0, G_VALID, G_X, G_Y, G_Z
 from .surface import SURF_SAG, intersect_sag
 
@@ -216,6 +216,9 @@ def geometry_tile(cam, surf, frame, mon, row0, row1, width, geo, spec):
     geometry rows (cone basis about P) and the exact monitor coordinates (u, v) of P (NaN
     where P misses the monitor or the vision ray misses the surface). One pinhole ray
     through each pixel centre."""
+    # reference-count-free views for the pixel loop (the arguments outlive it)
+    cam, surf, frame, mon = borrow(cam), borrow(surf), borrow(frame), borrow(mon)
+    geo, spec = borrow(geo), borrow(spec)
     px0 = cam[CAM_POS]
     py0 = cam[CAM_POS + 1]
     pz0 = cam[CAM_POS + 2]
@@ -239,6 +242,8 @@ def geometry_tile(cam, surf, frame, mon, row0, row1, width, geo, spec):
 def geometry_rays(origins, dirs, surf, frame, mon, geo, spec):
     """:func:`geometry_tile` for explicit vision rays: ``origins`` and unit ``dirs`` (R, 3)
     (a thin lens's aperture samples, sub-pixel rays) -> ``geo`` (R, G_SIZE), ``spec`` (R, 2)."""
+    origins, dirs, surf, frame = borrow(origins), borrow(dirs), borrow(surf), borrow(frame)
+    mon, geo, spec = borrow(mon), borrow(geo), borrow(spec)
     for k in range(origins.shape[0]):
         _fill_row(surf, frame, mon, origins[k, 0], origins[k, 1], origins[k, 2],
                   dirs[k, 0], dirs[k, 1], dirs[k, 2], geo[k], spec[k])
@@ -254,6 +259,8 @@ def geometry_lens(pos, rot, chief, aperture, focus, surf, frame, mon, geo, spec)
     of the plane in focus (mm; <= 0: pinhole, the chief rays themselves, m must be 1). Ray
     (p, s, a) starts at ``pos + rot (A, 0)`` towards the in-focus point ``focus * chief`` and
     fills row ``(p * n2 + s) * m + a`` of ``geo`` / ``spec``."""
+    pos, rot, chief, aperture = borrow(pos), borrow(rot), borrow(chief), borrow(aperture)
+    surf, frame, mon, geo, spec = borrow(surf), borrow(frame), borrow(mon), borrow(geo), borrow(spec)
     npix = chief.shape[0]
     n2 = chief.shape[1]
     m = aperture.shape[1]

@@ -20,7 +20,8 @@ Methods
   al. 2013), fourth-order in the interior and still exact for quadratics. Any mask
   (circles, annuli, islands: piston is set per connected part). Full rectangles are
   solved exactly with a DCT (the normal matrix of the scheme is the Neumann Laplacian);
-  masked ones with a sparse direct solver or, for large maps, algebraic multigrid (PyAMG).
+  masked ones by conjugate gradients preconditioned with that DCT solve on a rectangle
+  holding the mask (or, on request, SciPy's sparse LU or PyAMG's algebraic multigrid).
 - :func:`frankot_chellappa`: the Fourier projection onto integrable fields for full
   rectangles (periodic FFT, optionally on the mirror-extended field). Documented edge error:
   see ``docs/reconstruction.md``.
@@ -34,6 +35,7 @@ Methods
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +57,7 @@ __all__ = [
     "height_stats",
     "HeightStats",
     "TERM_LEVELS",
+    "clear_operator_cache",
 ]
 
 
@@ -111,75 +114,56 @@ def _prepare(slope_x, slope_y, mask):
 
 
 # --------------------------------------------------------------------------- Southwell
-def _derivative_along(s, m, axis, h):
-    """ds/d(axis) from valid neighbours: central where both exist, one-sided 3-point
-    (2nd order) where two on one side exist, 2-point otherwise, 0 for isolated points."""
-    s = np.moveaxis(s, axis, -1)
-    m = np.moveaxis(m, axis, -1)
-    n = s.shape[-1]
-    d = np.zeros_like(s)
-    if n < 2:
-        return np.moveaxis(d, -1, axis)
-
-    def sh(a, k, fill):
-        # value at index i + k (fill outside)
-        out = np.full_like(a, fill)
-        if k > 0:
-            out[..., :-k] = a[..., k:]
-        elif k < 0:
-            out[..., -k:] = a[..., :k]
-        else:
-            out[...] = a
-        return out
-
-    mp1, mm1 = sh(m, 1, False), sh(m, -1, False)
-    mp2, mm2 = sh(m, 2, False), sh(m, -2, False)
-    sp1, sm1, sp2, sm2 = sh(s, 1, 0.0), sh(s, -1, 0.0), sh(s, 2, 0.0), sh(s, -2, 0.0)
-    central = m & mp1 & mm1
-    fwd3 = m & ~central & mp1 & mp2
-    bwd3 = m & ~central & ~fwd3 & mm1 & mm2
-    fwd2 = m & ~central & ~fwd3 & ~bwd3 & mp1
-    bwd2 = m & ~central & ~fwd3 & ~bwd3 & ~fwd2 & mm1
-    d = np.where(central, (sp1 - sm1) / (2 * h), d)
-    d = np.where(fwd3, (-3 * s + 4 * sp1 - sp2) / (2 * h), d)
-    d = np.where(bwd3, (3 * s - 4 * sm1 + sm2) / (2 * h), d)
-    d = np.where(fwd2, (sp1 - s) / h, d)
-    d = np.where(bwd2, (s - sm1) / h, d)
-    return np.moveaxis(d, -1, axis)
-
-
-def _southwell_differences(sx, sy, m, dx, dy, order):
-    """Right-hand sides of the neighbour equations z_j - z_i = b along x and y, and the
-    masks of valid pairs ((H, W-1) and (H-1, W))."""
-    px = m[:, :-1] & m[:, 1:]
-    py = m[:-1, :] & m[1:, :]
-    bx = dx * 0.5 * (sx[:, :-1] + sx[:, 1:])
-    by = dy * 0.5 * (sy[:-1, :] + sy[1:, :])
-    if order == 4:
-        dsx = _derivative_along(sx, m, 1, dx)
-        dsy = _derivative_along(sy, m, 0, dy)
-        bx = bx - dx * dx / 12.0 * (dsx[:, 1:] - dsx[:, :-1])
-        by = by - dy * dy / 12.0 * (dsy[1:, :] - dsy[:-1, :])
-    elif order != 2:
+def _southwell_rhs(sx, sy, m, dx, dy, order):
+    """(H, W) right-hand side A^T b of the Southwell normal equations (one value per node;
+    0 outside ``m``): the compiled :func:`pmdsim.kernels.reconstruct.southwell_rhs`."""
+    if order not in (2, 4):
         raise ValueError(f"order must be 2 (classic Southwell) or 4 (higher-order), got {order!r}")
-    return np.where(px, bx, 0.0), np.where(py, by, 0.0), px, py
+    from ..kernels.reconstruct import southwell_rhs
+
+    rhs = np.empty(m.shape)
+    southwell_rhs(np.ascontiguousarray(sx), np.ascontiguousarray(sy), np.ascontiguousarray(m),
+                  float(dx), float(dy), int(order), rhs)
+    return rhs
 
 
 def _dct_poisson(rhs):
     """Solve L z = rhs for the Neumann grid Laplacian L = Dx^T Dx + Dy^T Dy (forward
-    differences, unit step) on a full rectangle; the zero-mean solution."""
+    differences, unit step) on a full rectangle; the zero-mean solution.
+
+    Both axes by DCT-II when their lengths have small prime factors (or the grid is small);
+    otherwise (a DCT of a length like 1226 = 2 x 613 takes 3x longer) DCT along the axis
+    with the smaller largest prime factor only and, for each of its modes k, the tridiagonal
+    system (T + lambda_k I) y = c_k along the other axis
+    (:func:`_neumann_tridiagonal_solve`; mode 0 by a 1-D DCT).
+    The two agree to ~1e-11 relative (the Thomas sweep of the near-singular low modes)."""
     h, w = rhs.shape
-    lx = 2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w)
-    ly = 2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h)
-    lam = ly[:, None] + lx[None, :]
-    c = scipy.fft.dctn(rhs, type=2, norm="ortho", workers=-1)
-    lam[0, 0] = 1.0
-    c = c / lam
-    c[0, 0] = 0.0
-    return scipy.fft.idctn(c, type=2, norm="ortho", workers=-1)
+    if all(scipy.fft.next_fast_len(n, real=True) == n for n in (h, w)) or min(h, w) < 3 or h * w < 65_536:
+        c = scipy.fft.dctn(rhs, type=2, norm="ortho", workers=-1)
+        c /= _dct_eigenvalues(rhs.shape)
+        c[0, 0] = 0.0
+        return scipy.fft.idctn(c, type=2, norm="ortho", workers=-1)
+    # the DCT axis: the length with the smaller largest prime factor; the other is solved directly
+    axis = 0 if _largest_prime_factor(h) <= _largest_prime_factor(w) else 1
+    c = scipy.fft.dct(rhs, type=2, norm="ortho", axis=axis, workers=-1)
+    c = np.ascontiguousarray(c if axis == 0 else c.T)  # (modes, positions)
+    k = c.shape[0]
+    lam = 2.0 - 2.0 * np.cos(np.pi * np.arange(k) / k)
+    y = np.zeros_like(c)
+    y[1:] = _neumann_tridiagonal_solve(c[1:], lam[1:])
+    # mode 0: the singular 1-D Neumann problem, its zero-mean solution
+    n = c.shape[1]
+    c0 = scipy.fft.dct(c[0], type=2, norm="ortho")
+    lam1 = 2.0 - 2.0 * np.cos(np.pi * np.arange(n) / n)
+    lam1[0] = 1.0
+    c0 /= lam1
+    c0[0] = 0.0
+    y[0] = scipy.fft.idct(c0, type=2, norm="ortho")
+    return scipy.fft.idct(y if axis == 0 else y.T, type=2, norm="ortho", axis=axis, workers=-1)
 
 
-def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", remove="piston"):
+def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", remove="piston", x0=None,
+              rtol=1e-11):
     """Height (H, W) in mm from slopes by zonal least squares (Southwell grid).
 
     Parameters
@@ -193,13 +177,26 @@ def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", r
     order : {2, 4}
         2: classic Southwell (trapezoid between neighbours); 4: with the Euler-Maclaurin
         correction from slope derivatives (default; exact for quadratics either way).
-    solver : {"auto", "dct", "direct", "amg"}
-        ``dct`` needs a full rectangle (exact, O(N log N)); ``direct`` = SciPy's sparse LU;
-        ``amg`` = PyAMG smoothed-aggregation CG; ``auto``: ``dct`` on full rectangles,
-        ``direct`` below 50 000 points, ``amg`` above.
+    solver : {"auto", "dct", "pcg", "direct", "amg"}
+        ``dct`` needs a full rectangle (exact, O(N log N)); ``pcg``: conjugate gradients on
+        the masked system preconditioned by the ``dct`` solve on a rectangle holding the
+        mask (15-25 iterations on circles, annuli, holes; no set-up); ``direct`` = SciPy's
+        sparse LU; ``amg`` = PyAMG smoothed-aggregation CG; ``auto``: ``dct`` on full
+        rectangles, ``pcg`` otherwise. The iterative ones stop at a residual of ``rtol``
+        times the right-hand side's (the first guess's residual with ``x0``) and fall back
+        to ``direct`` when they do not get there. The
+        matrix, its LU factors and the AMG hierarchy depend only on the mask: they are kept
+        for the next call with the same mask (the iterations of a reconstruction).
     remove : str or sequence
         Terms removed from the result (:func:`remove_terms`); default: piston (mean zero
         per connected part of the aperture). Piston is always undetermined by slopes.
+    x0 : (H, W) ndarray, optional
+        A first guess of the height (mm) for the iterative solvers (``pcg``, ``amg``), e.g.
+        the previous iteration of a reconstruction; the others ignore it.
+    rtol : float
+        Residual reduction of the iterative solvers (default 1e-11: the exact least-squares
+        solution to round-off). A reconstruction passes its previous height as ``x0`` and a
+        looser ``rtol``: it only needs the correction to a few digits per iteration.
 
     Returns
     -------
@@ -207,89 +204,217 @@ def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", r
     """
     dx, dy = _spacing(spacing)
     sx, sy, m = _prepare(slope_x, slope_y, mask)
-    h, w = m.shape
-    bx, by, px, py = _southwell_differences(sx, sy, m, dx, dy, order)
-    full = bool(m.all())
-    if solver == "auto":
-        solver = "dct" if full else ("direct" if m.sum() < 50_000 else "amg")
-    if solver == "dct":
-        if not full:
-            raise ValueError("solver='dct' needs a full rectangle (no mask, all slopes finite); use 'direct' or 'amg'")
-        rhs = np.zeros((h, w))
-        rhs[:, :-1] -= bx
-        rhs[:, 1:] += bx
-        rhs[:-1, :] -= by
-        rhs[1:, :] += by
-        z = _dct_poisson(rhs)
-    elif solver in ("direct", "amg"):
-        z = _southwell_sparse(bx, by, px, py, m, solver)
-    else:
-        raise ValueError(f"solver must be 'auto', 'dct', 'direct' or 'amg', got {solver!r}")
-    z = np.where(m, z, np.nan)
+    z = _integrate(sx, sy, m, dx, dy, order, solver, x0, rtol)
+    z[~m] = np.nan
     return remove_terms(z, m, *grid_coordinates(m.shape, (dx, dy)), terms=remove, _components=True)
 
 
-_AMG_CACHE: dict = {}  # one PyAMG hierarchy, keyed by the mask
+def _integrate(sx, sy, m, dx, dy, order=4, solver="auto", x0=None, rtol=1e-11):
+    """:func:`southwell` on prepared input (slopes finite everywhere, 0 outside the bool
+    mask ``m``): a height (H, W), no term removed, any value outside ``m``."""
+    rhs = _southwell_rhs(sx, sy, m, dx, dy, order)
+    if not m.any():
+        return np.zeros(m.shape)
+    full = bool(m.all())
+    if solver == "auto":
+        solver = "dct" if full else "pcg"
+    if solver == "dct":
+        if not full:
+            raise ValueError("solver='dct' needs a full rectangle (no mask, all slopes finite); "
+                             "use 'pcg', 'direct' or 'amg'")
+        z = _dct_poisson(rhs)
+    elif solver in ("pcg", "direct", "amg"):
+        z = _southwell_sparse(rhs, m, solver, x0, rtol)
+    else:
+        raise ValueError(f"solver must be 'auto', 'dct', 'pcg', 'direct' or 'amg', got {solver!r}")
+    return z
 
 
-def _southwell_sparse(bx, by, px, py, m, solver):
+@dataclass(eq=False)
+class _SouthwellOperator:
+    """The normal matrix of the Southwell equations on one mask (the Neumann grid Laplacian
+    of the measured nodes; independent of the slopes and of the grid step) and its solver:
+    ``lu`` (SuperLU of the matrix with one node pinned per connected part), ``ml`` (the
+    PyAMG hierarchy of the singular matrix) or ``box`` (for ``pcg``: the slices of the
+    mask's bounding box and the shape of the DCT rectangle that holds it)."""
+
+    lap: object
+    ncomp: int
+    labels: np.ndarray
+    lu: object = None
+    ml: object = None
+    box: tuple = None
+
+
+_OPERATORS: dict = {}  # (shape, kind, mask digest) -> _SouthwellOperator, the latest two
+_OPERATORS_KEPT = 2
+_OPERATORS_LOCK = threading.Lock()  # runs and sweep points may integrate in threads
+
+
+def clear_operator_cache():
+    """Forget the kept Southwell factorisations and AMG hierarchies (their memory)."""
+    with _OPERATORS_LOCK:
+        _OPERATORS.clear()
+
+
+def _laplacian(m):
+    """The Neumann grid Laplacian A^T A of the measured nodes' neighbour pairs (CSR)."""
     h, w = m.shape
     n = int(m.sum())
     idx = np.full((h, w), -1, np.int64)
     idx[m] = np.arange(n)
-    ix0, ix1 = idx[:, :-1][px], idx[:, 1:][px]
-    iy0, iy1 = idx[:-1, :][py], idx[1:, :][py]
-    i0 = np.concatenate([ix0, iy0])
-    i1 = np.concatenate([ix1, iy1])
-    b = np.concatenate([bx[px], by[py]])
-    k = len(b)
-    rows = np.repeat(np.arange(k), 2)
-    cols = np.stack([i0, i1], axis=1).ravel()
-    vals = np.tile([-1.0, 1.0], k)
-    a = sp.csr_matrix((vals, (rows, cols)), shape=(k, n))
-    lap = (a.T @ a).tocsr()
-    rhs = a.T @ b
+    px = m[:, :-1] & m[:, 1:]
+    py = m[:-1, :] & m[1:, :]
+    i0 = np.concatenate([idx[:, :-1][px], idx[:-1, :][py]])
+    i1 = np.concatenate([idx[:, 1:][px], idx[1:, :][py]])
+    deg = np.bincount(i0, minlength=n) + np.bincount(i1, minlength=n)
+    rows = np.concatenate([i0, i1, np.arange(n)])
+    cols = np.concatenate([i1, i0, np.arange(n)])
+    vals = np.concatenate([-np.ones(2 * len(i0)), deg.astype(np.float64)])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+def _operator(m, kind):
+    import hashlib
+
+    key = (m.shape, kind, hashlib.blake2b(np.packbits(m).tobytes(), digest_size=16).hexdigest())
+    with _OPERATORS_LOCK:
+        op = _OPERATORS.get(key)
+    if op is not None:
+        return op
+    lap = _laplacian(m)
     ncomp, labels = scipy.sparse.csgraph.connected_components(lap, directed=False)
-    if solver == "amg" and ncomp > 16:
-        solver = "direct"  # many islands: the near-null space would be too wide
-    if solver == "direct":
-        # pin one point per connected part (piston is free; set afterwards)
+    op = _SouthwellOperator(lap, ncomp, labels)
+    if kind == "pcg":
+        rows = np.flatnonzero(m.any(axis=1))
+        cols = np.flatnonzero(m.any(axis=0))
+        box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+        # a DCT of a length with a large prime factor is several times slower: the
+        # rectangle of the preconditioner only has to hold the mask
+        shape = tuple(scipy.fft.next_fast_len(int(n), real=True)
+                      for n in (rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1))
+        op.box = (box, shape)
+    elif kind == "direct" or ncomp > 16:  # many islands: AMG's near-null space would be too wide
+        # pin one node per connected part (piston is free; set afterwards): since the
+        # right-hand side sums to zero over each part, the pinned node comes out 0 and
+        # the others solve the singular system exactly
         first = np.unique(labels, return_index=True)[1]
-        pin = np.zeros(n)
+        pin = np.zeros(lap.shape[0])
         pin[first] = 1.0
-        lap = (lap + sp.diags(pin)).tocsr()
-        z = scipy.sparse.linalg.spsolve(lap.tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
+        op.lu = scipy.sparse.linalg.splu((lap + sp.diags(pin)).tocsc(), permc_spec="MMD_AT_PLUS_A")
     else:
         try:
             import pyamg
         except ImportError as e:  # pragma: no cover - pyamg is a dependency
             raise ImportError("solver='amg' needs PyAMG (pip install pyamg)") from e
         # the singular Neumann system itself (consistent: rhs sums to zero per part), with
-        # the constants of each part as the near-null space; CG stays in the range. The
-        # hierarchy depends only on the mask: kept for the next call with the same mask
-        # (the reconstruction's iterations).
-        import hashlib
+        # the constants of each part as the near-null space; CG stays in the range
+        near_null = np.zeros((lap.shape[0], ncomp))
+        near_null[np.arange(lap.shape[0]), labels] = 1.0
+        op.ml = pyamg.smoothed_aggregation_solver(lap, B=near_null, symmetry="hermitian", max_coarse=500)
+    with _OPERATORS_LOCK:
+        while len(_OPERATORS) >= _OPERATORS_KEPT:
+            _OPERATORS.pop(next(iter(_OPERATORS)))
+        _OPERATORS[key] = op
+    return op
 
-        key = (m.shape, hashlib.blake2b(np.packbits(m).tobytes(), digest_size=16).hexdigest())
-        ml = _AMG_CACHE.get(key)
-        if ml is None:
-            near_null = np.zeros((n, ncomp))
-            near_null[np.arange(n), labels] = 1.0
-            ml = pyamg.smoothed_aggregation_solver(lap, B=near_null, symmetry="hermitian", max_coarse=500)
-            _AMG_CACHE.clear()
-            _AMG_CACHE[key] = ml
-        import warnings
 
-        with warnings.catch_warnings():
-            # CG stops with "indefinite preconditioner" once the residual reaches round-off
-            warnings.simplefilter("ignore", UserWarning)
-            z = ml.solve(rhs, tol=1e-11, accel="cg", maxiter=300)
-        res = np.linalg.norm(lap @ z - rhs)
-        if not res <= 1e-8 * max(np.linalg.norm(rhs), 1e-300):  # not converged: the sure way
-            return _southwell_sparse(bx, by, px, py, m, "direct")
-    out = np.zeros((h, w))
+def _southwell_sparse(rhs, m, solver, x0=None, rtol=1e-11):
+    op = _operator(m, solver)
+    b = rhs[m]
+    if op.lu is not None:
+        z = op.lu.solve(b)
+    else:
+        guess = None
+        if x0 is not None:
+            guess = np.asarray(x0, np.float64)[m]
+            if not np.isfinite(guess).all():
+                guess = None
+        norm_b = max(float(np.linalg.norm(b)), 1e-300)
+        # the residual to reach: rtol of the first guess's residual (of b without one)
+        target = rtol * (norm_b if guess is None else float(np.linalg.norm(b - op.lap @ guess)))
+        if op.box is not None:
+            z = _pcg(op, m, b, guess, target)
+        else:
+            import warnings
+
+            with warnings.catch_warnings():
+                # CG stops with "indefinite preconditioner" once the residual reaches round-off
+                warnings.simplefilter("ignore", UserWarning)
+                z = op.ml.solve(b, x0=guess, tol=target / norm_b, accel="cg", maxiter=300)
+        res = np.linalg.norm(op.lap @ z - b)
+        if not res <= max(1e-8 * norm_b, 2.0 * target):  # not converged: the sure way
+            return _southwell_sparse(rhs, m, "direct")
+    out = np.zeros(m.shape)
     out[m] = z
     return out
+
+
+def _pcg(op, m, b, x0, atol, maxiter=200):
+    """CG on the masked Southwell system to a residual of ``atol``, preconditioned by the
+    exact solve of the system on a rectangle holding the mask (:func:`_dct_poisson`) with
+    the residual put on the mask's nodes and zeros around: a fictitious-domain
+    preconditioner, symmetric and positive definite."""
+    (box, shape) = op.box
+    mb = m[box]
+    h, w = mb.shape
+    lam = _dct_eigenvalues(shape)
+    pad = np.zeros(shape)
+    inner = pad[:h, :w]
+
+    def precondition(r):
+        inner[mb] = r
+        c = scipy.fft.dctn(pad, type=2, norm="ortho", workers=-1)
+        c /= lam
+        c[0, 0] = 0.0
+        return scipy.fft.idctn(c, type=2, norm="ortho", workers=-1)[:h, :w][mb]
+
+    n = len(b)
+    prec = scipy.sparse.linalg.LinearOperator((n, n), matvec=precondition, dtype=np.float64)
+    z, _ = scipy.sparse.linalg.cg(op.lap, b, x0=x0, rtol=0.0, atol=atol, maxiter=maxiter, M=prec)
+    return z
+
+
+def _neumann_tridiagonal_solve(rhs, shift):
+    """Solve ``(T + shift[k] I) y_k = rhs[k]`` for every row k of ``rhs`` (K, n) (all shifts
+    > 0), T the 1-D Neumann grid Laplacian of length n (diagonal 1, 2, ..., 2, 1;
+    off-diagonals -1): the Thomas algorithm, one sweep for all rows at once (stable: the
+    matrices are symmetric, positive definite and diagonally dominant)."""
+    k, n = rhs.shape
+    if n == 1:
+        return rhs / shift[:, None]
+    cp = np.empty((n, k))  # modified super-diagonal, position-major
+    y = np.empty((n, k))
+    r = rhs.T
+    den = 1.0 + shift
+    cp[0] = -1.0 / den
+    y[0] = r[0] / den
+    for i in range(1, n):
+        den = (2.0 if i < n - 1 else 1.0) + shift + cp[i - 1]  # b - a cp[i-1], a = -1
+        cp[i] = -1.0 / den
+        y[i] = (r[i] + y[i - 1]) / den
+    for i in range(n - 2, -1, -1):
+        y[i] -= cp[i] * y[i + 1]
+    return y.T
+
+
+def _largest_prime_factor(n):
+    p, largest = 2, 1
+    while p * p <= n:
+        while n % p == 0:
+            n //= p
+            largest = p
+        p += 1
+    return max(largest, n) if n > 1 else largest
+
+
+def _dct_eigenvalues(shape):
+    """Eigenvalues of the Neumann grid Laplacian of ``shape`` in the DCT-II basis ([0, 0]
+    set to 1: the constant mode is dropped by the caller)."""
+    h, w = shape
+    lam = (2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h))[:, None] + (2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w))[None, :]
+    lam[0, 0] = 1.0
+    return lam
 
 
 # ------------------------------------------------------------------ Frankot-Chellappa
@@ -409,19 +534,28 @@ def legendre_terms(n_terms):
     return out[:n_terms]
 
 
-def _legendre(i, j, u, v):
-    """sqrt((2i+1)(2j+1)) P_i(u) P_j(v) (RMS 1 on [-1, 1]^2) and its (u, v) gradient."""
-    from numpy.polynomial import legendre as L
+def _legendre_table(t, degree):
+    """P_k(t) and P_k'(t) for k = 0..degree (Bonnet's recurrence), each (degree + 1, N)."""
+    p = np.empty((degree + 1,) + t.shape)
+    d = np.zeros_like(p)
+    p[0] = 1.0
+    if degree >= 1:
+        p[1] = t
+        d[1] = 1.0
+    for k in range(1, degree):
+        p[k + 1] = ((2 * k + 1) * t * p[k] - k * p[k - 1]) / (k + 1)
+        d[k + 1] = d[k - 1] + (2 * k + 1) * p[k]
+    return p, d
 
-    ci = np.zeros(i + 1)
-    ci[i] = 1.0
-    cj = np.zeros(j + 1)
-    cj[j] = 1.0
+
+def _legendre(i, j, u, v, tables=None):
+    """sqrt((2i+1)(2j+1)) P_i(u) P_j(v) (RMS 1 on [-1, 1]^2) and its (u, v) gradient;
+    ``tables``: the :func:`_legendre_table` of u and of v, to share between terms."""
+    if tables is None:
+        tables = (_legendre_table(u, i), _legendre_table(v, j))
+    (pu, du), (pv, dv) = tables
     norm = math.sqrt((2 * i + 1) * (2 * j + 1))
-    pu, pv = L.legval(u, ci), L.legval(v, cj)
-    du = L.legval(u, L.legder(ci)) if i > 0 else np.zeros_like(u)
-    dv = L.legval(v, L.legder(cj)) if j > 0 else np.zeros_like(v)
-    return norm * pu * pv, norm * du * pv, norm * pu * dv
+    return norm * pu[i] * pv[j], norm * du[i] * pv[j], norm * pu[i] * dv[j]
 
 
 @dataclass(frozen=True)
@@ -469,25 +603,32 @@ def modal_fit(slope_x, slope_y, spacing, mask=None, *, basis="zernike", n_terms=
         u, v = xm / scale[0], ym / scale[1]
         terms = legendre_terms(n_terms)
         names = tuple(f"L{i}{j}" for i, j in terms)
-        funcs = [lambda uu, vv, i=i, j=j: _legendre(i, j, uu, vv) for i, j in terms]
+        degree = max(max(t) for t in terms)
+        tables = (_legendre_table(u, degree), _legendre_table(v, degree))
+        funcs = [lambda uu, vv, i=i, j=j: _legendre(i, j, uu, vv, tables) for i, j in terms]
     else:
         raise ValueError(f"basis must be 'zernike' or 'legendre', got {basis!r}")
-    gx = np.empty((len(u), len(funcs)))
-    gy = np.empty_like(gx)
+    # one row per term (rows contiguous): values, d/dx and d/dy at the measured points
+    zv = np.empty((len(funcs), len(u)))
+    gx = np.empty_like(zv)
+    gy = np.empty_like(zv)
     for k, f in enumerate(funcs):
-        _, a, b = f(u, v)
-        gx[:, k] = a / scale[0]
-        gy[:, k] = b / scale[1]
-    a = np.vstack([gx[:, 1:], gy[:, 1:]])
-    rhs = np.concatenate([sx[m], sy[m]])
-    coef = _lstsq(a, rhs)
+        zv[k], a, b = f(u, v)
+        gx[k] = a / scale[0]
+        gy[k] = b / scale[1]
+    gx, gy = gx[1:], gy[1:]
+    bx, by = sx[m], sy[m]
+    # least squares of [gx; gy]^T c = [bx; by] by its normal equations, without stacking
+    import scipy.linalg
+
+    try:
+        coef = scipy.linalg.solve(gx @ gx.T + gy @ gy.T, gx @ bx + gy @ by, assume_a="pos")
+    except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
+        coef = np.linalg.lstsq(np.hstack([gx, gy]).T, np.concatenate([bx, by]), rcond=None)[0]
     coef = np.concatenate([[0.0], coef])
-    res = a @ coef[1:] - rhs
+    res = np.concatenate([coef[1:] @ gx - bx, coef[1:] @ gy - by])
     # height on the grid; piston chosen so the fitted terms have zero mean on the aperture
-    zval = np.zeros(len(u))
-    for k, f in enumerate(funcs):
-        if k:
-            zval += coef[k] * f(u, v)[0]
+    zval = coef[1:] @ zv[1:]
     zval -= zval.mean()
     height = np.full(m.shape, np.nan)
     height[m] = zval

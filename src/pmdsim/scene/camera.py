@@ -189,13 +189,16 @@ class Camera:
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (..., 2) = (col, row) of world points (mm), OpenCV's model."""
-        pc = (np.asarray(points, np.float64) - self.position) @ self.rotation
+        # einsum, not matmul: OpenBLAS takes ~10x longer for an (N, 3) @ (3, 3) product
+        pc = np.einsum("...j,jk->...k", np.asarray(points, np.float64) - self.position, self.rotation)
         with np.errstate(divide="ignore", invalid="ignore"):
             x = pc[..., 0] / pc[..., 2]
             y = pc[..., 1] / pc[..., 2]
-        xd, yd = self.distort(x, y)
-        return np.stack([self.focal_px * xd + self.principal_point[0],
-                         self.fy * yd + self.principal_point[1]], axis=-1)
+        xd, yd = self.distort(x, y) if self.has_distortion else (x, y)  # distort is the identity then
+        out = np.empty(x.shape + (2,))
+        out[..., 0] = self.focal_px * xd + self.principal_point[0]
+        out[..., 1] = self.fy * yd + self.principal_point[1]
+        return out
 
     def subpixel_offsets(self) -> np.ndarray:
         """(n^2, 2) (d_col, d_row) offsets of the n x n sub-pixel centres from the pixel centre."""

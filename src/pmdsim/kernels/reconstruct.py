@@ -1,0 +1,154 @@
+"""Compiled per-node work of slope reconstruction and Southwell integration.
+
+Plain arrays in and out; the validated entry points are
+:func:`pmdsim.measure.reconstruct.reconstruct` and :func:`pmdsim.measure.integrate.southwell`.
+Slow NumPy references: ``tests/naive_integrate.py`` (the right-hand side) and
+:func:`pmdsim.measure.reconstruct.bisector_normals` / ``slopes_in_frame`` (the slopes).
+
+- :func:`southwell_rhs`: the right-hand side ``A^T b`` of the Southwell normal equations on a
+  grid, one value per node: every measured neighbour pair (i, j) (j = right or lower
+  neighbour) has ``z_j - z_i = b_ij`` with ``b = h (s_i + s_j) / 2`` (order 2, the
+  trapezoid rule) ``- h^2 / 12 (s'_j - s'_i)`` (order 4, Euler-Maclaurin end correction,
+  ``s'`` by finite differences of the measured slopes along the pair's axis: central where
+  both neighbours are measured, one-sided three-point, then two-point, else 0); node i
+  receives ``-b``, node j ``+b``.
+- :func:`bisector_slopes`: the surface slopes dz/dx, dz/dy in a local frame of the normals
+  that bisect the unit directions from the surface points to the camera and to the
+  monitor points (the law of reflection); :func:`bisector_slopes_planar` with the monitor
+  points of a planar pixel grid computed inline.
+- :func:`support_cells`: which projected nodes fall in a cell of 2 x 2 valid camera pixels.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ._jit import jit, parallel_jit
+
+
+@jit(inline="always")
+def _measured(m, r, c):
+    return 0 <= r < m.shape[0] and 0 <= c < m.shape[1] and m[r, c]
+
+
+@jit(inline="always")
+def _slope_derivative(s, m, r, c, dr, dc, h):
+    """ds along (dr, dc) at node (r, c) from the measured neighbours (see module doc)."""
+    if not m[r, c]:
+        return 0.0
+    p1 = _measured(m, r + dr, c + dc)
+    m1 = _measured(m, r - dr, c - dc)
+    if p1 and m1:
+        return (s[r + dr, c + dc] - s[r - dr, c - dc]) / (2 * h)
+    p2 = _measured(m, r + 2 * dr, c + 2 * dc)
+    m2 = _measured(m, r - 2 * dr, c - 2 * dc)
+    if p1 and p2:
+        return (-3 * s[r, c] + 4 * s[r + dr, c + dc] - s[r + 2 * dr, c + 2 * dc]) / (2 * h)
+    if m1 and m2:
+        return (3 * s[r, c] - 4 * s[r - dr, c - dc] + s[r - 2 * dr, c - 2 * dc]) / (2 * h)
+    if p1:
+        return (s[r + dr, c + dc] - s[r, c]) / h
+    if m1:
+        return (s[r, c] - s[r - dr, c - dc]) / h
+    return 0.0
+
+
+@parallel_jit(fastmath=False)
+def southwell_rhs(sx, sy, m, dx, dy, order, rhs):
+    """Fill ``rhs`` (H, W) with the Southwell right-hand side of slopes ``sx``, ``sy``
+    (H, W; any finite value where ``m`` is False) on the grid of steps ``dx``, ``dy``;
+    ``order`` 2 or 4. Each node sums its own pairs, so rows run in parallel without races."""
+    nr, nc = m.shape
+    cx = dx * dx / 12.0
+    cy = dy * dy / 12.0
+    dsx = np.zeros((nr, nc))
+    dsy = np.zeros((nr, nc))
+    if order == 4:
+        for r in numba.prange(nr):
+            for c in range(nc):
+                dsx[r, c] = _slope_derivative(sx, m, r, c, 0, 1, dx)
+                dsy[r, c] = _slope_derivative(sy, m, r, c, 1, 0, dy)
+    for r in numba.prange(nr):
+        for c in range(nc):
+            acc = 0.0
+            if m[r, c]:
+                if c + 1 < nc and m[r, c + 1]:  # pair to the right: this node is i
+                    acc -= dx * 0.5 * (sx[r, c] + sx[r, c + 1]) - cx * (dsx[r, c + 1] - dsx[r, c])
+                if c >= 1 and m[r, c - 1]:  # pair to the left: this node is j
+                    acc += dx * 0.5 * (sx[r, c - 1] + sx[r, c]) - cx * (dsx[r, c] - dsx[r, c - 1])
+                if r + 1 < nr and m[r + 1, c]:
+                    acc -= dy * 0.5 * (sy[r, c] + sy[r + 1, c]) - cy * (dsy[r + 1, c] - dsy[r, c])
+                if r >= 1 and m[r - 1, c]:
+                    acc += dy * 0.5 * (sy[r - 1, c] + sy[r, c]) - cy * (dsy[r, c] - dsy[r - 1, c])
+            rhs[r, c] = acc
+
+
+@jit(inline="always")
+def _bisector_slope(px, py, pz, camera_position, mx, my, mz, rotation):
+    ax = camera_position[0] - px
+    ay = camera_position[1] - py
+    az = camera_position[2] - pz
+    bx = mx - px
+    by = my - py
+    bz = mz - pz
+    la = 1.0 / math.sqrt(ax * ax + ay * ay + az * az)
+    lb = 1.0 / math.sqrt(bx * bx + by * by + bz * bz)
+    nx = ax * la + bx * lb
+    ny = ay * la + by * lb
+    nz = az * la + bz * lb
+    # local components n . (column j of rotation); the scale of n cancels in the ratios
+    l0 = nx * rotation[0, 0] + ny * rotation[1, 0] + nz * rotation[2, 0]
+    l1 = nx * rotation[0, 1] + ny * rotation[1, 1] + nz * rotation[2, 1]
+    l2 = nx * rotation[0, 2] + ny * rotation[1, 2] + nz * rotation[2, 2]
+    if l2 == 0.0:
+        return math.nan, math.nan
+    return -l0 / l2, -l1 / l2
+
+
+@parallel_jit(fastmath=False)
+def bisector_slopes(points, camera_position, monitor_points, rotation, out_sx, out_sy):
+    """Slopes (dz/dx, dz/dy) in the frame whose axes are the columns of ``rotation`` of the
+    normals bisecting the unit directions from ``points`` (N, 3) to ``camera_position`` (3,)
+    and to ``monitor_points`` (N, 3); NaN where the normal lies in the frame's x-y plane."""
+    for k in numba.prange(points.shape[0]):
+        out_sx[k], out_sy[k] = _bisector_slope(points[k, 0], points[k, 1], points[k, 2], camera_position,
+                                               monitor_points[k, 0], monitor_points[k, 1],
+                                               monitor_points[k, 2], rotation)
+
+
+@parallel_jit(fastmath=False)
+def bisector_slopes_planar(points, camera_position, u, v, centre, e_u, e_v, pitch, u_mid, v_mid,
+                           rotation, out_sx, out_sy):
+    """:func:`bisector_slopes` with the monitor points of a planar pixel grid: monitor
+    coordinates (u, v) (N,) px -> ``centre + (u - u_mid) pitch e_u + (v - v_mid) pitch e_v``
+    (the arithmetic of :meth:`pmdsim.scene.monitor.Monitor.pixel_to_world`)."""
+    for k in numba.prange(points.shape[0]):
+        du = (u[k] - u_mid) * pitch
+        dv = (v[k] - v_mid) * pitch
+        mx = centre[0] + du * e_u[0] + dv * e_v[0]
+        my = centre[1] + du * e_u[1] + dv * e_v[1]
+        mz = centre[2] + du * e_u[2] + dv * e_v[2]
+        out_sx[k], out_sy[k] = _bisector_slope(points[k, 0], points[k, 1], points[k, 2], camera_position,
+                                               mx, my, mz, rotation)
+
+
+@parallel_jit(fastmath=False)
+def support_cells(valid, cols, rows, ok):
+    """``ok[k] &=`` the fractional pixel (cols[k], rows[k]) lies in a cell of 2 x 2 valid
+    pixels of ``valid`` (H, W) (NaN coordinates: not)."""
+    h, w = valid.shape
+    for k in numba.prange(ok.shape[0]):
+        if not ok[k]:
+            continue
+        c = cols[k]
+        r = rows[k]
+        if not (c >= 0.0 and r >= 0.0 and c < w - 1.0 and r < h - 1.0):  # also NaN, inf
+            ok[k] = False
+            continue
+        c0 = int(math.floor(c))
+        r0 = int(math.floor(r))
+        ok[k] = valid[r0, c0] and valid[r0 + 1, c0] and valid[r0, c0 + 1] and valid[r0 + 1, c0 + 1]
+
