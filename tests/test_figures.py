@@ -113,3 +113,21 @@ def test_a_figure_that_fails_in_a_drawing_process_is_a_note(tmp_path, monkeypatc
                for n in res.notes), res.notes
     assert (res.outdir / "run.zarr").is_dir() and len(res.image_paths) == 2 * 3 * 4
     assert sorted(p.name for p in (res.outdir / "figures").iterdir()) == ["setup.png"]
+
+
+def test_a_failed_fork_draws_in_the_run_process(decoded_run, tmp_path, monkeypatch):
+    """Where fork fails (strict memory overcommit: ENOMEM) the figures are drawn by the run
+    itself when it asks for them; the run does not fail."""
+    import os
+
+    from pmdsim.run.figures import Drawing, _simulation
+
+    def no_fork():
+        raise OSError(12, "Cannot allocate memory")
+
+    ds = pipeline.load_run(decoded_run.outdir).load()
+    monkeypatch.setattr(os, "fork", no_fork)
+    d = Drawing(["surface_errors"], tmp_path, "tiny", "", ds, _simulation(ds), fork=True)
+    assert d.proc is None
+    notes: list = []
+    assert [p.name for p in d.paths(notes)] == ["surface_errors.png"] and notes == []

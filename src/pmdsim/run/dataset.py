@@ -141,21 +141,12 @@ def keep_bits(values: np.ndarray, bits: int = KEEP_BITS) -> np.ndarray:
     """float32 ``values`` rounded (to nearest, ties to even) to ``bits`` significant
     mantissa bits; NaN and inf unchanged. The relative rounding error is <= 2**-(bits+1).
     Returns a new array (``values`` is never changed)."""
+    from ..kernels.bits import round_mantissa
+
     a = np.array(values, dtype=np.float32, order="C", copy=True)
     drop = 23 - bits
-    if drop <= 0:
-        return a
-    special = ~np.isfinite(a)
-    kept = a[special] if special.any() else None
-    # in place on the copy: three passes fewer than (u + half + lsb) & mask
-    u = a.view(np.uint32)
-    lsb = u >> np.uint32(drop)
-    lsb &= np.uint32(1)
-    u += np.uint32((1 << (drop - 1)) - 1)
-    u += lsb
-    u &= np.uint32((0xFFFFFFFF << drop) & 0xFFFFFFFF)
-    if kept is not None:
-        a[special] = kept
+    if drop > 0 and a.size:
+        round_mantissa(a.reshape(-1).view(np.uint32), drop)  # in place, one pass
     return a
 
 

@@ -307,11 +307,16 @@ class Drawing:
             try:
                 with _signals_deferred():
                     self.proc.start()
+            except OSError:  # no fork (e.g. strict memory overcommit): drawn here, later
+                send.close()
+                self.conn.close()
+                self.proc = self.conn = None
+                return
             except BaseException:
+                send.close()
                 self.close()  # interrupted: end the process that was just started
                 raise
-            finally:
-                send.close()
+            send.close()
             self.args = None  # the process holds what it needs
 
     def paths(self, notes: list | None = None) -> list[Path]:

@@ -101,9 +101,11 @@ def write_image(path: str | Path, image: np.ndarray, image_format: str = "tiff",
         import tifffile
 
         desc = json.dumps(metadata) if metadata else None
-        # zlib with horizontal differencing (TIFF predictor 2): lossless, ~20 % smaller
+        # zlib level 3 with horizontal differencing (TIFF predictor 2), lossless: on the
+        # Fig. 3 run 1.0 CPU-s for 7.3 MB of TIFFs, where zlib's default level 6 takes 1.8 s
+        # for 4.6 MB (the TIFFs are written beside the chain, on its cores)
         tifffile.imwrite(path, np.asarray(image), description=desc, metadata=None,
-                         compression="zlib", predictor=True)
+                         compression="zlib", compressionargs={"level": 3}, predictor=True)
     elif image_format == "png":
         imagefile.write_png(path, image)
     else:
