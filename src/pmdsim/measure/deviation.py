@@ -143,7 +143,8 @@ def compare_direction(
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = modulation / ref_modulation
     considered = np.asarray(ref_valid, bool)
-    worst = np.nanmin(np.where(np.isfinite(ratio), ratio, np.nan), axis=0) if ratio.ndim == 3 else ratio
+    # the smallest finite ratio over the widths (NaN where none is finite, without a warning)
+    worst = np.fmin.reduce(np.where(np.isfinite(ratio), ratio, np.nan), axis=0) if ratio.ndim == 3 else ratio
     low = considered & ~(worst >= min_modulation_ratio)
     ok = considered & np.asarray(valid, bool) & ~low
     dphi = np.where(ok, np.asarray(absolute_phase) - np.asarray(ref_absolute_phase), np.nan)
