@@ -255,19 +255,21 @@ def _print_statistics(console: Console, result) -> None:
     per = {name: st for name, st in per.items() if "directions" in st}  # decoded ones
     if not per:
         return
-    table = Table(title="deviation from the ideal specular reference (decoded mirror) and, "
-                  "for the monitor coordinate, from the exact specular point P; RMS/P95 over "
-                  "the valid pixels (all statistics: statistics.json, summary.txt)",
-                  title_justify="left")
-    # fits 80 columns: the variant column only with variants (long names fold)
+    table = Table(title="deviation from the ideal specular reference (decoded mirror; "
+                  "'vs exact P': of the monitor coordinate from the exact specular point); "
+                  "each cell: RMS (upper) and P95 (lower) over the valid pixels; all "
+                  "statistics in statistics.json, summary.txt", title_justify="left",
+                  show_lines=True)
+    # fits 80 columns: two short lines per cell; the variant column only with variants
     named = bool(result.variants)
     if named:
-        table.add_column("variant", justify="left", overflow="fold")
-    for col in ("dir", "phase mrad", "monitor px", "vs exact P", "slope urad", "valid %"):
+        table.add_column("variant", justify="left", overflow="fold", min_width=8)
+    for col in ("dir", "phase\nmrad", "monitor\npx", "vs exact\nP, px", "slope\nurad",
+                "valid\n%"):
         table.add_column(col, justify="left" if col == "dir" else "right", no_wrap=True)
 
     def pair(s):
-        return "nan" if not s or s["rms"] is None else f"{s['rms']:.3g}/{s['p95']:.3g}"
+        return "nan" if not s or s["rms"] is None else f"{s['rms']:.3g}\n{s['p95']:.3g}"
 
     for name, st in per.items():
         for d, s in st["directions"].items():
