@@ -35,7 +35,7 @@ def test_surface_to_monitor_distance_from_the_mirror_image_of_the_camera():
     cfg = make_config()
     sim = Simulation.from_config(cfg)
     geo = sim.geometry()
-    dist = chain.surface_to_monitor_mm(sim, geo, rows_per_chunk=5)
+    dist = chain.surface_to_monitor_mm(sim, geo)
     cam, mon = cfg.camera, cfg.monitor
     pos = np.asarray(cam.position_mm, np.float64)
     mirror_cam = pos * np.array([1.0, 1.0, -1.0])
@@ -238,8 +238,8 @@ def test_slope_conversion_follows_the_plane_of_incidence_closed_form(theta_i):
 
 
 def test_compiled_slope_deviation_equals_the_numpy_reference():
-    """The chain's compiled 3-D slope conversion (kernels.slopes) against the NumPy
-    bisector-normal reference (measure.reconstruct.slope_deviation_3d) on random surface
+    """The chain's compiled 3-D slope conversion (kernels.reconstruct.slope_deviation_3d)
+    against the NumPy bisector-normal reference (measure.reconstruct.slope_deviation_3d) on random surface
     points and monitor coordinates of the Fig. 3-like geometry, both fringe directions and
     both signs, and NaN where a coordinate or point is missing (1e-12 rad)."""
     from pmdsim.measure.reconstruct import slope_deviation_3d
@@ -261,7 +261,7 @@ def test_compiled_slope_deviation_equals_the_numpy_reference():
     coord = rng.normal(0.0, 0.5, shape)
     coord[0, :5] = np.nan
     points[1, :3] = np.nan
-    geo = Geometry(np.ones(shape, bool), np.ones(shape, bool), su, sv)
+    geo = Geometry(np.ones(shape, bool), np.ones(shape, bool), su, sv, points)
     sg = chain.SlopeGeometry(points, np.asarray(cfg.camera.position_mm, np.float64), sim.scene.monitor)
     for d in ("x", "y"):
         got = chain.slope_deviation_urad(d, coord, geo, sg, None, 0.25)

@@ -248,7 +248,7 @@ def test_bisector_slope_kernels_match_numpy():
     """The compiled per-node slopes (kernels.reconstruct) against the NumPy reference
     slopes_in_frame(bisector_normals(...)), with a generic and with a planar monitor."""
     from pmdsim.kernels.reconstruct import bisector_slopes, bisector_slopes_planar
-    from pmdsim.measure.reconstruct import _planar_monitor, bisector_normals, slopes_in_frame
+    from pmdsim.measure.reconstruct import planar_monitor, bisector_normals, slopes_in_frame
 
     scene, u, v = decoded(CASES["freeform"][0], npx=80, focal_px=650.0)
     rng = np.random.default_rng(3)
@@ -265,8 +265,8 @@ def test_bisector_slope_kernels_match_numpy():
     bisector_slopes(points, cam, np.ascontiguousarray(m3), rot, a, b)
     np.testing.assert_allclose(a, want[0], rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(b, want[1], rtol=1e-12, atol=1e-15)
-    planar = _planar_monitor(scene.monitor)
-    assert planar is not None and _planar_monitor(object()) is None
+    planar = planar_monitor(scene.monitor)
+    assert planar is not None and planar_monitor(object()) is None
     bisector_slopes_planar(points, cam, mu, mv, *planar, rot, a, b)
     np.testing.assert_allclose(a, want[0], rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(b, want[1], rtol=1e-12, atol=1e-15)

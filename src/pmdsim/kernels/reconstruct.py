@@ -16,6 +16,9 @@ Slow NumPy references: ``tests/naive_integrate.py`` (the right-hand side) and
   that bisect the unit directions from the surface points to the camera and to the
   monitor points (the law of reflection); :func:`bisector_slopes_planar` with the monitor
   points of a planar pixel grid computed inline.
+- :func:`slope_deviation_3d`: the measurement chain's signed tilt between the bisector
+  normals of a reference and a decoded monitor point (NumPy reference:
+  :func:`pmdsim.measure.reconstruct.slope_deviation_3d`).
 - :func:`support_cells`: which projected nodes fall in a cell of 2 x 2 valid camera pixels.
 """
 
@@ -87,7 +90,19 @@ def southwell_rhs(sx, sy, m, dx, dy, order, rhs):
 
 
 @jit(inline="always")
-def _bisector_slope(px, py, pz, camera_position, mx, my, mz, rotation):
+def _monitor_point(u, v, centre, e_u, e_v, pitch, u_mid, v_mid):
+    """World point of monitor coordinates (u, v) px on a planar pixel grid (the arithmetic of
+    :meth:`pmdsim.scene.monitor.Monitor.pixel_to_world`)."""
+    du = (u - u_mid) * pitch
+    dv = (v - v_mid) * pitch
+    return (centre[0] + du * e_u[0] + dv * e_v[0], centre[1] + du * e_u[1] + dv * e_v[1],
+            centre[2] + du * e_u[2] + dv * e_v[2])
+
+
+@jit(inline="always")
+def _bisector(px, py, pz, camera_position, mx, my, mz):
+    """Sum of the unit directions from (px, py, pz) to the camera and to the monitor point
+    (mx, my, mz): the reflecting normal, not normalised."""
     ax = camera_position[0] - px
     ay = camera_position[1] - py
     az = camera_position[2] - pz
@@ -96,9 +111,12 @@ def _bisector_slope(px, py, pz, camera_position, mx, my, mz, rotation):
     bz = mz - pz
     la = 1.0 / math.sqrt(ax * ax + ay * ay + az * az)
     lb = 1.0 / math.sqrt(bx * bx + by * by + bz * bz)
-    nx = ax * la + bx * lb
-    ny = ay * la + by * lb
-    nz = az * la + bz * lb
+    return ax * la + bx * lb, ay * la + by * lb, az * la + bz * lb
+
+
+@jit(inline="always")
+def _bisector_slope(px, py, pz, camera_position, mx, my, mz, rotation):
+    nx, ny, nz = _bisector(px, py, pz, camera_position, mx, my, mz)
     # local components n . (column j of rotation); the scale of n cancels in the ratios
     l0 = nx * rotation[0, 0] + ny * rotation[1, 0] + nz * rotation[2, 0]
     l1 = nx * rotation[0, 1] + ny * rotation[1, 1] + nz * rotation[2, 1]
@@ -123,16 +141,42 @@ def bisector_slopes(points, camera_position, monitor_points, rotation, out_sx, o
 def bisector_slopes_planar(points, camera_position, u, v, centre, e_u, e_v, pitch, u_mid, v_mid,
                            rotation, out_sx, out_sy):
     """:func:`bisector_slopes` with the monitor points of a planar pixel grid: monitor
-    coordinates (u, v) (N,) px -> ``centre + (u - u_mid) pitch e_u + (v - v_mid) pitch e_v``
-    (the arithmetic of :meth:`pmdsim.scene.monitor.Monitor.pixel_to_world`)."""
+    coordinates (u, v) (N,) px -> ``centre + (u - u_mid) pitch e_u + (v - v_mid) pitch e_v``."""
     for k in numba.prange(points.shape[0]):
-        du = (u[k] - u_mid) * pitch
-        dv = (v[k] - v_mid) * pitch
-        mx = centre[0] + du * e_u[0] + dv * e_v[0]
-        my = centre[1] + du * e_u[1] + dv * e_v[1]
-        mz = centre[2] + du * e_u[2] + dv * e_v[2]
+        mx, my, mz = _monitor_point(u[k], v[k], centre, e_u, e_v, pitch, u_mid, v_mid)
         out_sx[k], out_sy[k] = _bisector_slope(points[k, 0], points[k, 1], points[k, 2], camera_position,
                                                mx, my, mz, rotation)
+
+
+@parallel_jit(fastmath=False)
+def slope_deviation_3d(points, camera_position, centre, e_u, e_v, pitch, u_mid, v_mid,
+                       u_ref, v_ref, u, v, out):
+    """Signed surface tilt (rad) per pixel into ``out`` (P,) that moves the decoded monitor
+    point from (u_ref, v_ref) to (u, v) on a planar pixel grid (as
+    :func:`bisector_slopes_planar`): the angle between the bisector normals at ``points``
+    (P, 3), signed by the larger coordinate change; NaN where any input is NaN. The NumPy
+    reference is :func:`pmdsim.measure.reconstruct.slope_deviation_3d`."""
+    for p in numba.prange(points.shape[0]):
+        ur, vr, uu, vv = u_ref[p], v_ref[p], u[p], v[p]
+        sx, sy, sz = points[p, 0], points[p, 1], points[p, 2]
+        if not (math.isfinite(ur) and math.isfinite(vr) and math.isfinite(uu)
+                and math.isfinite(vv) and math.isfinite(sx) and math.isfinite(sy)
+                and math.isfinite(sz)):
+            out[p] = np.nan
+            continue
+        mx, my, mz = _monitor_point(ur, vr, centre, e_u, e_v, pitch, u_mid, v_mid)
+        nx0, ny0, nz0 = _bisector(sx, sy, sz, camera_position, mx, my, mz)
+        mx, my, mz = _monitor_point(uu, vv, centre, e_u, e_v, pitch, u_mid, v_mid)
+        nx1, ny1, nz1 = _bisector(sx, sy, sz, camera_position, mx, my, mz)
+        # the angle between the normals: atan2(|n0 x n1|, n0 . n1) (their scale cancels)
+        cx = ny0 * nz1 - nz0 * ny1
+        cy = nz0 * nx1 - nx0 * nz1
+        cz = nx0 * ny1 - ny0 * nx1
+        ang = math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz),
+                         nx0 * nx1 + ny0 * ny1 + nz0 * nz1)
+        du, dv = uu - ur, vv - vr
+        d = du if abs(du) >= abs(dv) else dv
+        out[p] = (1.0 if d > 0 else (-1.0 if d < 0 else 0.0)) * ang
 
 
 @parallel_jit(fastmath=False)

@@ -108,29 +108,12 @@ def decode_fringes(fringes, monitor_resolution, decode_cfg, saturation_level=Non
     return out
 
 
-def surface_to_monitor_mm(sim, geometry, rows_per_chunk: int = 128, points_out=None) -> np.ndarray:
-    """(H, W) distance (mm) from each pixel's surface point to the exact monitor point of its
-    principal reflection P; NaN where P misses the monitor. ``points_out`` ((H, W, 3),
-    optional) receives the surface points (NaN off the surface)."""
-    from ..trace import trace_primary
-
-    scene = sim.scene
-    h, w = sim.shape
-    if geometry.points is not None:  # the vision rays' surface points, traced already
-        target = scene.monitor.pixel_to_world(geometry.specular_u, geometry.specular_v)
-        target -= geometry.points
-        if points_out is not None:
-            points_out[...] = geometry.points
-        return np.sqrt(np.einsum("...k,...k->...", target, target))
-    out = np.full((h, w), np.nan)
-    for r0 in range(0, h, rows_per_chunk):
-        r1 = min(h, r0 + rows_per_chunk)
-        hits = trace_primary(scene, r0, r1)
-        target = scene.monitor.pixel_to_world(geometry.specular_u[r0:r1], geometry.specular_v[r0:r1])
-        out[r0:r1] = np.linalg.norm(target - hits.point, axis=-1)
-        if points_out is not None:
-            points_out[r0:r1] = hits.point
-    return out
+def surface_to_monitor_mm(sim, geometry) -> np.ndarray:
+    """(H, W) distance (mm) from each pixel's surface point (``geometry.points``) to the
+    exact monitor point of its principal reflection P; NaN where P misses the monitor."""
+    target = sim.scene.monitor.pixel_to_world(geometry.specular_u, geometry.specular_v)
+    target -= geometry.points
+    return np.sqrt(np.einsum("...k,...k->...", target, target))
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,21 +132,25 @@ def slope_deviation_urad(direction, coord_px, geometry, slope_geometry, distance
     the small-angle coord / (2 d)."""
     if slope_geometry is None:
         return analysis.slope_deviation(coord_px * pitch_mm, distance_mm) * 1e6
-    from ..kernels.slopes import slope_deviation_3d
+    from ..kernels import reconstruct as kr
+    from .reconstruct import planar_monitor, slope_deviation_3d
 
     su, sv = geometry.specular_u, geometry.specular_v
     u1, v1 = (su + coord_px, sv) if direction == "x" else (su, sv + coord_px)
-    mon = slope_geometry.monitor
+    planar = planar_monitor(slope_geometry.monitor)
+    if planar is None:  # another monitor model: its own pixel_to_world, in NumPy
+        with np.errstate(invalid="ignore"):
+            s = slope_deviation_3d(slope_geometry.points_mm, slope_geometry.camera_position,
+                                   slope_geometry.monitor, su, sv, u1, v1)
+        return np.where(np.isfinite(coord_px), s * 1e6, np.nan)
     shape = np.shape(coord_px)
     flat = [np.ascontiguousarray(np.broadcast_to(a, shape), np.float64).ravel()
             for a in (su, sv, u1, v1)]
     out = np.empty(flat[0].size)
-    # compiled per pixel; the NumPy reference is measure.reconstruct.slope_deviation_3d
-    slope_deviation_3d(np.ascontiguousarray(slope_geometry.points_mm, np.float64).reshape(-1, 3),
-                       np.asarray(slope_geometry.camera_position, np.float64),
-                       np.asarray(mon.centre, np.float64), np.asarray(mon.e_u, np.float64),
-                       np.asarray(mon.e_v, np.float64), float(mon.pitch),
-                       (mon.width - 1) / 2.0, (mon.height - 1) / 2.0, *flat, out)
+    # compiled per pixel, the same as the NumPy slope_deviation_3d above
+    kr.slope_deviation_3d(np.ascontiguousarray(slope_geometry.points_mm, np.float64).reshape(-1, 3),
+                          np.asarray(slope_geometry.camera_position, np.float64), *planar,
+                          *flat, out)
     return out.reshape(shape) * 1e6
 
 
@@ -385,9 +372,9 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
 def decode_specular_reference(cfg, sim, geometry, progress=None):
     """Render, capture (with ``[sensor]``: its own noise stream 1) and decode the fringes of
     the ideal specular reference of ``sim`` (mirror BRDF, one ray per pixel, the same camera,
-    surface and monitor model). Returns ``(decoded, distance_mm, points_mm)``: the decoded
-    directions (:func:`decode_fringes`), the surface-to-monitor distance and the surface
-    point of every pixel (:func:`surface_to_monitor_mm`)."""
+    surface and monitor model). Returns ``(decoded, distance_mm)``: the decoded directions
+    (:func:`decode_fringes`) and the surface-to-monitor distance
+    (:func:`surface_to_monitor_mm`)."""
     from dataclasses import replace
 
     from ..render import Simulation
@@ -403,13 +390,7 @@ def decode_specular_reference(cfg, sim, geometry, progress=None):
     decoded = decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
                              sensor.saturation_dn if sensor.enabled else None)
     del fr
-    if geometry.points is not None:
-        points = geometry.points
-        distance = surface_to_monitor_mm(sim, geometry)
-    else:
-        points = np.full(sim.shape + (3,), np.nan)
-        distance = surface_to_monitor_mm(sim, geometry, points_out=points)
-    return decoded, distance, points
+    return decoded, surface_to_monitor_mm(sim, geometry)
 
 
 __all__ = ["DirectionChain", "ChainResult", "decode_problem", "decode_fringes", "compare",

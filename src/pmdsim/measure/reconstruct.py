@@ -289,7 +289,7 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     sx = sy = None
     it = 0
     rot = np.ascontiguousarray(pf.rotation)
-    planar = _planar_monitor(monitor)
+    planar = planar_monitor(monitor)
     # the aperture's nodes: their (x, y) part of the world point is fixed, z moves
     base = pf.centre + x[mask][:, None] * rot[:, 0] + y[mask][:, None] * rot[:, 1]
     ok_m = np.ones(len(base), bool)  # measured, among the aperture's nodes
@@ -343,10 +343,11 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
                           tuple(history), converged)
 
 
-def _planar_monitor(monitor):
+def planar_monitor(monitor):
     """The plane parameters of a :class:`~pmdsim.scene.monitor.Monitor` (whose
     ``pixel_to_world`` the compiled :func:`~pmdsim.kernels.reconstruct.bisector_slopes_planar`
-    repeats), None for any other monitor model (its own ``pixel_to_world`` is called)."""
+    repeats, as does the chain's slope_deviation_3d), None for any other monitor model (its own
+    ``pixel_to_world`` is called)."""
     from ..scene.monitor import Monitor
 
     if getattr(type(monitor), "pixel_to_world", None) is not Monitor.pixel_to_world:

@@ -167,14 +167,15 @@ class Geometry:
     ``surface_mask``: the vision ray hits the front of the surface. ``monitor_mask``: P hits
     the monitor as well. ``specular_u``/``specular_v``: exact monitor coordinates (monitor
     px) of P (NaN where it misses), ``specular_u_px``/``..._v_px`` the nearest monitor pixel.
+    ``points``: the surface points.
     """
 
     surface_mask: np.ndarray
     monitor_mask: np.ndarray
     specular_u: np.ndarray
     specular_v: np.ndarray
-    #: (H, W, 3) surface point of each pixel's vision ray (mm; NaN off the surface), or None
-    points: np.ndarray | None = None
+    #: (H, W, 3) surface point of each pixel's vision ray (mm; NaN off the surface)
+    points: np.ndarray
 
     @property
     def specular_u_px(self) -> np.ndarray:

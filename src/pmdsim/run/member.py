@@ -120,8 +120,8 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
                                      sensor.saturation_dn if sensor.enabled else None),
                 reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
                 cfg.decode, len(fringes.shifts),
-                slope_geometry=None if reference.points_mm is None else chain.SlopeGeometry(
-                    reference.points_mm, sim.scene.camera.position, sim.scene.monitor),
+                slope_geometry=chain.SlopeGeometry(
+                    geometry.points, sim.scene.camera.position, sim.scene.monitor),
                 off_monitor=off_monitor)
             stats = chain.statistics(measured, cfg.name)
             from . import reconstruction as recon

@@ -22,7 +22,6 @@ class Reference:
     distance_mm: np.ndarray
     seconds: float
     notes: tuple = ()
-    points_mm: np.ndarray | None = None  # surface point per pixel, for the 3-D slope conversion
     reconstruction: object = None  # (Reconstruction, SurfaceErrors) of the reference, or None
 
 
@@ -51,8 +50,8 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     per pixel, the same camera, surface and monitor model)."""
     t = time.perf_counter()
     base = steps.done
-    decoded, distance, points = chain.decode_specular_reference(cfg, sim, geometry,
-                                                                progress=steps.tiles())
+    decoded, distance = chain.decode_specular_reference(cfg, sim, geometry,
+                                                        progress=steps.tiles())
     steps.finish_render(base, n_tiles)
     notes = []
     for d, res in decoded.items():
@@ -73,4 +72,4 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     from . import reconstruction as recon
 
     rec = recon.reference_reconstruction(cfg, sim.scene, decoded)
-    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes), points, rec)
+    return Reference(decoded, distance, time.perf_counter() - t, tuple(notes), rec)

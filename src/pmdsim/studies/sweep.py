@@ -300,8 +300,7 @@ def _reference(cfg: RunConfig, sim, geometry):
         if key in _REFERENCES:
             _REFERENCES.move_to_end(key)
             return _REFERENCES[key]
-    decoded, distance, points = chain.decode_specular_reference(cfg, sim, geometry)
-    value = (decoded, distance, points)
+    value = chain.decode_specular_reference(cfg, sim, geometry)
     with _REFERENCES_LOCK:
         _REFERENCES[key] = value
         while len(_REFERENCES) > REFERENCE_CACHE_SIZE:
@@ -341,7 +340,7 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
     sim = Simulation.from_config(cfg)
     sim = Simulation(sim.scene, sim.tile_rows, scheduler, None)
     geometry = sim.geometry()
-    ref_decoded, distance, points = _reference(cfg, sim, geometry)
+    ref_decoded, distance = _reference(cfg, sim, geometry)
     fr_cfg = cfg.patterns.fringes
     fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts)
     sensor = Sensor.from_config(cfg.sensor)
@@ -353,7 +352,7 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
     measured = chain.compare(decoded, ref_decoded, geometry, distance,
                              cfg.monitor.pixel_pitch_mm, cfg.decode, fr_cfg.shifts,
                              slope_geometry=chain.SlopeGeometry(
-                                 points, sim.scene.camera.position, sim.scene.monitor))
+                                 geometry.points, sim.scene.camera.position, sim.scene.monitor))
     dcs = [measured.directions[d] for d in fr_cfg.directions]
     stats = np.array([[[np.nan if (x := chain.direction_quantity_stats(dc)[q][s]) is None
                         else x for s in STATISTICS] for q in QUANTITIES] for dc in dcs],
