@@ -5,11 +5,10 @@ surface's local frame, mm), with RMS / PV / P95 in the titles."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
-from .scene import _axes_at, _fixed_figure, _save
+from .scene import _axes_at, _fixed_figure
 
 CMAP = "RdBu_r"
 
@@ -61,9 +60,3 @@ def plot_surface_errors(ds, name: str = "", description: str = ""):
                  y=1 - 0.08 / fig.get_size_inches()[1], va="top")
     return fig
 
-
-def reconstruction_figures(ds, folder, name: str = "", description: str = "") -> list[Path]:
-    """``surface_errors.png`` into ``folder`` when the dataset has a reconstruction."""
-    if "height_error_nm" not in ds:
-        return []
-    return [_save(plot_surface_errors(ds, name, description), Path(folder) / "surface_errors.png")]
