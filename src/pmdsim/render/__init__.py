@@ -1,6 +1,6 @@
 """Rendering: scattered bundles, BRDF weights and pattern sums, tile by tile on Dask
 (:class:`Simulation`); trace once, render any number of patterns from that transport."""
 
-from .simulation import FringeResult, Geometry, Simulation, scene_geometry_rows
+from .simulation import FringeResult, Geometry, Simulation, local_scheduler, scene_geometry_rows
 
-__all__ = ["Simulation", "FringeResult", "Geometry", "scene_geometry_rows"]
+__all__ = ["Simulation", "FringeResult", "Geometry", "scene_geometry_rows", "local_scheduler"]

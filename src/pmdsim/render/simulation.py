@@ -46,6 +46,22 @@ from ..trace import bundle_geometry, cone_basis, trace_pixels
 ProgressFn = Callable[[int, int], None]
 
 
+def local_scheduler(name: str):
+    """Dask's in-process scheduler ``name`` ("threads" or "synchronous") as its ``get``
+    function, to pass as ``scheduler=``: a name makes Dask import ``distributed`` (when it
+    is installed) to look for an active client, 0.25 s of a run's start-up for nothing.
+    Other names are returned as they are."""
+    if name == "threads":
+        from dask.threaded import get
+
+        return get
+    if name == "synchronous":
+        from dask.local import get_sync
+
+        return get_sync
+    return name
+
+
 def scene_geometry_rows(scene: Scene, row0: int, row1: int, buffers=None):
     """Compiled vision-ray trace of camera rows ``row0:row1``, one pinhole ray per pixel
     centre (cameras with sub-pixels, a lens or distortion: :func:`vision_geometry_rows`).
@@ -233,7 +249,7 @@ class Simulation:
         tasks = [dask.delayed(fn, pure=False)(r0, r1, dask_key_name=f"pmdsim-tile-{r0}") for r0, r1 in tiles]
         kwargs = {}
         if self.scheduler != "distributed":
-            kwargs["scheduler"] = self.scheduler
+            kwargs["scheduler"] = local_scheduler(self.scheduler)
             if self.num_workers is not None and self.scheduler != "synchronous":
                 kwargs["num_workers"] = self.num_workers
         if progress is None or self.scheduler == "distributed":

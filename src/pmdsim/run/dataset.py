@@ -231,8 +231,10 @@ def write_dataset(ds, path: str | Path) -> Path:
 
     import dask
 
+    from ..render import local_scheduler
+
     path = Path(path)
-    with warnings.catch_warnings(), dask.config.set(scheduler="threads"):
+    with warnings.catch_warnings(), dask.config.set(scheduler=local_scheduler("threads")):
         # zarr-python notes that consolidated metadata is not (yet) in the v3 spec; xarray
         # and zarr-python read it, other readers ignore it and list the store instead
         warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)

@@ -170,7 +170,9 @@ def draw_figures(run_folder: str | Path, names, run_name: str, description: str 
             ds = open_dataset(run_folder)
         paths = []
         # lazy variables are read here, never shipped to a distributed cluster
-        with dask.config.set(scheduler="synchronous"):
+        from ..render import local_scheduler
+
+        with dask.config.set(scheduler=local_scheduler("synchronous")):
             for n in names:
                 try:
                     paths.append(draw_one(ds, n, folder, run_name, description, sim))
@@ -264,8 +266,10 @@ def _draw_in_child(conn, names, folder, run_name, description, ds, sim) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     out = []
+    from ..render import local_scheduler
+
     # the dataset's lazy variables are views of arrays this process already holds
-    with dask.config.set(scheduler="synchronous"):
+    with dask.config.set(scheduler=local_scheduler("synchronous")):
         for n in names:
             try:
                 out.append((n, str(draw_one(ds, n, Path(folder), run_name, description, sim)),

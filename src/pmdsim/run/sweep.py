@@ -210,7 +210,9 @@ def _local(tasks, keys, scheduler: str, num_workers, progress):
     import dask
     from dask.callbacks import Callback
 
-    kwargs = {"scheduler": scheduler}
+    from ..render import local_scheduler
+
+    kwargs = {"scheduler": local_scheduler(scheduler)}
     if num_workers is not None and scheduler != "synchronous":
         kwargs["num_workers"] = num_workers
     total, done = len(tasks), [0]
