@@ -292,12 +292,19 @@ def _histogram(ax, data: dict, colours: dict, stats: dict, bins: int = 121, lim=
         top = max(top, float(np.max(counts)) if np.size(counts) else 0.0)
     ax.axvline(0, color="0.5", linewidth=0.6)
     ax.set_xlim(-lim, lim)
+    leg = ax.legend(fontsize=6.5, loc="upper left", title_fontsize=6,
+                    title=f"(|values| > {lim:g} in the end bins)")
+    # room above the highest bin for the legend (it spans the axes' width, so it would
+    # cover a peak): the bins end below its lower edge
+    fig = ax.get_figure()
+    box = leg.get_window_extent(fig.canvas.get_renderer())
+    axes_box = ax.get_window_extent()
+    free = min(max((box.y0 - axes_box.y0) / axes_box.height - 0.04, 0.35), 0.95)
+    top = max(top, 1.0)
     if log:
-        ax.set_ylim(0.5, max(top, 1.0) * 30)
+        ax.set_ylim(0.5, 0.5 * (2 * top) ** (1 / free))
     else:
-        ax.set_ylim(0, max(top, 1.0) * 1.35)
-    ax.legend(fontsize=6.5, loc="upper left", title=f"(|values| > {lim:g} in the end bins)",
-              title_fontsize=6)
+        ax.set_ylim(0, top / free)
     ax.tick_params(labelsize=7)
 
 

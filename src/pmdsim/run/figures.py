@@ -265,6 +265,9 @@ def _draw_in_child(conn, names, folder, run_name, description, ds, sim) -> None:
     # the run's process decides: it ends this one if it is interrupted
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    # lower priority than the run's own threads: on a busy machine the chain (the critical
+    # path) gets the cores first, the figures the time left over
+    os.nice(10)
     out = []
     from ..render import local_scheduler
 
