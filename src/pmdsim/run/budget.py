@@ -15,6 +15,7 @@ from typing import Callable
 from ..config import RunConfig
 from ..studies.budget import TABLE_COLUMNS, budget
 from . import files as pio
+from .threads import single_blas
 
 MARKER = "pmdsim-budget.json"
 
@@ -27,6 +28,7 @@ class BudgetResult:
     figure: Path | None
 
 
+@single_blas
 def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrite: bool = False,
                progress: Callable[[str], None] | None = None, truth: str = "centre") -> BudgetResult:
     """Compute :func:`pmdsim.studies.budget.budget` and write it into ``outdir``."""

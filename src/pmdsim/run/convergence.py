@@ -14,6 +14,7 @@ from ..config import RunConfig
 from ..studies.convergence import (ALL_ESTIMATORS, COLUMNS, DEFAULT_N, DEFAULT_THETA_DEG,
                                    convergence_study)
 from . import files as pio
+from .threads import single_blas
 
 #: Marker file of a finished convergence folder (an existing folder is replaced only if it
 #: carries it, or is empty).
@@ -39,6 +40,7 @@ class ConvergenceResult:
 
 
 
+@single_blas
 def run_convergence(
     cfg: RunConfig,
     outdir: str | Path,

@@ -65,6 +65,7 @@ from .manifest import write_run_manifest, write_variants_manifest
 from .member import run_member
 from .reference import chain_mode, specular_reference
 from .result import ProgressFn, RunResult, _Steps
+from .threads import single_blas
 from .variants import run_variants
 
 #: Names a variant cannot have: they are files or folders of the run folder itself
@@ -91,6 +92,7 @@ class RunPlan:
         return self.members[0][2]
 
 
+@single_blas
 def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | None = None,
                    *, overwrite: bool = False, figures: bool | None = None,
                    decode: bool | None = None, diagnostics: bool = True) -> RunResult:

@@ -46,6 +46,7 @@ import numpy as np
 from ..config import ConfigError, RunConfig, load_config
 from ..studies.sweep import (MAP_VARIABLES, POINT_VARIABLES, SweepPlan, measure_point,
                              plan_sweep, reference_key)
+from .threads import single_blas
 
 STORE_NAME = "sweep.zarr"
 CONFIG_NAME = "config.json"
@@ -189,6 +190,7 @@ def done_mask(store: str | Path) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- one point
+@single_blas
 def compute_point(store: str, position: tuple, config_json: str, decimation: int,
                   index: int) -> int:
     """The Dask task of one point: measure it and write its region of every variable, then
@@ -241,6 +243,7 @@ def _distributed(tasks, client, progress):
     return out
 
 
+@single_blas
 def run_sweep(cfg: RunConfig | str | Path, outdir: str | Path, *, scheduler: str = "threads",
               client=None, num_workers: int | None = None,
               progress: ProgressFn | None = None, overwrite: bool = False,

@@ -13,6 +13,7 @@ from ..brdf.turning import TextureParameters, format_texture, texture_parameters
 from ..config import ConfigError, RunConfig
 from ..report.texture import plot_fit, plot_texture
 from ..studies.fit import FitResult, NoiseModel, fit_fringe_images, format_fit
+from .threads import single_blas
 
 
 @dataclass(frozen=True)
@@ -49,6 +50,7 @@ class FitRun:
     figure: Path | None
 
 
+@single_blas
 def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True) -> FitRun:
     """Fit the configured model's alphas to fringe images (files in the order direction,
     width, shift of ``patterns.fringes``), write fit.json, fit.txt, fit.png to ``outdir``."""

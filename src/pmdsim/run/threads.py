@@ -1,0 +1,53 @@
+"""One BLAS thread while pmdsim works.
+
+NumPy and SciPy each bring an OpenBLAS that starts one thread per core, and its threads
+busy-wait for the next call after each one. pmdsim's parallel work is its compiled kernels
+(Numba threads) and Dask tasks; the BLAS calls of a run are small (3 x 3 rotations of N x 3
+arrays, vector dot products of the iterative solvers), so on a 2-core machine the extra
+BLAS threads only spin against the kernels: the Fig. 3 run used 1.5-2.4 CPU-seconds less
+with one BLAS thread (17.3-18.5 against 19.7-20.0 CPU-s, medians of 4 runs each; wall
+0.1-0.8 s less, within the machine's noise).
+
+The entry points of a run (:func:`~pmdsim.run.simulate.run_simulation`, sweeps,
+convergence and budget studies, fits) run under :func:`single_blas`, which limits every
+loaded BLAS to one thread with threadpoolctl and restores the previous setting afterwards
+(a Jupyter session keeps its own). Set ``PMDSIM_BLAS_THREADS`` to another number to
+change the limit (0: leave BLAS as it is).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+
+
+def blas_limit() -> int | None:
+    """Threads BLAS may use during a run: ``PMDSIM_BLAS_THREADS`` (default 1); None for 0
+    (no limit)."""
+    raw = os.environ.get("PMDSIM_BLAS_THREADS", "1").strip()
+    try:
+        n = int(raw)
+    except ValueError:
+        raise ValueError(f"PMDSIM_BLAS_THREADS: expected a whole number of threads (0 = "
+                         f"no limit), got {raw!r}") from None
+    if n < 0:
+        raise ValueError(f"PMDSIM_BLAS_THREADS: must be >= 0 (0 = no limit), got {n}")
+    return n or None
+
+
+def single_blas(fn):
+    """Decorator: ``fn`` runs with BLAS limited to :func:`blas_limit` threads."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        limit = blas_limit()
+        if limit is None:
+            return fn(*args, **kwargs)
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=limit, user_api="blas"):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+__all__ = ["single_blas", "blas_limit"]
