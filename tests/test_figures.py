@@ -131,3 +131,48 @@ def test_a_failed_fork_draws_in_the_run_process(decoded_run, tmp_path, monkeypat
     assert d.proc is None
     notes: list = []
     assert [p.name for p in d.paths(notes)] == ["surface_errors.png"] and notes == []
+
+
+def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch):
+    """The overview needs only the chain: its drawing starts before the surface is
+    reconstructed and diagnosed, the reconstruction's figure after; the run's statistics
+    still hold the reconstruction, and a run without decoding draws its figures too."""
+    import json
+
+    from pmdsim.run import figures as figs
+    from pmdsim.run import member as member_mod
+    from pmdsim.run import reconstruction as recon
+
+    events = []
+    start, from_chain, diagnose = figs.start_drawings, recon.from_chain, member_mod.diagnose_run
+
+    def start_drawings(names, *args, **kwargs):
+        events.append(("figures", tuple(names)))
+        return start(names, *args, **kwargs)
+
+    def record(tag, fn):
+        def wrapped(*args, **kwargs):
+            events.append((tag,))
+            return fn(*args, **kwargs)
+        return wrapped
+
+    monkeypatch.setattr(figs, "start_drawings", start_drawings)
+    monkeypatch.setattr(recon, "from_chain", record("reconstruction", from_chain))
+    monkeypatch.setattr(member_mod, "diagnose_run", record("diagnostics", diagnose))
+    d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
+    d["output"] = {"figures": True, "write_images": False}
+    res = pipeline.run_simulation(parse_config(d), tmp_path / "run")
+    drawn = [e for e in events if e[0] == "figures" and e[1]]
+    assert events.index(("figures", ("overview",))) < events.index(("reconstruction",)) \
+        < events.index(("diagnostics",)) < events.index(("figures", ("surface_errors",)))
+    assert [e[1] for e in drawn] == [("setup",), ("overview",), ("surface_errors",)]
+    stats = json.loads((res.outdir / "statistics.json").read_text())
+    assert "reconstruction" in stats and "diagnostics" in stats
+    assert json.loads(pipeline.load_run(res.outdir).attrs["statistics_json"]) == stats
+    assert sorted(p.name for p in res.figure_paths) == [
+        "overview.png", "setup.png", "surface_errors.png"]
+
+    d["decode"] = {"enabled": False}  # no chain: the fringe figures only
+    res = pipeline.run_simulation(parse_config(d), tmp_path / "plain")
+    assert sorted(p.name for p in res.figure_paths) == [
+        "fringes.png", "modulation.png", "setup.png"]

@@ -9,8 +9,10 @@ alone (the set-up figure rebuilds the simulation from ``attrs["config_json"]``),
 
 A run draws its figures off its critical path (:class:`Drawing`): on Linux a forked
 process draws from the run's *in-memory* data while the run goes on (the set-up figure
-and the fringe figures as soon as the images exist, the chain's figures while the Zarr
-store is written), so the run waits only for what is left when everything else is done.
+and the fringe figures as soon as the images exist, the chain's figures as soon as the
+deviation and its statistics exist, the reconstruction's figure while the Zarr store is
+written), so the run waits only for what is left when everything else is done. The drawing
+processes run at nice 10: the run's own threads get the cores first.
 Elsewhere (no safe ``fork``) the run draws them itself at the end.
 
 ``pmdsim report RUN`` draws from the folder: in separate (spawned) processes that each

@@ -111,6 +111,7 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
             early = early_names(figure_plan(ds, out.figure_set, decoding))
             drawings += start_drawings(early, folder / "figures", cfg.name, description(cfg),
                                        ds, sim, out.figure_workers)
+            started = list(early)
 
         t = time.perf_counter()
         stats: dict = {}
@@ -124,6 +125,17 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
                     geometry.points, sim.scene.camera.position, sim.scene.monitor),
                 off_monitor=off_monitor)
             stats = chain.statistics(measured, cfg.name)
+            ds = assign_to_dataset(ds, measured, stats)
+            if figures:
+                from .figures import figure_names, start_drawings
+
+                # the chain's figures (overview, deviation maps, ...) need neither the
+                # reconstruction nor the diagnostics: drawn while those run
+                mid = [n for n in figure_names(ds, out.figure_set)
+                       if n not in started and FIGURES[n][1] == "chain"]
+                started += mid
+                drawings += start_drawings(mid, folder / "figures", cfg.name,
+                                           description(cfg), ds, sim, out.figure_workers)
             from . import reconstruction as recon
 
             if recon.wanted(cfg, measured.directions):
@@ -136,7 +148,7 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
                         ds = ds.assign_coords({dims[0]: (dims, data, attrs)})
                 for name, var in rvars.items():
                     ds[name] = var
-            ds = assign_to_dataset(ds, measured, stats)
+                ds.attrs["statistics_json"] = json.dumps(stats)
             del measured
         dot_table = []
         if dot_images is not None:
@@ -162,8 +174,8 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         if figures:
             from .figures import figure_names, start_drawings
 
-            # the chain's figures are drawn while the dataset is written
-            late = [n for n in figure_names(ds, out.figure_set) if n not in early]
+            # the reconstruction's figures are drawn while the dataset is written
+            late = [n for n in figure_names(ds, out.figure_set) if n not in started]
             drawings += start_drawings(late, folder / "figures", cfg.name, description(cfg),
                                        ds, sim, out.figure_workers)
         t = time.perf_counter()
