@@ -1,0 +1,54 @@
+"""The run's specular reference: its reconstruction, computed in a thread while the run
+goes on, is the one computed inline, and its errors reach the run."""
+
+from __future__ import annotations
+
+from concurrent.futures import Future
+
+import numpy as np
+import pytest
+
+from pmdsim.config import parse_config
+from pmdsim.render import Simulation
+from pmdsim.run import reference as ref
+from pmdsim.run.result import _Steps
+from test_pipeline import tiny_config_dict
+
+
+@pytest.fixture(scope="module")
+def setup():
+    cfg = parse_config(tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4}))
+    sim = Simulation.from_config(cfg)
+    return cfg, sim, sim.geometry()
+
+
+def _reference(setup, threaded, monkeypatch):
+    cfg, sim, geometry = setup
+    monkeypatch.setattr(ref, "_threadsafe_numba", lambda: threaded)
+    n_tiles = -(-sim.shape[0] // sim.tile_rows)
+    return ref.specular_reference(cfg, sim, geometry, _Steps(None, 10 * n_tiles), n_tiles)
+
+
+def test_threaded_reference_reconstruction_is_the_inline_one(setup, monkeypatch):
+    inline = _reference(setup, False, monkeypatch)
+    threaded = _reference(setup, True, monkeypatch)
+    assert not isinstance(inline._reconstruction, Future)
+    assert isinstance(threaded._reconstruction, Future)
+    (r0, e0), (r1, e1) = inline.reconstruction, threaded.reconstruction
+    np.testing.assert_array_equal(r0.height_mm, r1.height_mm)
+    np.testing.assert_array_equal(e0.height_nm, e1.height_nm)
+    assert np.isfinite(e0.height_nm).any()
+
+
+def test_an_error_of_the_threaded_reconstruction_is_raised_where_it_is_read(setup,
+                                                                            monkeypatch):
+    from pmdsim.run import reconstruction as recon
+
+    def fails(*args, **kwargs):
+        raise RuntimeError("reference reconstruction failed")
+
+    monkeypatch.setattr(recon, "reference_reconstruction", fails)
+    r = _reference(setup, True, monkeypatch)  # the run goes on
+    with pytest.raises(RuntimeError, match="reference reconstruction failed"):
+        r.reconstruction
+
