@@ -52,3 +52,43 @@ def test_an_error_of_the_threaded_reconstruction_is_raised_where_it_is_read(setu
     with pytest.raises(RuntimeError, match="reference reconstruction failed"):
         r.reconstruction
 
+
+
+def test_the_run_forks_its_figures_only_after_the_reference_thread(tmp_path, monkeypatch):
+    """A fork while the reference's reconstruction runs a DCT in its thread shuts SciPy's
+    pocketfft pool under it ("Work item submitted after shutdown"): the run waits for the
+    thread before its first figure process (here the thread is made slow on purpose)."""
+    import threading
+    import time
+
+    from pmdsim.run import figures as figs
+    from pmdsim.run import reconstruction as recon
+    from pmdsim.run.simulate import run_simulation
+
+    slow_done = []
+    original = recon.reference_reconstruction
+
+    def slow(*args, **kwargs):
+        time.sleep(1.5)
+        out = original(*args, **kwargs)
+        slow_done.append(True)
+        return out
+
+    alive_at_fork = []
+    start = figs.start_drawings
+
+    def start_drawings(names, *args, **kwargs):
+        alive_at_fork.append(any(t.name == "pmdsim-reference-reconstruction"
+                                 for t in threading.enumerate()))
+        return start(names, *args, **kwargs)
+
+    monkeypatch.setattr(ref, "_threadsafe_numba", lambda: True)
+    monkeypatch.setattr(recon, "reference_reconstruction", slow)
+    monkeypatch.setattr(figs, "start_drawings", start_drawings)
+    d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
+    d["output"] = {"figures": True, "write_images": False}
+    res = run_simulation(parse_config(d), tmp_path / "run")
+    assert slow_done == [True]
+    assert alive_at_fork and not any(alive_at_fork)
+    assert sorted(p.name for p in res.figure_paths) == [
+        "overview.png", "setup.png", "surface_errors.png"]

@@ -107,6 +107,8 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
         if figures:
             from .figures import early_names, figure_plan, start_drawings
 
+            if reference is not None:
+                reference.settle()  # no fork while its reconstruction's thread runs
             # the set-up and fringe figures need nothing of the chain: drawn meanwhile
             early = early_names(figure_plan(ds, out.figure_set, decoding))
             drawings += start_drawings(early, folder / "figures", cfg.name, description(cfg),

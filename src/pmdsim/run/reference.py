@@ -35,6 +35,15 @@ class Reference:
         r = self._reconstruction
         return r.result() if isinstance(r, Future) else r
 
+    def settle(self) -> None:
+        """Wait until the reconstruction's thread (if any) has finished, without raising
+        its error (that is raised where :attr:`reconstruction` is read). A run calls it
+        before it forks: a fork while the thread runs a DCT shuts SciPy's pocketfft worker
+        pool under it ("Work item submitted after shutdown")."""
+        r = self._reconstruction
+        if isinstance(r, Future):
+            r.exception()
+
 
 
 def chain_mode(cfg: RunConfig, decode: bool | None) -> tuple[bool, list[str]]:
