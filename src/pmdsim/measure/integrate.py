@@ -181,7 +181,8 @@ def southwell(slope_x, slope_y, spacing, mask=None, *, order=4, solver="auto", r
         ``dct`` needs a full rectangle (exact, O(N log N)); ``pcg``: conjugate gradients on
         the masked system preconditioned by the ``dct`` solve on a rectangle holding the
         mask (15-25 iterations on circles, annuli, holes; no set-up); ``direct`` = SciPy's
-        sparse LU; ``amg`` = PyAMG smoothed-aggregation CG; ``auto``: ``dct`` on full
+        sparse LU; ``amg`` = SciPy CG preconditioned by a PyAMG smoothed-aggregation
+        V-cycle; ``auto``: ``dct`` on full
         rectangles, ``pcg`` otherwise. The iterative ones stop at a residual of ``rtol``
         times the right-hand side's (the first guess's residual with ``x0``) and fall back
         to ``direct`` when they do not get there. The
@@ -336,12 +337,12 @@ def _southwell_sparse(rhs, m, solver, x0=None, rtol=1e-11):
         if op.box is not None:
             z = _pcg(op, m, b, guess, target)
         else:
-            import warnings
-
-            with warnings.catch_warnings():
-                # CG stops with "indefinite preconditioner" once the residual reaches round-off
-                warnings.simplefilter("ignore", UserWarning)
-                z = op.ml.solve(b, x0=guess, tol=target / norm_b, accel="cg", maxiter=300)
+            # SciPy's CG with the AMG V-cycle as preconditioner: PyAMG's own CG warns
+            # "Indefinite matrix detected" once the residual reaches round-off, and it turns
+            # its warnings on itself at every call (a caller's filter cannot hold them)
+            z, _ = scipy.sparse.linalg.cg(op.lap, b, x0=guess, rtol=target / norm_b,
+                                          atol=0.0, maxiter=300,
+                                          M=op.ml.aspreconditioner(cycle="V"))
         res = np.linalg.norm(op.lap @ z - b)
         if not res <= max(1e-8 * norm_b, 2.0 * target):  # not converged: the sure way
             return _southwell_sparse(rhs, m, "direct")
