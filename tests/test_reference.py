@@ -92,3 +92,29 @@ def test_the_run_forks_its_figures_only_after_the_reference_thread(tmp_path, mon
     assert alive_at_fork and not any(alive_at_fork)
     assert sorted(p.name for p in res.figure_paths) == [
         "overview.png", "setup.png", "surface_errors.png"]
+
+
+def test_a_failed_run_leaves_no_reference_thread_behind(tmp_path, monkeypatch):
+    import threading
+    import time
+
+    from pmdsim.run import reconstruction as recon
+    from pmdsim.run.simulate import run_simulation
+
+    original = recon.reference_reconstruction
+
+    def slow(*args, **kwargs):
+        time.sleep(1.0)
+        return original(*args, **kwargs)
+
+    def fails(*args, **kwargs):
+        raise RuntimeError("the member failed")
+
+    monkeypatch.setattr(ref, "_threadsafe_numba", lambda: True)
+    monkeypatch.setattr(recon, "reference_reconstruction", slow)
+    monkeypatch.setattr("pmdsim.run.simulate.run_member", fails)
+    d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
+    with pytest.raises(RuntimeError, match="the member failed"):
+        run_simulation(parse_config(d), tmp_path / "run")
+    assert not any(t.name == "pmdsim-reference-reconstruction" for t in threading.enumerate())
+    assert not (tmp_path / "run").exists()

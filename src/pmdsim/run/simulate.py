@@ -163,14 +163,18 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         shared = {"geometry": t_geometry}
         if reference is not None:
             shared["reference"] = reference.seconds
-        if cfg.variants:
-            result = run_variants(plan, geometry, reference, tmp, shared)
-        else:
-            result, _ = run_member(cfg, plan.sim, geometry, tmp, plan.steps, plan.figures,
-                                   plan.inputs, reference=reference, standalone=True,
-                                   diagnostics=plan.diagnostics)
-            result = replace(result, notes=tuple(plan.notes) + result.notes,
-                             timings=dict(result.timings, **shared))
+        try:
+            if cfg.variants:
+                result = run_variants(plan, geometry, reference, tmp, shared)
+            else:
+                result, _ = run_member(cfg, plan.sim, geometry, tmp, plan.steps, plan.figures,
+                                       plan.inputs, reference=reference, standalone=True,
+                                       diagnostics=plan.diagnostics)
+                result = replace(result, notes=tuple(plan.notes) + result.notes,
+                                 timings=dict(result.timings, **shared))
+        finally:
+            if reference is not None:  # a failed or interrupted run leaves no thread behind
+                reference.settle()
         timings = dict(result.timings, total=time.perf_counter() - t_start)
         result = replace(result, timings=timings)
         # the folder's size, measured now that everything but the manifest is written
