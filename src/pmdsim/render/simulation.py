@@ -410,10 +410,8 @@ class Simulation:
         """(H, W, 3) surface points from geometry rows: a row holds S in the monitor's
         orthonormal frame (``G_U0``, ``G_V0``: monitor px; ``G_T``: distance along -n)."""
         mon = self.scene.monitor
-        basis = np.stack([mon.pitch * mon.e_u, mon.pitch * mon.e_v, -mon.normal])
-        origin = mon.centre - ((mon.width - 1) / 2.0) * basis[0] - ((mon.height - 1) / 2.0) * basis[1]
-        pts = geo[:, [kb.G_U0, kb.G_V0, kb.G_T]] @ basis
-        pts += origin
+        pts = mon.pixel_to_world(geo[:, kb.G_U0], geo[:, kb.G_V0])
+        pts -= geo[:, kb.G_T, None] * mon.normal
         pts[~valid.ravel()] = np.nan
         return pts.reshape(valid.shape + (3,))
 
