@@ -230,12 +230,15 @@ def _check_all_modes(cfg, mode_random):
 
     # harmonic: cos/sin of k * (exact coordinate)
     ku, kv = np.array([2 * np.pi / 20, 2 * np.pi * 3 / 37.5]), np.array([2 * np.pi / 11.3])
+    def harmonic_refs(ku, kv):
+        refs = []
+        for k, c in [(k, "u") for k in ku] + [(k, "v") for k in kv]:
+            refs += [naive.weighted_sums(rays, np.cos(k * rays[c])),
+                     naive.weighted_sums(rays, np.sin(k * rays[c]))]
+        return refs
+
     out = _render_tile(scene, geo, rot, kb.MODE_HARMONIC, kb.OUT_FIRST + 6, k_u=ku, k_v=kv)[0]
-    refs = []
-    for k, c in [(k, "u") for k in ku] + [(k, "v") for k in kv]:
-        refs += [naive.weighted_sums(rays, np.cos(k * rays[c])),
-                 naive.weighted_sums(rays, np.sin(k * rays[c]))]
-    check(out, refs, "harmonic")
+    check(out, harmonic_refs(ku, kv), "harmonic")
 
     # harmonic, integer frequency ratios: exp(i k c) as the power m = 2, 4 or 8 of a smaller
     # frequency's (kernels.bundle._harmonic_plan); ratios 3 and 5 by sin/cos
@@ -245,11 +248,7 @@ def _check_all_modes(cfg, mode_random):
     assert list(plan[0]) == [1, 2, 4, 0, 3, 6, 5]
     assert list(plan[1]) == [2, -1, 1, 0, -1, -1, -1] and list(plan[2]) == [4, 1, 2, 8, 1, 1, 1]
     out = _render_tile(scene, geo, rot, kb.MODE_HARMONIC, kb.OUT_FIRST + 14, k_u=ku, k_v=kv)[0]
-    refs = []
-    for k, c in [(k, "u") for k in ku] + [(k, "v") for k in kv]:
-        refs += [naive.weighted_sums(rays, np.cos(k * rays[c])),
-                 naive.weighted_sums(rays, np.sin(k * rays[c]))]
-    check(out, refs, "harmonic powers")
+    check(out, harmonic_refs(ku, kv), "harmonic powers")
 
     # images, float32 and float64
     for dtype in (np.float32, np.float64):
