@@ -119,6 +119,26 @@ def draw_one(ds, name: str, folder: Path, run_name: str, description: str = "",
     return fn(ds, path, run_name)
 
 
+def _draw_here(ds, names, folder: Path, run_name: str, description: str, sim,
+               failed) -> dict:
+    """Draw ``names`` in this process: {name: path} of those drawn; ``failed(name, error)``
+    is called for the others (it may raise). The dataset's lazy variables are read on Dask's
+    synchronous scheduler (views of arrays this process holds: never shipped to a
+    cluster)."""
+    import dask
+
+    from ..render import local_scheduler
+
+    drawn = {}
+    with dask.config.set(scheduler=local_scheduler("synchronous")):
+        for n in names:
+            try:
+                drawn[n] = draw_one(ds, n, folder, run_name, description, sim)
+            except Exception as err:  # noqa: BLE001 - the caller decides (note or raise)
+                failed(n, err)
+    return drawn
+
+
 def _draw_from_folder(run_folder: str, name: str, folder: str, run_name: str,
                       description: str) -> str:
     """Worker process job: open the run's dataset and draw one figure."""
@@ -166,21 +186,10 @@ def draw_figures(run_folder: str | Path, names, run_name: str, description: str 
     names = list(names)
     workers = default_workers(len(names)) if workers is None else workers
     if workers <= 1 or len(names) <= 1:
-        import dask
-
         if ds is None:
             ds = open_dataset(run_folder)
-        paths = []
-        # lazy variables are read here, never shipped to a distributed cluster
-        from ..render import local_scheduler
-
-        with dask.config.set(scheduler=local_scheduler("synchronous")):
-            for n in names:
-                try:
-                    paths.append(draw_one(ds, n, folder, run_name, description, sim))
-                except Exception as err:  # noqa: BLE001 - reported in notes (or re-raised)
-                    failed(n, err)
-        return paths
+        drawn = _draw_here(ds, names, folder, run_name, description, sim, failed)
+        return [drawn[n] for n in names if n in drawn]
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -262,26 +271,19 @@ def _draw_in_child(conn, names, folder, run_name, description, ds, sim) -> None:
     ``[(name, path or None, error or None)]``."""
     import signal
 
-    import dask
-
     # the run's process decides: it ends this one if it is interrupted
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     # lower priority than the run's own threads: on a busy machine the chain (the critical
     # path) gets the cores first, the figures the time left over
     os.nice(10)
-    out = []
-    from ..render import local_scheduler
+    errors = {}
 
-    # the dataset's lazy variables are views of arrays this process already holds
-    with dask.config.set(scheduler=local_scheduler("synchronous")):
-        for n in names:
-            try:
-                out.append((n, str(draw_one(ds, n, Path(folder), run_name, description, sim)),
-                            None))
-            except Exception as err:  # noqa: BLE001 - sent back, reported as a note
-                out.append((n, None, f"{type(err).__name__}: {err}"))
-    conn.send(out)
+    def failed(name, err):  # sent back, reported as a note
+        errors[name] = f"{type(err).__name__}: {err}"
+
+    drawn = _draw_here(ds, names, Path(folder), run_name, description, sim, failed)
+    conn.send([(n, str(drawn[n]) if n in drawn else None, errors.get(n)) for n in names])
     conn.close()
 
 
