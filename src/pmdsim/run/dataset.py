@@ -188,10 +188,6 @@ def _stored(name: str, block: np.ndarray) -> np.ndarray:
     return keep_bits(block)
 
 
-def _stored_block(block: np.ndarray, name: str) -> np.ndarray:
-    return _stored(name, block)
-
-
 def storage_form(ds, lazy: bool = False):
     """``ds`` as the run folder stores it: image-like float variables (camera rows x
     columns) in float32 with :data:`KEEP_BITS` significant bits, except
@@ -210,7 +206,8 @@ def storage_form(ds, lazy: bool = False):
             if isinstance(var.data, da.Array):  # already lazy (the chain's variables)
                 chunks = (1,) * (var.ndim - 2) + tuple(var.shape[-2:])
                 dtype = np.dtype(np.float32) if var.dtype.kind == "f" else var.dtype
-                arr = var.data.rechunk(chunks).map_blocks(_stored_block, name, dtype=dtype)
+                arr = var.data.rechunk(chunks).map_blocks(functools.partial(_stored, name),
+                                                          dtype=dtype)
             else:  # a view of the in-memory array, each chunk converted when read
                 arr = lazy_array(var.data, convert=functools.partial(_stored, name))
             new[name] = var.copy(data=arr)
