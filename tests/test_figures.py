@@ -139,12 +139,12 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
     still hold the reconstruction, and a run without decoding draws its figures too."""
     import json
 
-    from pmdsim.run import figures as figs
     from pmdsim.run import member as member_mod
     from pmdsim.run import reconstruction as recon
 
     events = []
-    start, from_chain, diagnose = figs.start_drawings, recon.from_chain, member_mod.diagnose_run
+    start, from_chain, diagnose = (member_mod.start_drawings, recon.from_chain,
+                                   member_mod.diagnose_run)
 
     def start_drawings(names, *args, **kwargs):
         events.append(("figures", tuple(names)))
@@ -156,7 +156,7 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
             return fn(*args, **kwargs)
         return wrapped
 
-    monkeypatch.setattr(figs, "start_drawings", start_drawings)
+    monkeypatch.setattr(member_mod, "start_drawings", start_drawings)
     monkeypatch.setattr(recon, "from_chain", record("reconstruction", from_chain))
     monkeypatch.setattr(member_mod, "diagnose_run", record("diagnostics", diagnose))
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})

@@ -61,7 +61,7 @@ def test_the_run_forks_its_figures_only_after_the_reference_thread(tmp_path, mon
     import threading
     import time
 
-    from pmdsim.run import figures as figs
+    from pmdsim.run import member as member_mod
     from pmdsim.run import reconstruction as recon
     from pmdsim.run.simulate import run_simulation
 
@@ -75,16 +75,16 @@ def test_the_run_forks_its_figures_only_after_the_reference_thread(tmp_path, mon
         return out
 
     alive_at_fork = []
-    start = figs.start_drawings
+    start = member_mod.start_drawings
 
     def start_drawings(names, *args, **kwargs):
-        alive_at_fork.append(any(t.name == "pmdsim-reference-reconstruction"
+        alive_at_fork.append(any(t.name.startswith("pmdsim-reference-reconstruction")
                                  for t in threading.enumerate()))
         return start(names, *args, **kwargs)
 
     monkeypatch.setattr(ref, "_threadsafe_numba", lambda: True)
     monkeypatch.setattr(recon, "reference_reconstruction", slow)
-    monkeypatch.setattr(figs, "start_drawings", start_drawings)
+    monkeypatch.setattr(member_mod, "start_drawings", start_drawings)
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
     d["output"] = {"figures": True, "write_images": False}
     res = run_simulation(parse_config(d), tmp_path / "run")
@@ -116,5 +116,5 @@ def test_a_failed_run_leaves_no_reference_thread_behind(tmp_path, monkeypatch):
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
     with pytest.raises(RuntimeError, match="the member failed"):
         run_simulation(parse_config(d), tmp_path / "run")
-    assert not any(t.name == "pmdsim-reference-reconstruction" for t in threading.enumerate())
+    assert not any(t.name.startswith("pmdsim-reference-reconstruction") for t in threading.enumerate())
     assert not (tmp_path / "run").exists()

@@ -21,7 +21,8 @@ from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, write_dataset
 from ..report.text import description, summary_text_of
 from .dataset import assign_to_dataset, dot_dataset_variables
 from .diagnostics import diagnose_run
-from .figures import FIGURES, import_in_background
+from .figures import (FIGURES, early_names, figure_names, figure_plan, import_in_background,
+                      start_drawings)
 from .result import RunResult, _Steps, draw_safely
 
 
@@ -103,17 +104,21 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
 
         drawings = []
         stack.callback(lambda: [d.close() for d in drawings])  # an error ends them
+        started: list[str] = []
+
+        def draw(names, ds):
+            """Fork the drawing processes of the figures ``names`` not started yet."""
+            names = [n for n in names if n not in started]
+            started.extend(names)
+            drawings.extend(start_drawings(names, folder / "figures", cfg.name,
+                                           description(cfg), ds, sim, out.figure_workers))
+
         decoding = reference is not None and fringes is not None
         if figures:
-            from .figures import early_names, figure_plan, start_drawings
-
             if reference is not None:
                 reference.settle()  # no fork while its reconstruction's thread runs
             # the set-up and fringe figures need nothing of the chain: drawn meanwhile
-            early = early_names(figure_plan(ds, out.figure_set, decoding))
-            drawings += start_drawings(early, folder / "figures", cfg.name, description(cfg),
-                                       ds, sim, out.figure_workers)
-            started = list(early)
+            draw(early_names(figure_plan(ds, out.figure_set, decoding)), ds)
 
         t = time.perf_counter()
         stats: dict = {}
@@ -129,15 +134,10 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
             stats = chain.statistics(measured, cfg.name)
             ds = assign_to_dataset(ds, measured, stats)
             if figures:
-                from .figures import figure_names, start_drawings
-
                 # the chain's figures (overview, deviation maps, ...) need neither the
                 # reconstruction nor the diagnostics: drawn while those run
-                mid = [n for n in figure_names(ds, out.figure_set)
-                       if n not in started and FIGURES[n][1] == "chain"]
-                started += mid
-                drawings += start_drawings(mid, folder / "figures", cfg.name,
-                                           description(cfg), ds, sim, out.figure_workers)
+                draw([n for n in figure_names(ds, out.figure_set)
+                      if FIGURES[n][1] == "chain"], ds)
             from . import reconstruction as recon
 
             if recon.wanted(cfg, measured.directions):
@@ -173,13 +173,8 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
             steps.advance()
         timings["diagnostics"] = time.perf_counter() - t
 
-        if figures:
-            from .figures import figure_names, start_drawings
-
-            # the reconstruction's figures are drawn while the dataset is written
-            late = [n for n in figure_names(ds, out.figure_set) if n not in started]
-            drawings += start_drawings(late, folder / "figures", cfg.name, description(cfg),
-                                       ds, sim, out.figure_workers)
+        if figures:  # the reconstruction's figures are drawn while the dataset is written
+            draw(figure_names(ds, out.figure_set), ds)
         t = time.perf_counter()
         write_dataset(ds, folder / DATASET_NAME)
         (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")

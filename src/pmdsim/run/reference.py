@@ -3,9 +3,8 @@ shared by the variants)."""
 
 from __future__ import annotations
 
-import threading
 import time
-from concurrent.futures import Future
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -108,16 +107,9 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     # wall on the Fig. 3 run. Its compiled kernels are parallel too: only with a Numba
     # threading layer that takes launches from two threads at once
     if recon.wanted(cfg, decoded) and _threadsafe_numba():
-        rec = Future()
-
-        def work():
-            try:
-                rec.set_result(recon.reference_reconstruction(cfg, sim.scene, decoded))
-            except BaseException as err:  # noqa: BLE001 - raised where it is read
-                rec.set_exception(err)
-
-        threading.Thread(target=work, name="pmdsim-reference-reconstruction",
-                         daemon=True).start()
+        pool = ThreadPoolExecutor(1, thread_name_prefix="pmdsim-reference-reconstruction")
+        rec = pool.submit(recon.reference_reconstruction, cfg, sim.scene, decoded)
+        pool.shutdown(wait=False)  # its one thread ends with the job
     else:
         rec = recon.reference_reconstruction(cfg, sim.scene, decoded)
     return Reference(decoded, distance, time.perf_counter() - t, tuple(notes), rec)
