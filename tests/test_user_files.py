@@ -18,7 +18,8 @@ from conftest import base_dict, merge
 from pmdsim.config import ConfigError, InputError
 from pmdsim.config.files import (FileInputError, MissingFileError, read_flatness_map,
                                  read_height_map, read_response_lut, read_table,
-                                 read_variation_map, register_height_map_reader,
+                                 read_slope_table, read_variation_map,
+                                 register_height_map_reader,
                                  HEIGHT_MAP_READERS)
 
 
@@ -218,6 +219,7 @@ LOADERS = {
     "height.tif": lambda p: read_height_map(p, FIELD),
     "brdf.npz": lambda p: read_variation_map(p, None, FIELD),
     "brdf.npy": lambda p: read_variation_map(p, "rho_s_scale", FIELD),
+    "slopes.npz": lambda p: read_slope_table(p, FIELD),
 }
 
 numbers = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**30, 10**30),
@@ -350,3 +352,23 @@ def app_():
     from pmdsim.cli import app
 
     return app
+
+
+def test_slope_tables(tmp_path):
+    counts = np.arange(12.0).reshape(3, 4)
+    ex, ey = np.linspace(-0.1, 0.1, 4), np.linspace(-0.2, 0.3, 5)
+    np.savez(tmp_path / "ok.npz", counts=counts, edges_x=ex, edges_y=ey)
+    got = read_slope_table(tmp_path / "ok.npz", FIELD)
+    np.testing.assert_array_equal(got["counts"], counts)
+    np.testing.assert_array_equal(got["edges_y"], ey)
+    np.savez(tmp_path / "swapped.npz", counts=counts, edges_x=ey, edges_y=ex)
+    np.savez(tmp_path / "neg.npz", counts=-counts, edges_x=ex, edges_y=ey)
+    np.savez(tmp_path / "order.npz", counts=counts, edges_x=ex[::-1], edges_y=ey)
+    np.savez(tmp_path / "noedges.npz", counts=counts)
+    (tmp_path / "trunc.npz").write_bytes((tmp_path / "ok.npz").read_bytes()[:200])
+    for name, problem in (("swapped.npz", "edges_x must hold 4"), ("neg.npz", ">= 0"),
+                          ("order.npz", "increase"), ("noedges.npz", "edges_x"),
+                          ("trunc.npz", "npz")):
+        with pytest.raises(FileInputError, match=problem) as info:
+            read_slope_table(tmp_path / name, FIELD)
+        _named(info.value, tmp_path / name)

@@ -283,6 +283,61 @@ def read_height_map(path, field: str = "surface.file") -> np.ndarray:
     return read_grid(path, field, min_size=4, what="heights")
 
 
+# ----------------------------------------------------------------------------- archives
+def read_npz(path, field: str) -> dict[str, np.ndarray]:
+    """Every array of a ``.npz`` archive (no pickles), as stored. Raises
+    :class:`FileInputError` naming ``field`` for a file that is not a complete archive."""
+    path = _existing(path, field)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if not hasattr(z, "files"):
+                raise ValueError("a single .npy array, not a .npz archive")
+            return {k: np.asarray(z[k]) for k in z.files}
+    except MemoryError:
+        raise
+    except Exception as err:  # noqa: BLE001 - zipfile/zlib/numpy raise many kinds
+        msg = ("holds Python objects (pickles), not numbers" if "pickle" in str(err).lower()
+               else f"is not a readable .npz archive ({type(err).__name__}: {err}); was it "
+               "truncated?")
+        raise _fail(field, path, msg) from None
+
+
+def read_slope_table(path, field: str = "brdf.file") -> dict[str, np.ndarray]:
+    """A slope histogram (``counts`` (nx, ny) >= 0, not all 0; ``edges_x`` (nx + 1,),
+    ``edges_y`` (ny + 1,) strictly increasing) or a height map (``heights``: a .npz array or
+    a .npy file), validated, as float64 arrays under those names."""
+    path = _existing(path, field)
+    if path.suffix.lower() == ".npy":
+        return {"heights": read_grid(path, field, min_size=4, what="heights")}
+    if path.suffix.lower() != ".npz":
+        raise _fail(field, path, "a slope table must be .npz (counts + edges_x/edges_y, or "
+                    "heights) or .npy (a height map)")
+    data = read_npz(path, field)
+    if "counts" in data:
+        missing = [k for k in ("edges_x", "edges_y") if k not in data]
+        if missing:
+            raise _fail(field, path, f"a slope histogram needs {missing} beside counts")
+        counts = _as_real_grid(data["counts"], field, path, "histogram counts", 1)
+        if (counts < 0).any() or counts.sum() <= 0:
+            raise _fail(field, path, "counts must be >= 0 and not all 0")
+        out = {"counts": counts}
+        for k, n in (("edges_x", counts.shape[0] + 1), ("edges_y", counts.shape[1] + 1)):
+            e = np.asarray(data[k])
+            if e.dtype.kind not in "iuf" or e.shape != (n,):
+                raise _fail(field, path, f"{k} must hold {n} numbers (one more than counts has "
+                            f"along that axis), got {e.dtype} {e.shape}")
+            e = e.astype(np.float64)
+            _finite(e, field, path)
+            if np.any(np.diff(e) <= 0):
+                raise _fail(field, path, f"{k} must increase strictly")
+            out[k] = e
+        return out
+    if "heights" in data:
+        return {"heights": _as_real_grid(data["heights"], field, path, "heights", 4)}
+    raise _fail(field, path, f"expected arrays 'counts', 'edges_x', 'edges_y' or 'heights' (it "
+                f"has {list(data)})")
+
+
 # ----------------------------------------------------------------------------- BRDF maps
 #: The quantities of a BRDF parameter map and their allowed ranges (low, high, low open).
 VARIATION_QUANTITIES = {
@@ -301,20 +356,11 @@ def read_variation_map(path, quantity: str | None,
     path = _existing(path, field)
     suffix = path.suffix.lower()
     if suffix == ".npz":
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                names = list(z.files)
-                raw = {k: z[k] for k in VARIATION_QUANTITIES if k in names}
-        except MemoryError:
-            raise
-        except Exception as err:  # noqa: BLE001 - zipfile/zlib/numpy raise many kinds
-            msg = ("holds Python objects (pickles), not numbers" if "pickle" in str(err).lower()
-                   else f"is not a readable .npz archive ({type(err).__name__}: {err}); was it "
-                   "truncated?")
-            raise _fail(field, path, msg) from None
+        arrays = read_npz(path, field)
+        raw = {k: arrays[k] for k in VARIATION_QUANTITIES if k in arrays}
         if not raw:
             raise _fail(field, path, f"holds none of the arrays {list(VARIATION_QUANTITIES)} (it "
-                        f"has {names})")
+                        f"has {list(arrays)})")
     elif suffix in HEIGHT_MAP_READERS:
         if quantity is None:
             raise _fail(field, path, "a single map needs brdf.variation.quantity (which of "
@@ -341,5 +387,5 @@ def read_variation_map(path, quantity: str | None,
 
 
 __all__ = ["FileInputError", "MissingFileError", "read_table", "read_response_lut",
-           "read_flatness_map", "read_grid", "read_height_map", "read_variation_map",
+           "read_flatness_map", "read_grid", "read_npz", "read_slope_table", "read_height_map", "read_variation_map",
            "register_height_map_reader", "HEIGHT_MAP_READERS", "VARIATION_QUANTITIES"]
