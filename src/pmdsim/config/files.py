@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import ConfigError, InputError
+from .base import ConfigError, InputError
 
 #: Largest file a loader reads (bytes): a user file beyond this is almost surely the wrong
 #: file (a 1 GB CSV table of a display response), and reading it would take the memory.
