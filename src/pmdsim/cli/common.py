@@ -93,3 +93,23 @@ def _numbers(text: str | None, name: str, kind=float) -> list | None:
         from ..config import InputError
 
         raise InputError(f"{name} must be comma-separated numbers, got {text!r}") from None
+
+
+def _output_folder(path, option: str = "-o") -> None:
+    """Refuse, before any computation, an output folder that cannot be one: an existing
+    file (or a path below one), or a folder that cannot be created or written."""
+    import os
+    from pathlib import Path
+
+    if path is None:
+        return
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        _fail(f"{option} {path}: exists and is a file, not a folder; choose another {option}")
+    parent = path if path.exists() else next((p for p in path.absolute().parents if p.exists()),
+                                             None)
+    if parent is not None and not parent.is_dir():
+        _fail(f"{option} {path}: {parent} is a file, so no folder can be made below it; "
+              f"choose another {option}")
+    if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
+        _fail(f"{option} {path}: {parent} is not writable; choose another {option}")

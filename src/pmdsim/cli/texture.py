@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from .common import _console, _fail
+from .common import _console, _fail, _output_folder
 
 
 def texture(
@@ -30,6 +30,20 @@ def texture(
     (docs/texture.md)."""
     from ..run.texture import run_texture
 
+    import math
+
+    _output_folder(output)
+    if not (math.isfinite(incidence_deg) and 0 <= incidence_deg < 90):
+        _fail(f"--incidence-deg must be at least 0 and below 90 deg (grazing incidence has no "
+              f"reflection to measure), got {incidence_deg:g}")
+    for name, value, low in (("--feed-um", feed_um, 0), ("--nose-radius-mm", nose_radius_mm, 0),
+                             ("--wavelength-nm", wavelength_nm, 0),
+                             ("--distance-mm", distance_mm, 0), ("--pitch-mm", pitch_mm, 0),
+                             ("--correlation-um", correlation_um, 0)):
+        if not (math.isfinite(value) and value > low):
+            _fail(f"{name} must be a positive finite number, got {value:g}")
+    if not (math.isfinite(rq_um) and rq_um >= 0):
+        _fail(f"--rq-um must be a finite number >= 0, got {rq_um:g}")
     try:
         res = run_texture(output, figure=not no_figure, feed_um=feed_um,
                           nose_radius_mm=nose_radius_mm, rq_um=rq_um,
@@ -60,6 +74,7 @@ def fit(
     from ..config import ConfigError, load_config
     from ..run.texture import run_fit
 
+    _output_folder(output)
     console = _console()
     try:
         cfg = load_config(config)

@@ -12,7 +12,8 @@ from .base import Coord, Float, Int, MAX_RESOLUTION_PX, _Model
 class FringeConfig(_Model):
     """Sinusoidal fringes: widths (periods) in monitor px, K equal phase shifts."""
 
-    widths_px: Annotated[tuple[Annotated[Float, Field(gt=0, le=1e7)], ...],
+    # a period below 2 monitor pixels cannot be shown (it aliases): the smallest width is 2
+    widths_px: Annotated[tuple[Annotated[Float, Field(ge=2, le=1e7)], ...],
                          Field(max_length=16)] = (50.0,)
     shifts: Annotated[Int, Field(ge=3, le=256)] = 4
     directions: tuple[Literal["x", "y"], ...] = ("x", "y")

@@ -3,6 +3,7 @@ freeform, measured height map) with its aperture; the tagged union :data:`Surfac
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
 import numpy as np
@@ -32,6 +33,34 @@ class FlatSurfaceConfig(_Model):
         if abs(n @ x) > 1 - 1e-9:
             raise ValueError("x_axis must not be parallel to normal")
         return self
+
+
+def _aperture_reach(ap) -> float | None:
+    """The largest distance (mm) from the vertex axis that an aperture reaches."""
+    if ap is None:
+        return None
+    cx, cy = ap.centre_mm
+    if ap.shape == "rectangular":
+        w, h = ap.size_mm
+        return math.hypot(abs(cx) + w / 2, abs(cy) + h / 2)
+    return math.hypot(cx, cy) + ap.radius_mm
+
+
+def _aperture_fits(surface) -> None:
+    """Refuse an aperture beyond the edge of a closed base conic (a sphere of radius R ends
+    at r = |R|; a conic with 1 + k > 0 at |R| / sqrt(1 + k)): the surface has no points there."""
+    radius = getattr(surface, "radius_mm", None)
+    reach = _aperture_reach(getattr(surface, "aperture", None))
+    k = float(getattr(surface, "conic", 0.0))
+    if radius is None or reach is None or 1 + k <= 0:
+        return
+    edge = abs(radius) / math.sqrt(1 + k)
+    if reach >= edge:
+        what = "sphere" if k == 0 else f"conic (k = {k:g})"
+        raise ValueError(
+            f"aperture: reaches {reach:g} mm from the axis, but a {what} of radius_mm = "
+            f"{radius:g} ends at {edge:g} mm (it has no points beyond); use a smaller "
+            "aperture.radius_mm / size_mm (or a larger radius_mm)")
 
 
 class ApertureConfig(_Model):
@@ -87,6 +116,7 @@ class _SagSurfaceBase(_Model):
         x = np.asarray(self.x_axis) / np.linalg.norm(self.x_axis)
         if abs(n @ x) > 1 - 1e-9:
             raise ValueError("x_axis must not be parallel to normal")
+        _aperture_fits(self)
         return self
 
 
