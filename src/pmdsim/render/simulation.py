@@ -282,6 +282,7 @@ class Simulation:
             u1, u2 = samp.lobe_unit_points()
         else:
             u1, u2 = samp.unit_points()
+        w_ray = np.ones(1) if delta else samp.ray_weights(lobe)  # the mirror: P alone
         brdf = scene.brdf.kernel_params()
         mshape = np.array(scene.monitor.shape, dtype=np.int64)
         e1 = np.zeros((0, 1))
@@ -311,7 +312,8 @@ class Simulation:
             if var is not None:  # spatially varying alpha/rho_s: per-pixel parameters
                 px = var.geometry_params(geo, scene.monitor, brdf)
                 args = (geo, brdf, u1, u2, rot)
-                tail = (table_u, table_v, k_u, k_v, images, dots, out, none, none, none, mc, px)
+                tail = (table_u, table_v, k_u, k_v, images, dots, out, none, none, none, mc, px,
+                        w_ray)
                 if lobe:
                     kb.render_tile_lobe(*args, mshape, mode, *tail)
                 else:
@@ -321,11 +323,13 @@ class Simulation:
                 kb.render_tile_lobe(
                     geo, brdf, u1, u2, rot, mshape, mode,
                     table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
+                    w_ray=w_ray,
                 )
             else:
                 kb.render_tile(
                     geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, True, mshape, mode,
                     table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
+                    w_ray=w_ray,
                 )
             return out
 
@@ -571,6 +575,7 @@ class Simulation:
                           for r in np.unique(rows).tolist()}
                 rot = np.stack([by_row[int(r)][int(c)] for r, c in zip(rows, cols)])
         n = u1.size if lobe else u1.size + 1
+        w_ray = np.ones(1) if scene.brdf.is_delta else samp.ray_weights(lobe)
         ou, ov, of = (np.empty((len(rows), n)) for _ in range(3))
         out = np.empty((len(rows), kb.OUT_FIRST))
         args = (np.array(scene.monitor.shape, np.int64), kb.MODE_TRANSPORT,
@@ -581,10 +586,10 @@ class Simulation:
             px = scene.brdf_variation.geometry_params(geo, scene.monitor, scene.brdf.kernel_params())
             args = args + (None, px)  # transport renders without the display model, as below
         if lobe:
-            kb.render_tile_lobe(geo, scene.brdf.kernel_params(), u1, u2, rot, *args)
+            kb.render_tile_lobe(geo, scene.brdf.kernel_params(), u1, u2, rot, *args, w_ray=w_ray)
         else:
             kb.render_tile(geo, scene.brdf.kernel_params(), u1, u2, rot, samp.scheme_id,
-                           samp.theta_max, True, *args)
+                           samp.theta_max, True, *args, w_ray=w_ray)
         if not directions:
             return ou, ov, of, None, hits.point[0].copy()
         dirs = np.empty((len(rows), n, 3))
