@@ -21,7 +21,7 @@ def report(
     variant: str | None = typer.Option(None, "--variant", help="Only this variant of a run "
                                        "with variants (default: all)."),
     output: Path | None = typer.Option(None, "-o", "--output", help="Folder for the figures "
-                                       "(default: RUN/figures, or RUN/<variant>/figures)."),
+                                       "(default: RUN/figures, or RUN/VARIANT/figures)."),
     workers: int | None = typer.Option(None, "--workers", min=1, help="Drawing processes "
                                        "(default: one per core for 4 figures or more)."),
 ) -> None:
