@@ -30,6 +30,7 @@ Rays that miss the monitor see black (L = 0) but keep their weight in sum f.
 from __future__ import annotations
 
 import threading
+import uuid
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -246,7 +247,10 @@ class Simulation:
         import dask
         from dask.callbacks import Callback
 
-        tasks = [dask.delayed(fn, pure=False)(r0, r1, dask_key_name=f"pmdsim-tile-{r0}") for r0, r1 in tiles]
+        # keys unique per call: a cluster may still hold the previous call's tiles
+        call = uuid.uuid4().hex[:12]
+        tasks = [dask.delayed(fn, pure=False)(r0, r1, dask_key_name=f"pmdsim-tile-{r0}-{call}")
+                 for r0, r1 in tiles]
         kwargs = {}
         if self.scheduler != "distributed":
             kwargs["scheduler"] = local_scheduler(self.scheduler)

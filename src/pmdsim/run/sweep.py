@@ -45,7 +45,7 @@ import numpy as np
 
 from ..config import ConfigError, RunConfig, load_config
 from ..studies.sweep import (MAP_VARIABLES, POINT_VARIABLES, SweepPlan, measure_point,
-                             plan_sweep, reference_key)
+                             geometry_key, plan_sweep, reference_key)
 from .threads import single_blas
 
 STORE_NAME = "sweep.zarr"
@@ -294,10 +294,10 @@ def run_sweep(cfg: RunConfig | str | Path, outdir: str | Path, *, scheduler: str
     outdir = Path(outdir)
     store = _open_or_create(plan, outdir, overwrite)
     done = done_mask(store)
-    # Points that share a specular reference run next to each other (each process keeps
-    # the last two references it decoded).
+    # Points that share a geometry and a specular reference run next to each other (each
+    # process keeps the last two of each: pmdsim.studies.sweep.GEOMETRIES, REFERENCES).
     todo = sorted((p for p in plan.points if not done[p.position]),
-                  key=lambda p: (reference_key(p.config), p.index))
+                  key=lambda p: (geometry_key(p.config), reference_key(p.config), p.index))
     skipped = tuple(p.index for p in plan.points if done[p.position])
     import dask
 
