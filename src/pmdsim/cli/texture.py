@@ -78,6 +78,9 @@ def fit(
     console = _console()
     try:
         cfg = load_config(config)
+        from ..config import check_resources
+
+        check_resources(cfg)  # one simulation of the fit, before the first one runs
         t0 = time.perf_counter()
         with console.status(f"fitting {cfg.brdf.model} alphas to {len(images)} images"):
             res = run_fit(cfg, images, output, figure=not no_figure)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from ..config import RunConfig
+from ..config import RunConfig, check_resources
 from ..studies.budget import TABLE_COLUMNS, budget
 from . import files as pio
 from .threads import single_blas
@@ -33,6 +33,7 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
                progress: Callable[[str], None] | None = None, truth: str = "centre") -> BudgetResult:
     """Compute :func:`pmdsim.studies.budget.budget` and write it into ``outdir``."""
     final = Path(outdir).absolute()
+    check_resources(cfg)  # the budget's largest run, before anything is computed
     pio.check_output_dir(final, overwrite, MARKER)
     rows = budget(cfg, progress, truth)
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
