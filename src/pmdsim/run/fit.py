@@ -38,6 +38,9 @@ class FitRun:
 def check_fit_output(outdir, overwrite: bool = False) -> Path:
     """Refuse, before any work, an output that may not become a fit folder."""
     final = Path(outdir).absolute()
+    if final.exists() and not final.is_dir():
+        raise FileExistsError(f"output {final} is an existing file, not a folder: name a new "
+                              "folder for fit.json, fit.txt and fit.png")
     pio.check_output_dir(final, overwrite, MARKER)
     return final
 
