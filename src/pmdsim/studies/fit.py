@@ -70,6 +70,8 @@ MAX_CHI2 = 2.0
 #: A direction's fringes count as signal when the first harmonic's power exceeds what
 #: noise alone gives by this many standard errors (1 / sqrt(pixels)) in some width.
 SIGNAL_SIGMAS = 6.0
+#: Relative floor of the noise estimated from noise-free images (the fit's own precision).
+PRECISION_FLOOR = 1e-6
 #: The model's numerical error is the fit's render minus one with this many times the rays.
 ERROR_RAYS_FACTOR = 4
 
@@ -412,8 +414,10 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
     tested = True
     if noise is None:
         var, dof = harmonic_noise_variance(np.where(valid, images - fitted, np.nan))
-        if np.isfinite(var) and var > 0:
-            s = np.sqrt(var)
+        if np.isfinite(var):
+            # floor: noise-free (simulated, float) images are fitted to the optimiser's
+            # precision (xtol 1e-6 in the logarithms), not to 0
+            s = max(np.sqrt(var), PRECISION_FLOOR * float(np.sqrt(np.mean(meas**2))))
             jac, res, sigma = jac / s, res / s, sigma * s
             noise_info |= {"sigma": float(s), "dof": dof}
         else:
