@@ -51,13 +51,13 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..brdf import equivalent_alphas
-from ..config import MAX_RAYS, ConfigError, InputError, RunConfig
+from ..config import ConfigError, InputError, RunConfig
 from ..render import Simulation
 from .fit_stats import (NoiseModel, fringe_signal_ratio, harmonic_noise_variance,
                         parameter_covariance)
 
 __all__ = ["FIT_FIELDS", "NoiseModel", "FitResult", "fit_fringe_images", "fit_config",
-           "model_error", "decoded_modulation", "median_modulation", "closed_form_start",
+           "decoded_modulation", "median_modulation", "closed_form_start",
            "slope_jacobian", "format_fit"]
 
 #: Models whose alphas can be fitted, with the configuration fields of (alpha_x, alpha_y).
@@ -70,10 +70,16 @@ MAX_CHI2 = 2.0
 #: A direction's fringes count as signal when the first harmonic's power exceeds what
 #: noise alone gives by this many standard errors (1 / sqrt(pixels)) in some width.
 SIGNAL_SIGMAS = 6.0
+#: Pixels whose lobe puts more than this share of its weight off the monitor are not fitted.
+EDGE_SHARE = 1e-6
 #: Relative floor of the noise estimated from noise-free images (the fit's own precision).
 PRECISION_FLOOR = 1e-6
-#: The model's numerical error is the fit's render minus one with this many times the rays.
-ERROR_RAYS_FACTOR = 4
+#: The model's numerical error: the fit is refined with this many times the rays ...
+REFINE_FACTOR = 4
+#: ... until the alphas move by less than this share of their noise uncertainty (k = 1) ...
+REFINE_TOLERANCE = 0.5
+#: ... with at most this many model evaluations per refinement.
+REFINE_NFEV = 20
 
 
 @dataclass(frozen=True)
@@ -270,32 +276,29 @@ def closed_form_start(sim: Simulation, widths, directions, modulation) -> tuple[
 
 
 # =========================================================================== the fit
-def model_error(cfg: RunConfig, values, widths, directions, shifts: int, valid,
-                model) -> tuple[np.ndarray, dict]:
-    """The model's numerical error at the fitted ``values`` (alpha_x, alpha_y, scale), as
-    one correlated pattern over the fitted image values ``[valid]`` (n,), of unit standard
-    uncertainty: this is the only way the model's own sampling error enters the fit (as
-    ``U`` of :func:`~pmdsim.studies.fit_stats.parameter_covariance`).
-
-    Estimate: ``model`` (the fit's render, unscaled) against a render with
-    ``ERROR_RAYS_FACTOR`` times the rays, and the difference taken as ``1 - 1/sqrt(4)`` of
-    the error (the Monte-Carlo rate; a lattice converges faster, so this overstates). Also
-    returns a summary (RMS of the error, relative to the RMS of the values; the ray
-    counts)."""
-    n = cfg.sampling.n_rays
-    n_ref = min(n * ERROR_RAYS_FACTOR, MAX_RAYS)
-    if n_ref == n:
-        return np.zeros(int(np.sum(valid))), {"method": "none (n_rays at its maximum)"}
-    ref = Simulation.from_config(_with_alphas(cfg, values[0], values[1], n_ref))
-    fine = ref.render_fringes(widths, directions, shifts).images.astype(np.float64)
-    diff = values[2] * (np.nan_to_num(model[valid]) - np.nan_to_num(fine[valid]))
-    e = diff / (1.0 - 1.0 / np.sqrt(n_ref / n))
-    level = float(np.sqrt(np.mean((values[2] * np.nan_to_num(model[valid])) ** 2)))
-    return e, {"method": f"render with n_rays = {n} vs {n_ref}, scaled by "
-                         f"1 / (1 - sqrt({n}/{n_ref})) (Monte-Carlo rate)",
-               "n_rays": n, "n_rays_reference": n_ref,
-               "rms": float(np.sqrt(np.mean(e**2))),
-               "rms_relative": float(np.sqrt(np.mean(e**2)) / level) if level > 0 else None}
+def _noise_scale(sol, images, valid, meas, noise: NoiseModel | None, sigma):
+    """The noise behind the weights of ``sol`` (a least-squares solution): with a sensor
+    model, its check against the residual's part no phase-shifted sinusoid makes; without
+    one, that part's variance, which scales the (unit-weighted) Jacobian and residuals.
+    Returns (summary, chi-square testable, (weighted Jacobian, weighted residuals))."""
+    fitted = np.full(images.shape, np.nan)
+    fitted[valid] = sol.fun * sigma + meas
+    resid = np.where(valid, images - fitted, np.nan)
+    if noise is not None:
+        var, dof = harmonic_noise_variance(resid / np.where(valid, noise.sigma(fitted), np.nan))
+        return ({"source": "sensor model (EMVA 1288)", "dof": dof,
+                 "observed_to_model": float(np.sqrt(var)) if np.isfinite(var) else None},
+                True, (sol.jac, sol.fun))
+    info = {"source": "the residual's part that no phase-shifted sinusoid makes"}
+    var, dof = harmonic_noise_variance(resid)
+    if not np.isfinite(var):
+        return (info | {"sigma": None, "note": "K = 3 shifts and no sensor model: the noise "
+                        "is unknown, the chi-square test was not made"}, False,
+                (sol.jac, sol.fun))
+    # floor: noise-free (simulated, float) images are fitted to the optimiser's precision
+    # (xtol 1e-6 in the logarithms), not to 0
+    s = max(np.sqrt(var), PRECISION_FLOOR * float(np.sqrt(np.mean(meas**2))))
+    return info | {"sigma": float(s), "dof": dof}, True, (sol.jac / s, sol.fun / s)
 
 
 def _signal_check(images, noise: NoiseModel | None, directions, widths) -> dict:
@@ -328,7 +331,8 @@ def _signal_check(images, noise: NoiseModel | None, directions, widths) -> dict:
 
 def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
                       noise: NoiseModel | None = None, start=None, diff_step: float = 2e-3,
-                      max_nfev: int = 60, max_chi2: float = MAX_CHI2) -> FitResult:
+                      max_nfev: int = 60, max_chi2: float = MAX_CHI2,
+                      max_rays: int = 6400) -> FitResult:
     """Fit (alpha_x, alpha_y, scale) to fringe images; see the module docstring.
 
     Parameters
@@ -346,6 +350,9 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
         Replaces the closed-form start.
     max_chi2 : float
         Largest reduced chi-square of a successful fit.
+    max_rays : int
+        Most rays per pixel of the refinement that estimates (and shrinks) the model's
+        numerical error.
 
     Raises
     ------
@@ -353,7 +360,7 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
         Images that do not fit the configuration (shape, no fringe signal), a set-up that
         does not see the monitor, a model without alphas.
     """
-    from .coverage import check_view
+    from .coverage import check_view, off_monitor_fraction
 
     images = np.asarray(images, np.float64)
     widths = tuple(float(w) for w in widths)
@@ -379,12 +386,22 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
     lo, hi = ALPHA_BOUNDS
     start = tuple(float(np.clip(s, lo * 1.01, hi / 1.01)) for s in start)
 
-    def render(ax, ay):
-        sim = Simulation.from_config(_with_alphas(cfg, ax, ay))
+    def render(ax, ay, n_rays=None):
+        sim = Simulation.from_config(_with_alphas(cfg, ax, ay, n_rays))
         return sim.render_fringes(widths, directions, shifts).images.astype(np.float64)
 
     r0 = render(*start)
-    valid = np.isfinite(images) & np.isfinite(r0)
+    # pixels whose lobe reaches the monitor's edge (at twice the start alphas, four times
+    # the rays) are left out: a ray crossing the edge makes the model jump
+    wide = Simulation.from_config(_with_alphas(
+        cfg, *np.minimum(2 * np.array(start), hi), REFINE_FACTOR * cfg.sampling.n_rays))
+    fr_wide = wide.render_fringes(widths[:1], directions[:1], 3)
+    edge = ~(off_monitor_fraction(fr_wide.f_total, fr_wide.f_hit) <= EDGE_SHARE)
+    valid = np.isfinite(images) & np.isfinite(r0) & ~edge
+    if not valid.any():
+        raise InputError("images: every pixel that sees the monitor sees it so near its edge "
+                         "that the lobe hangs over it; the alphas cannot be fitted from these "
+                         "images (monitor.centre_mm, camera.look_at_mm)")
     if valid.sum() < 10:
         raise ValueError("fit: fewer than 10 finite pixels shared by the images and the model")
     meas = images[valid]
@@ -396,49 +413,56 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
     sigma = noise.sigma(meas) if noise is not None else np.ones_like(meas)
     n_eval = [0]
 
-    def residuals(x):
-        n_eval[0] += 1
-        model = np.nan_to_num(render(np.exp(x[0]), np.exp(x[1]))[valid])  # lost bundle: black
-        return (np.exp(x[2]) * model - meas) / sigma
+    def solve(x_start, n_rays, nfev):
+        def residuals(x):
+            n_eval[0] += 1
+            model = np.nan_to_num(render(np.exp(x[0]), np.exp(x[1]), n_rays)[valid])  # lost: black
+            return (np.exp(x[2]) * model - meas) / sigma
+
+        return least_squares(residuals, x_start, diff_step=diff_step, x_scale=0.1,
+                             max_nfev=nfev, method="trf", xtol=1e-6, bounds=bounds)
 
     x0 = np.array([np.log(start[0]), np.log(start[1]), np.log(scale0)])
     bounds = ([np.log(lo), np.log(lo), -np.inf], [np.log(hi), np.log(hi), np.inf])
-    sol = least_squares(residuals, x0, diff_step=diff_step, x_scale=np.array([0.1, 0.1, 0.1]),
-                        max_nfev=max_nfev, method="trf", xtol=1e-6, bounds=bounds)
+    n_rays = cfg.sampling.n_rays
+    sol = solve(x0, n_rays, max_nfev)
+    if noise is not None and sol.success:
+        # weights from the fitted model, not the measured values (whose noise they would
+        # correlate with: a bias of the order of the uncertainty at low exposures)
+        sigma = noise.sigma(sol.fun * sigma + meas)
+        sol = solve(sol.x, n_rays, max_nfev)
+    noise_info, tested, sol_w = _noise_scale(sol, images, valid, meas, noise, sigma)
+    # the model's numerical error: refit with four times the rays until the alphas move
+    # less than REFINE_TOLERANCE of their noise uncertainty (or max_rays is reached)
+    ladder = [{"n_rays": n_rays, "values": np.exp(sol.x).tolist(), "evaluations": n_eval[0]}]
+    shift, refined = None, False
+    while n_rays * REFINE_FACTOR <= max_rays and sol.success:
+        std_noise = np.sqrt(np.diag(parameter_covariance(sol_w[0], sol_w[1]).cov_noise))
+        n_next = n_rays * REFINE_FACTOR
+        sol_next = solve(sol.x, n_next, REFINE_NFEV)
+        shift = sol_next.x - sol.x
+        n_rays, sol = n_next, sol_next
+        noise_info, tested, sol_w = _noise_scale(sol, images, valid, meas, noise, sigma)
+        ladder.append({"n_rays": n_rays, "values": np.exp(sol.x).tolist(),
+                       "evaluations": n_eval[0]})
+        if np.all(np.abs(shift[:2]) <= REFINE_TOLERANCE * std_noise[:2]):
+            refined = True
+            break
     values = np.exp(sol.x)
-    fitted_raw = render(values[0], values[1])
-    fitted = fitted_raw * values[2]
-    jac, res = sol.jac, sol.fun
-    noise_info: dict = {"source": "sensor model (EMVA 1288)" if noise is not None else
-                        "the residual's part that no phase-shifted sinusoid makes"}
-    tested = True
-    if noise is None:
-        var, dof = harmonic_noise_variance(np.where(valid, images - fitted, np.nan))
-        if np.isfinite(var):
-            # floor: noise-free (simulated, float) images are fitted to the optimiser's
-            # precision (xtol 1e-6 in the logarithms), not to 0
-            s = max(np.sqrt(var), PRECISION_FLOOR * float(np.sqrt(np.mean(meas**2))))
-            jac, res, sigma = jac / s, res / s, sigma * s
-            noise_info |= {"sigma": float(s), "dof": dof}
-        else:
-            tested = False
-            noise_info |= {"sigma": None, "note": "K = 3 shifts and no sensor model: the "
-                           "noise is unknown, the chi-square test was not made"}
-    else:
-        var, dof = harmonic_noise_variance(np.where(valid, (images - fitted), np.nan)
-                                           / np.where(valid, noise.sigma(fitted), np.nan))
-        noise_info |= {"observed_to_model": float(np.sqrt(var)) if np.isfinite(var) else None,
-                       "dof": dof}
-    e, model_info = model_error(cfg, values, widths, directions, shifts, valid, fitted_raw)
-    cv = parameter_covariance(jac, res, (e / sigma)[:, None])
+    fitted = render(values[0], values[1], n_rays) * values[2]
+    cv = parameter_covariance(sol_w[0], sol_w[1], shift=shift)
     jac_exp = np.diag(values)
     cov = jac_exp @ cv.cov @ jac_exp
     std = np.sqrt(np.diag(cov))
     std_noise = np.sqrt(np.diag(jac_exp @ cv.cov_noise @ jac_exp))
     std_model = np.sqrt(np.diag(jac_exp @ cv.cov_model @ jac_exp))
-    chi2 = cv.chi2_reduced if tested else float(np.sum(sol.fun**2) / cv.dof)
-    model_info |= {"estimator": cfg.sampling.estimator, "mode": cfg.sampling.mode,
-                   "birge_factor": cv.birge}
+    chi2 = cv.chi2_reduced
+    model_info = {"estimator": cfg.sampling.estimator, "mode": cfg.sampling.mode,
+                  "n_rays": n_rays, "ladder": ladder, "birge_factor": cv.birge,
+                  "method": ("the change of the fitted values from the last refinement (rays "
+                             f"x{REFINE_FACTOR})" if shift is not None else
+                             "not estimated (max_rays reached at the start)"),
+                  "converged": refined}
     noise_info |= signal
 
     reasons = []
@@ -486,7 +510,10 @@ def format_fit(res: FitResult, frame: str = "fixed") -> str:
                  f"<= {res.max_chi2:g}), residual RMS {res.residual_rms:.4g} over {res.n_data} "
                  f"values, {res.n_evaluations} simulations; {res.message}")
     if res.model:
+        steps = " -> ".join(str(s["n_rays"]) for s in res.model.get("ladder", []))
         lines.append(f"model: {res.model.get('estimator')} estimator, {res.model.get('mode')} "
-                     f"sample set, n_rays = {res.model.get('n_rays')}; numerical error "
-                     f"{res.model.get('method')}")
+                     f"sample set, rays per pixel {steps}; u model: "
+                     f"{res.model.get('method')}"
+                     + ("" if res.model.get("converged") else
+                        " (not below half the noise uncertainty at the largest ray count)"))
     return "\n".join(lines)

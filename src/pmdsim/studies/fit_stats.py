@@ -153,11 +153,15 @@ class Covariance:
     dof: int
 
 
-def parameter_covariance(jac, residual, model_error=None, birge: bool = True) -> Covariance:
+def parameter_covariance(jac, residual, model_error=None, birge: bool = True,
+                         shift=None) -> Covariance:
     """Covariance of least-squares parameters from the Jacobian ``jac`` (n, p) of the
     noise-weighted residuals ``residual`` (n,) at the optimum, and the model's numerical
     error ``model_error`` (n, m): columns of noise-weighted error patterns, each of unit
-    standard uncertainty (``None``: no model error). See the module docstring."""
+    standard uncertainty (``None``: no model error). ``shift`` (p,) or (p, k): the model's
+    numerical error already carried to the parameters (e.g. how far they move when the
+    model's sample set is refined), each column a standard uncertainty; it adds
+    ``shift shift^T``. See the module docstring."""
     j = np.asarray(jac, np.float64)
     r = np.asarray(residual, np.float64)
     n, p = j.shape
@@ -175,5 +179,8 @@ def parameter_covariance(jac, residual, model_error=None, birge: bool = True) ->
     b = max(1.0, chi2) if birge else 1.0
     g = a @ u
     cov_model = g @ g.T
+    if shift is not None:
+        sh = np.asarray(shift, np.float64).reshape(p, -1)
+        cov_model = cov_model + sh @ sh.T
     cov_noise = b * jtj_inv
     return Covariance(cov_noise + cov_model, cov_noise, cov_model, chi2, b, dof)
