@@ -392,18 +392,26 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
 
     r0 = render(*start)
     # pixels whose lobe reaches the monitor's edge (at twice the start alphas, four times
-    # the rays) are left out: a ray crossing the edge makes the model jump
-    wide = Simulation.from_config(_with_alphas(
-        cfg, *np.minimum(2 * np.array(start), hi), REFINE_FACTOR * cfg.sampling.n_rays))
-    fr_wide = wide.render_fringes(widths[:1], directions[:1], 3)
-    edge = ~(off_monitor_fraction(fr_wide.f_total, fr_wide.f_hit) <= EDGE_SHARE)
-    valid = np.isfinite(images) & np.isfinite(r0) & ~edge
-    if not valid.any():
-        raise InputError("images: every pixel that sees the monitor sees it so near its edge "
-                         "that the lobe hangs over it; the alphas cannot be fitted from these "
-                         "images (monitor.centre_mm, camera.look_at_mm)")
+    # the rays) are left out: a ray crossing the edge makes the model jump. If that leaves
+    # less than a quarter of the pixels, the bound is simulate's (5 % of the weight off
+    # the monitor at the start alphas).
+    seen = np.isfinite(images) & np.isfinite(r0)
+    valid, edge_rule = None, ""
+    for factor, share in ((2.0, EDGE_SHARE), (1.0, cfg.diagnostics.max_off_monitor_fraction)):
+        wide = Simulation.from_config(_with_alphas(
+            cfg, *np.minimum(factor * np.array(start), hi), REFINE_FACTOR * cfg.sampling.n_rays))
+        fr_wide = wide.render_fringes(widths[:1], directions[:1], 3)
+        on = off_monitor_fraction(fr_wide.f_total, fr_wide.f_hit) <= share
+        valid = seen & on
+        edge_rule = (f"pixels with more than {share:g} of the lobe's weight off the monitor "
+                     f"at {factor:g} x the start alphas left out")
+        if valid[0, 0, 0].sum() >= 0.25 * seen[0, 0, 0].sum():
+            break
     if valid.sum() < 10:
-        raise ValueError("fit: fewer than 10 finite pixels shared by the images and the model")
+        raise InputError("images: fewer than 10 values of pixels whose lobe stays on the "
+                         "monitor; the alphas cannot be fitted from these images (place the "
+                         "monitor so that the camera sees it well inside its edges: "
+                         "monitor.centre_mm, camera.look_at_mm)")
     meas = images[valid]
     denom = float(np.sum(r0[valid] ** 2))
     scale0 = float(np.sum(meas * r0[valid]) / denom) if denom > 0 else 1.0
@@ -462,7 +470,9 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
                   "method": ("the change of the fitted values from the last refinement (rays "
                              f"x{REFINE_FACTOR})" if shift is not None else
                              "not estimated (max_rays reached at the start)"),
-                  "converged": refined}
+                  "converged": refined, "pixels": edge_rule,
+                  "pixels_fitted": int(valid[0, 0, 0].sum()),
+                  "pixels_seen": int(seen[0, 0, 0].sum())}
     noise_info |= signal
 
     reasons = []
