@@ -130,7 +130,7 @@ def test_bad_input_exits_2_before_the_fit(case):
     existing.write_text("keep me\n")
     missing = [root / "no-such-image.tif"]  # the output is refused before images are read
     p = _fit(case["cfg"], missing, existing)
-    assert p.returncode == 2 and "existing file" in p.stderr and "no-such-image" not in p.stderr
+    assert p.returncode == 2 and "is a file" in p.stderr and "no-such-image" not in p.stderr
     assert existing.read_text() == "keep me\n"
     for text in (off.stderr, small.stderr, p.stderr):
         assert "Traceback" not in text
