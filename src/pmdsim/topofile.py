@@ -14,9 +14,10 @@ non-measured points and outliers handled as asked:
 - plain arrays ``.npy``, ``.csv``/``.txt`` and float ``.tif``/``.tiff`` (no units and no
   spacing inside: the caller gives ``spacing_mm`` and ``height_unit``).
 
-Every failure is an :class:`~pmdsim.config.InputError` (a missing file a
-:class:`~pmdsim.config.MissingInputError`) that names the configuration field and the file,
-raised before any long work. Zygo ``.datx`` (HDF5) is not read by either library (0.19.2 /
+Every failure is a :class:`~pmdsim.config.files.FileInputError` (an ``InputError`` and a
+``ConfigError``: exit code 2 in the command line; a missing file a ``MissingFileError``)
+that names the configuration field and the file, raised before any long work. Plain arrays
+are read by the readers of :data:`pmdsim.config.files.HEIGHT_MAP_READERS`. Zygo ``.datx`` (HDF5) is not read by either library (0.19.2 /
 2.0.0): export such a measurement as X3P or SDF from the instrument software.
 """
 
@@ -27,14 +28,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import InputError, MissingInputError
+from .config import files
+from .config.files import FileInputError as InputError
+from .config.files import MissingFileError as MissingInputError
 
 #: Suffixes read by x3pio, by surfalize, and as plain arrays.
 X3P_SUFFIXES = (".x3p",)
 SURFALIZE_SUFFIXES = (".sur", ".plu", ".plux", ".vk4", ".vk6", ".vk7", ".lext", ".oir", ".poir",
                       ".al3d", ".sdf", ".tmd", ".opd", ".zon", ".nms", ".os3d", ".gwy", ".hdat",
                       ".zmg", ".sflz", ".xyz", ".fits", ".fit", ".fts", ".dat", ".vk3")
-ARRAY_SUFFIXES = (".npy", ".csv", ".txt", ".tif", ".tiff")
+ARRAY_SUFFIXES = tuple(files.HEIGHT_MAP_READERS)
 HEIGHT_UNITS_MM = {"mm": 1.0, "um": 1e-3, "nm": 1e-6, "m": 1e3}
 LEVELS = ("none", "mean", "plane")
 FILLS = ("error", "nearest", "mean")
@@ -160,22 +163,15 @@ def _level(z, valid, level):
 
 def _read_array(path, field):
     try:
-        if path.suffix.lower() == ".npy":
-            z = np.load(path, allow_pickle=False)
-        elif path.suffix.lower() in (".csv", ".txt"):
-            text = path.read_text()
-            z = np.loadtxt(path, delimiter="," if "," in text else None, ndmin=2)
-        else:
-            import tifffile
-
-            z = tifffile.imread(path)
-            if z.dtype.kind != "f":
-                raise InputError(f"{field}: {path} holds {z.dtype} data; store heights as a "
-                                 "32-bit float TIFF")
+        z = files.HEIGHT_MAP_READERS[path.suffix.lower()](path, field)
     except InputError:
         raise
     except Exception as err:  # noqa: BLE001 - any reader failure is bad input, named
         raise InputError(f"{field}: cannot read {path}: {err}") from None
+    z = np.asarray(z)
+    if z.dtype.kind not in "fiu":
+        raise InputError(f"{field}: {path} holds {z.dtype} data, not heights: save a plain "
+                         "float array")
     return np.asarray(z, np.float64)
 
 

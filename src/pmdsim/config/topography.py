@@ -10,7 +10,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from . import Float, PositiveFloat, _Model
+from .base import Float, PositiveFloat, _Model
 
 Wavelength = Annotated[Float, Field(gt=1.0, le=1e5)]
 Incidence = Annotated[Float, Field(ge=0, lt=89)]

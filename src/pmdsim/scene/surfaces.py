@@ -13,7 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..config import ConfigError, FlatSurfaceConfig, InputError
+from ..config import ConfigError, FlatSurfaceConfig
 from ..geometry import normalize
 from ..topofile import is_instrument_file, read_topography
 
@@ -138,17 +138,16 @@ def zernike_monomials(j: int) -> np.ndarray:
     return norm * out
 
 
-def load_height_map(path, spacing_mm=(1.0, 1.0), height_unit="mm", **options):
+def load_height_map(path, field: str = "surface.file", spacing_mm=(1.0, 1.0), height_unit="mm",
+                    **options):
     """A (H, W) float64 height grid in mm and its spacing (dx, dy) in mm from an instrument
     file (X3P, .sur, .plu, ...: units and spacing from the file) or a plain array (.npy,
-    .csv/.txt, 32/64-bit float .tif/.tiff: ``spacing_mm``, ``height_unit``) through
+    .csv/.txt, 32/64-bit float .tif/.tiff: ``spacing_mm``, ``height_unit``;
+    :func:`pmdsim.config.files.read_height_map`) through
     :func:`pmdsim.topofile.read_topography` (``options``: ``level``, ``fill``,
-    ``outlier_sigma``). Raises ConfigError naming ``surface.file``."""
-    try:
-        t = read_topography(path, "surface.file", spacing_mm=spacing_mm, height_unit=height_unit,
-                            **options)
-    except InputError as err:
-        raise ConfigError(str(err)) from None
+    ``outlier_sigma``). Raises :class:`~pmdsim.config.files.FileInputError` (a
+    ConfigError) naming ``field``."""
+    t = read_topography(path, field, spacing_mm=spacing_mm, height_unit=height_unit, **options)
     return t.heights, (t.dx, t.dy)
 
 
@@ -220,7 +219,8 @@ class SagSurface:
             if cfg.spacing_mm is None and not is_instrument_file(cfg.file):
                 raise ConfigError(f"surface.spacing_mm: {cfg.file} holds no sample spacing; "
                                   "give spacing_mm = [dx, dy] (mm)")
-            z, (dx, dy) = load_height_map(cfg.file, cfg.spacing_mm, cfg.height_unit, level=cfg.level,
+            z, (dx, dy) = load_height_map(cfg.file, "surface.file", cfg.spacing_mm, cfg.height_unit,
+                                          level=cfg.level,
                                           fill=cfg.fill, outlier_sigma=cfg.outlier_sigma)
             h, w = z.shape
             origin = (-(w - 1) / 2 * dx, -(h - 1) / 2 * dy) if cfg.origin_mm is None else tuple(cfg.origin_mm)
