@@ -274,12 +274,25 @@ class Simulation:
         """True when the radiometric estimator samples the BRDF lobe (not for the mirror)."""
         return self.scene.estimator == "radiometric" and not self.scene.brdf.is_delta
 
-    def _render(self, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
-                images=None, dots=None, progress=None):
-        scene = self.scene
+    def _render(self, mode, ncols, **kw):
+        """Pixel sums of the scene's BRDF; a specular peak beside a lobe is a second, mirror
+        pass added by :func:`pmdsim.render.specular.add_specular`."""
+        from .specular import add_specular, check_estimator, specular_reflectance
+
+        check_estimator(self.scene.brdf, self.scene.estimator)
+        out = self._render_brdf(self.scene, mode, ncols, **kw)
+        if specular_reflectance(self.scene.brdf) > 0:
+            kw.pop("progress", None)
+            mirror = self._render_brdf(self.scene.specular(), mode, ncols, **kw)
+            out = add_specular(out, mirror, self.scene.brdf, self.scene.estimator,
+                               self.scene.rays_per_pixel)
+        return out
+
+    def _render_brdf(self, scene, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
+                     images=None, dots=None, progress=None):
         delta = scene.brdf.is_delta
         samp = scene.sampling
-        lobe = self._lobe
+        lobe = scene.estimator == "radiometric" and not delta
         if delta:
             u1 = u2 = np.zeros(0)
         elif lobe:
