@@ -58,6 +58,9 @@ ResolutionAxis = Annotated[Int, Field(gt=0, le=MAX_RESOLUTION_PX)]
 MAX_RAYS = 10_000_000
 
 
+from .budget import BudgetConfig  # noqa: E402  (its own section module)
+
+
 class ConfigError(ValueError):
     """A configuration is invalid; the message names each offending field and the fix."""
 
@@ -899,7 +902,8 @@ class ReconstructConfig(_Model):
 
     ``enabled``: None = whenever the chain decodes both directions x and y; ``spacing_mm``:
     the surface grid; ``remove``: terms removed before the height statistics (``piston``,
-    ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism);
+    ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism,
+    ``sphere`` = the best-fit sphere, radius reported; docs/reconstruction.md);
     ``order``: 2 = classic Southwell, 4 = higher-order; ``anchor``: where the height is
     tied to the nominal shape (the aperture centre, or the mean over the aperture);
     ``prior``: the nominal shape (a surface table like ``[surface]``, e.g. the design when
@@ -908,7 +912,7 @@ class ReconstructConfig(_Model):
 
     enabled: Bool | None = None
     spacing_mm: PositiveFloat = 0.5
-    remove: Literal["none", "piston", "tilt", "power", "astigmatism"] = "piston"
+    remove: Literal["none", "piston", "tilt", "power", "astigmatism", "sphere"] = "piston"
     order: Literal[2, 4] = 4
     anchor: Literal["centre", "mean"] = "centre"
     prior: SurfaceConfig | None = Field(
@@ -1129,6 +1133,7 @@ class RunConfig(_Model):
     reconstruct: ReconstructConfig = ReconstructConfig()
     diagnostics: DiagnosticsConfig = DiagnosticsConfig()
     sensor: SensorConfig = SensorConfig()
+    budget: BudgetConfig = BudgetConfig()
     variants: Annotated[tuple[VariantConfig, ...], Field(max_length=64)] = ()
     sweep: SweepConfig | None = None
 
