@@ -16,25 +16,14 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
+from pydantic import Field
+
+from .base import Bool, Float, Int, _Model
+
+_NonNeg = Annotated[Float, Field(ge=0, le=1e6)]
 
 
-def _not_bool(v):
-    if isinstance(v, bool):
-        raise ValueError("must be a number, not a boolean (true/false)")
-    return v
-
-
-_Float = Annotated[float, BeforeValidator(_not_bool)]
-_NonNeg = Annotated[_Float, Field(ge=0, le=1e6)]
-_Int = Annotated[int, BeforeValidator(_not_bool)]
-
-
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-class CalibrationUncertainty(_Section):
+class CalibrationUncertainty(_Model):
     """One standard uncertainty per calibrated quantity; 0 leaves the row out.
 
     ``camera_position_mm`` / ``monitor_position_mm``: per axis (x, y, z of the world);
@@ -59,7 +48,7 @@ class CalibrationUncertainty(_Section):
 RemovalTerm = Literal["piston", "tilt", "power", "astigmatism", "sphere"]
 
 
-class BudgetConfig(_Section):
+class BudgetConfig(_Model):
     """``pmdsim budget`` settings.
 
     ``remove``: what is removed from the height error before RMS/PV/P95: a level
@@ -74,10 +63,10 @@ class BudgetConfig(_Section):
 
     remove: (Literal["none", "piston", "tilt", "power", "astigmatism", "sphere"]
              | tuple[RemovalTerm, ...] | None) = None
-    remove_zernike: tuple[Annotated[_Int, Field(ge=1, le=231)], ...] = ()
+    remove_zernike: tuple[Annotated[Int, Field(ge=1, le=231)], ...] = ()
     rim_exclusion_mm: _NonNeg = 0.0
-    rim_exclusion_percent: Annotated[_Float, Field(ge=0, lt=100)] = 0.0
-    zernike_terms: Annotated[_Int, Field(ge=4, le=231)] = 37
-    reconstruct: Annotated[bool, Field(strict=True)] | None = None
-    calibration_rows: Annotated[bool, Field(strict=True)] = True
+    rim_exclusion_percent: Annotated[Float, Field(ge=0, lt=100)] = 0.0
+    zernike_terms: Annotated[Int, Field(ge=4, le=231)] = 37
+    reconstruct: Bool | None = None
+    calibration_rows: Bool = True
     calibration: CalibrationUncertainty = CalibrationUncertainty()

@@ -6,8 +6,9 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-# the package's models, defined before it imports this module (at its end)
-from . import ConfigError, MirrorConfig, RunConfig
+from .base import ConfigError
+from .brdf import MirrorConfig
+from .run import RunConfig
 
 # ----------------------------------------------------------------------------- resources
 #: Scattered rays per CPU-second of a whole run (geometry, rendering, decoding, diagnostics,

@@ -57,6 +57,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..config import RESERVED_VARIANT_NAMES, ConfigError, RunConfig, check_resources
+from ..scene.sanity import check_physics
 from ..studies import coverage
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
@@ -206,6 +207,8 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
     dots = resolve_dots(cfg)
     image_files, levels = resolve_images(cfg)
     decoding, notes = chain_mode(cfg, decode)
+    for _, c, s in members:  # sensor, display and BRDF that leave no signal: refused here
+        notes += [n for n in check_physics(c, s.scene) if n not in notes]
     n_calls = (cfg.patterns.fringes is not None) + bool(dots) + (levels is not None)
     sim = members[0][2]
     n_tiles = math.ceil(sim.shape[0] / sim.tile_rows)

@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
-from ..config import ConfigError, FlatSurfaceConfig
+from ..config import ConfigError, FlatSurfaceConfig, files
 from ..geometry import normalize
 
 
@@ -139,32 +138,12 @@ def zernike_monomials(j: int) -> np.ndarray:
     return norm * out
 
 
-def load_height_map(path) -> np.ndarray:
+def load_height_map(path, field: str = "surface.file") -> np.ndarray:
     """A (H, W) float64 height grid from .npy, .csv/.txt (comma or whitespace separated) or
-    a 32/64-bit float .tif/.tiff. Raises ConfigError naming ``surface.file``."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"surface.file: height map not found: {path} (check the path)")
-    suffix = path.suffix.lower()
-    if suffix == ".npy":
-        z = np.load(path, allow_pickle=False)
-    elif suffix in (".csv", ".txt"):
-        text = path.read_text()
-        z = np.loadtxt(path, delimiter="," if "," in text else None, ndmin=2)
-    elif suffix in (".tif", ".tiff"):
-        import tifffile
-
-        z = tifffile.imread(path)
-        if z.dtype.kind != "f":
-            raise ConfigError(f"surface.file: {path} holds {z.dtype} data; store heights as a 32-bit float TIFF")
-    else:
-        raise ConfigError(f"surface.file: unknown height-map format {suffix!r} (use .npy, .csv or a 32-bit float .tif)")
-    z = np.asarray(z, np.float64)
-    if z.ndim != 2 or min(z.shape) < 4:
-        raise ConfigError(f"surface.file: {path} must hold a 2-D grid of at least 4 x 4 heights, got shape {z.shape}")
-    if not np.isfinite(z).all():
-        raise ConfigError(f"surface.file: {path} has {int((~np.isfinite(z)).sum())} non-finite heights; fill them first")
-    return z
+    a 32/64-bit float .tif/.tiff (or a registered instrument format). Raises
+    :class:`~pmdsim.config.files.FileInputError` (a ConfigError) naming ``field``
+    (:func:`pmdsim.config.files.read_height_map`)."""
+    return files.read_height_map(path, field)
 
 
 def bspline_coefficients(z: np.ndarray) -> np.ndarray:
