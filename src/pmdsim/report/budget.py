@@ -34,8 +34,9 @@ def height_text(height_rows: list[dict], settings: dict | None = None) -> str:
     for r in height_rows:
         if r.get("sphere"):
             sp = r["sphere"]
-            lines.append(f"best-fit sphere, {r['effect']}: radius {_g(sp['radius_measured_mm'])} mm "
-                         f"(true {_g(sp['radius_true_mm'])} mm, change {_g(sp['radius_change_mm'])} mm)")
+            lines.append(f"best-fit sphere, {r['effect']}: radius {sp['radius_measured_mm']:.8g} mm "
+                         f"(reference {sp['radius_true_mm']:.8g} mm), curvature change "
+                         f"{sp['curvature_change_per_mm'] * 1e3:+.3g} 1/m")
     return "\n".join(lines) + "\n"
 
 

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import math
+
 import os
 
 
@@ -141,7 +143,9 @@ def reconstruction_text(name: str, rec: dict) -> str:
     if rec.get("sphere"):
         sp = rec["sphere"]
         lines.append(f"  best-fit sphere: radius {sp['radius_measured_mm']:.8g} mm reconstructed, "
-                     f"{sp['radius_true_mm']:.8g} mm true (change {sp['radius_change_mm']:+.3g} mm)")
+                     + (f"{sp['radius_true_mm']:.8g} mm true (change {sp['radius_change_mm']:+.3g} mm)"
+                        if math.isfinite(sp["radius_true_mm"]) else "the true surface is flat")
+                     + f"; curvature change {sp['curvature_change_per_mm'] * 1e3:+.3g} 1/m")
     table = rec.get("zernike_noll_nm") or []
     if table:
         left = [t for t in table if not t["removed"] and t["index"] > 1]
