@@ -129,7 +129,7 @@ def budget(
     what = "centre ray" if truth == "centre" else "vision rays (footprint average)"
     console.print(f"pmdsim budget '{cfg.name}' ({time.perf_counter() - t0:.1f} s); deviation from "
                   f"the exact reflection point of each pixel's {what}")
-    console.print(budget_text(result.rows), markup=False)
+    console.print(budget_text(result.rows, result.height_rows, result.settings), markup=False)
     console.print(f"table  {result.table}")
     if result.figure is not None:
         console.print(f"figure {result.figure}")
