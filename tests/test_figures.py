@@ -135,15 +135,17 @@ def test_a_failed_fork_draws_in_the_run_process(decoded_run, tmp_path, monkeypat
 
 def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch):
     """The overview needs only the chain: its drawing starts before the surface is
-    reconstructed and diagnosed, the reconstruction's figure after; the run's statistics
-    still hold the reconstruction, and a run without decoding draws its figures too."""
+    reconstructed and diagnosed, the reconstruction's figure right after the
+    reconstruction (the diagnostics run meanwhile); the run's statistics still hold the
+    reconstruction, and a run without decoding draws its figures too."""
     import json
 
+    from pmdsim.run import figures as figures_mod
     from pmdsim.run import member as member_mod
     from pmdsim.run import reconstruction as recon
 
     events = []
-    start, from_chain, diagnose = (member_mod.start_drawings, recon.from_chain,
+    start, from_chain, diagnose = (figures_mod.start_drawings, recon.from_chain,
                                    member_mod.diagnose_run)
 
     def start_drawings(names, *args, **kwargs):
@@ -156,7 +158,7 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
             return fn(*args, **kwargs)
         return wrapped
 
-    monkeypatch.setattr(member_mod, "start_drawings", start_drawings)
+    monkeypatch.setattr(figures_mod, "start_drawings", start_drawings)
     monkeypatch.setattr(recon, "from_chain", record("reconstruction", from_chain))
     monkeypatch.setattr(member_mod, "diagnose_run", record("diagnostics", diagnose))
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
@@ -164,7 +166,7 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
     res = pipeline.run_simulation(parse_config(d), tmp_path / "run")
     drawn = [e for e in events if e[0] == "figures" and e[1]]
     assert events.index(("figures", ("overview",))) < events.index(("reconstruction",)) \
-        < events.index(("diagnostics",)) < events.index(("figures", ("surface_errors",)))
+        < events.index(("figures", ("surface_errors",))) < events.index(("diagnostics",))
     assert [e[1] for e in drawn] == [("setup",), ("overview",), ("surface_errors",)]
     stats = json.loads((res.outdir / "statistics.json").read_text())
     assert "reconstruction" in stats and "diagnostics" in stats

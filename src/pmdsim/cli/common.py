@@ -87,9 +87,35 @@ def _si(x: float) -> str:
 def _numbers(text: str | None, name: str, kind=float) -> list | None:
     if text is None:
         return None
-    try:
-        return [kind(x) for x in text.replace(" ", "").split(",") if x]
-    except ValueError:
-        from ..config import InputError
+    import math
 
+    from ..config import InputError
+
+    try:
+        values = [kind(x) for x in text.replace(" ", "").split(",") if x]
+    except ValueError:
         raise InputError(f"{name} must be comma-separated numbers, got {text!r}") from None
+    bad = [v for v in values if not math.isfinite(v) or v <= 0]
+    if bad:
+        raise InputError(f"{name} must be positive finite numbers, got {bad[0]!r} in {text!r}")
+    return values
+
+
+def _output_folder(path, option: str = "-o") -> None:
+    """Refuse, before any computation, an output folder that cannot be one: an existing
+    file (or a path below one), or a folder that cannot be created or written."""
+    import os
+    from pathlib import Path
+
+    if path is None:
+        return
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        _fail(f"{option} {path}: exists and is a file, not a folder; choose another {option}")
+    parent = path if path.exists() else next((p for p in path.absolute().parents if p.exists()),
+                                             None)
+    if parent is not None and not parent.is_dir():
+        _fail(f"{option} {path}: {parent} is a file, so no folder can be made below it; "
+              f"choose another {option}")
+    if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
+        _fail(f"{option} {path}: {parent} is not writable; choose another {option}")

@@ -45,9 +45,9 @@ class CameraConfig(_Model):
     subpixels: Annotated[Int, Field(ge=1, le=16)] = Field(
         1, description="n: each pixel value integrates n x n stratified sub-pixel vision rays "
         "(1 = one ray through the pixel centre)")
-    f_number: PositiveFloat | None = Field(
+    f_number: Annotated[Float, Field(ge=0.5, le=1e4)] | None = Field(
         None, description="thin lens of focal_length_mm at this f-number (aperture diameter "
-        "focal_length_mm / f_number); none = pinhole")
+        "focal_length_mm / f_number; >= 0.5, a numerical aperture <= 1); none = pinhole")
     focus_distance_mm: PositiveFloat | None = Field(
         None, description="distance of the plane in focus along the optical axis; default: the "
         "surface point seen by the image centre")
@@ -75,6 +75,12 @@ class CameraConfig(_Model):
         if self.f_number is not None and self.focal_length_mm is None:
             raise ValueError("f_number needs focal_length_mm (the aperture diameter is "
                              "focal_length_mm / f_number)")
+        if (self.focus_distance_mm is not None and self.focal_length_mm is not None
+                and self.focus_distance_mm <= self.focal_length_mm):
+            raise ValueError(f"focus_distance_mm = {self.focus_distance_mm:g} must exceed "
+                             f"focal_length_mm = {self.focal_length_mm:g} (a thin lens cannot "
+                             "focus nearer than its focal length); give the distance to the "
+                             "part in mm")
         has_mm = self.focal_length_mm is not None or self.pixel_pitch_mm is not None
         if self.camera_matrix is not None:
             pass

@@ -12,7 +12,8 @@ from .base import Coord, Float, Int, MAX_RESOLUTION_PX, _Model
 class FringeConfig(_Model):
     """Sinusoidal fringes: widths (periods) in monitor px, K equal phase shifts."""
 
-    widths_px: Annotated[tuple[Annotated[Float, Field(gt=0, le=1e7)], ...],
+    # a period below 2 monitor pixels cannot be shown (it aliases): the smallest width is 2
+    widths_px: Annotated[tuple[Annotated[Float, Field(ge=2, le=1e7)], ...],
                          Field(max_length=16)] = (50.0,)
     shifts: Annotated[Int, Field(ge=3, le=256)] = 4
     directions: tuple[Literal["x", "y"], ...] = ("x", "y")
@@ -55,11 +56,15 @@ class ImageConfig(_Model):
     """Arbitrary monitor images (PNG/TIFF files, paths relative to the config file)."""
 
     files: Annotated[tuple[Annotated[str, Field(min_length=1, max_length=4096)], ...],
-                     Field(min_length=1, max_length=10000)]
+                     Field(max_length=10000)]
 
     @field_validator("files")
     @classmethod
     def _paths(cls, v):
+        # checked here, after the items: pydantic's own length check would also report
+        # "at least 1 item ... not 0" for a list whose items are wrong (files = [1])
+        if len(v) == 0:
+            raise ValueError("give at least one image file")
         if any("\x00" in f for f in v):
             raise ValueError("file names must not contain NUL characters")
         return v

@@ -24,10 +24,12 @@ class SensorConfig(_Model):
 
     enabled: Bool = False
     quantum_efficiency: Annotated[Float, Field(gt=0, le=1)] = 1.0
-    exposure_electrons: PositiveFloat | None = None
-    exposure_photons: PositiveFloat | None = None
+    # real pixels hold up to ~1e6 e-; the bounds keep Poisson sampling exact (NumPy's
+    # limit is ~9e18) and name the field instead of NumPy's "lam value too large"
+    exposure_electrons: Annotated[Float, Field(gt=0, le=1e12)] | None = None
+    exposure_photons: Annotated[Float, Field(gt=0, le=1e12)] | None = None
     target_fill: Annotated[Float, Field(gt=0, le=1)] | None = None
-    full_well_electrons: PositiveFloat = 10000.0
+    full_well_electrons: Annotated[Float, Field(gt=0, le=1e12)] = 10000.0
     dark_noise_electrons: Annotated[Float, Field(ge=0)] = Field(
         0.0, description="sigma_d, temporal dark noise (std, e-)")
     dark_signal_electrons: Annotated[Float, Field(ge=0)] = Field(

@@ -3,6 +3,7 @@ freeform, measured height map) with its aperture; the tagged union :data:`Surfac
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
 import numpy as np
@@ -32,6 +33,34 @@ class FlatSurfaceConfig(_Model):
         if abs(n @ x) > 1 - 1e-9:
             raise ValueError("x_axis must not be parallel to normal")
         return self
+
+
+def _aperture_reach(ap) -> float | None:
+    """The largest distance (mm) from the vertex axis that an aperture reaches."""
+    if ap is None:
+        return None
+    cx, cy = ap.centre_mm
+    if ap.shape == "rectangular":
+        w, h = ap.size_mm
+        return math.hypot(abs(cx) + w / 2, abs(cy) + h / 2)
+    return math.hypot(cx, cy) + ap.radius_mm
+
+
+def _aperture_fits(surface) -> None:
+    """Refuse an aperture beyond the edge of a closed base conic (a sphere of radius R ends
+    at r = |R|; a conic with 1 + k > 0 at |R| / sqrt(1 + k)): the surface has no points there."""
+    radius = getattr(surface, "radius_mm", None)
+    reach = _aperture_reach(getattr(surface, "aperture", None))
+    k = float(getattr(surface, "conic", 0.0))
+    if radius is None or reach is None or 1 + k <= 0:
+        return
+    edge = abs(radius) / math.sqrt(1 + k)
+    if reach >= edge:
+        what = "sphere" if k == 0 else f"conic (k = {k:g})"
+        raise ValueError(
+            f"aperture: reaches {reach:g} mm from the axis, but a {what} of radius_mm = "
+            f"{radius:g} ends at {edge:g} mm (it has no points beyond); use a smaller "
+            "aperture.radius_mm / size_mm (or a larger radius_mm)")
 
 
 class ApertureConfig(_Model):
@@ -87,6 +116,7 @@ class _SagSurfaceBase(_Model):
         x = np.asarray(self.x_axis) / np.linalg.norm(self.x_axis)
         if abs(n @ x) > 1 - 1e-9:
             raise ValueError("x_axis must not be parallel to normal")
+        _aperture_fits(self)
         return self
 
 
@@ -140,15 +170,22 @@ class ZernikeSurfaceConfig(_SagSurfaceBase):
 
 
 class HeightMapSurfaceConfig(_SagSurfaceBase):
-    """A measured topography: heights on a regular grid from ``file`` (.npy, .csv, or a
-    32-bit float .tif/.tiff), rows along local y, columns along local x, ``spacing_mm`` =
-    (dx, dy), ``origin_mm`` = local (x, y) of element [0, 0] (default: the grid centred on
-    the vertex), heights in ``height_unit``, added to the base conic; interpolated with a
-    bicubic B-spline (continuous normals). The aperture defaults to the grid."""
+    """A measured topography: heights on a regular grid from ``file``, rows along local y,
+    columns along local x: an instrument file (X3P, Digital Surf .sur, Sensofar .plu,
+    Keyence .vk4, ...: units and spacing from the file; ``pmdsim.topofile``) or a plain
+    array (.npy, .csv, 32-bit float .tif/.tiff) with ``spacing_mm`` = (dx, dy) and heights
+    in ``height_unit``. ``level`` ("none", "mean", "plane"), ``outlier_sigma`` and ``fill``
+    ("error", "nearest", "mean": for non-measured points and outliers) prepare it.
+    ``origin_mm`` = local (x, y) of element [0, 0] (default: the grid centred on the
+    vertex); the heights are added to the base conic, interpolated with a bicubic B-spline
+    (continuous normals). The aperture defaults to the grid."""
 
     type: Literal["height_map"]
     file: str
-    spacing_mm: tuple[PositiveFloat, PositiveFloat]
+    spacing_mm: tuple[PositiveFloat, PositiveFloat] | None = None
+    level: Literal["none", "mean", "plane"] = "none"
+    fill: Literal["error", "nearest", "mean"] = "error"
+    outlier_sigma: PositiveFloat | None = None
     origin_mm: tuple[Coord, Coord] | None = None
     height_unit: Literal["mm", "um", "nm"] = "mm"
     radius_mm: Coord | None = None

@@ -209,7 +209,26 @@ def _draw_scene(ax, sim, bundle, vision, pixel, full: bool):
     return np.concatenate([np.asarray(p).reshape(-1, 3) for p in pts])
 
 
-def plot_setup(sim, path: str | Path, pixel: tuple[int, int] = (0, 0),
+def pixel_on_part(sim, grid: int = 33) -> tuple[int, int]:
+    """(row, col) whose bundle the set-up figure draws: (0, 0) (the paper's pixel (1, 1))
+    when its vision ray hits the surface, else, of a ``grid`` x ``grid`` lattice of pixels,
+    the one on the part nearest the image centre ((0, 0) when none is)."""
+    h, w = sim.shape
+    if trace_primary(sim.scene, 0, 1).valid[0, 0]:
+        return (0, 0)
+    best, dist = (0, 0), np.inf
+    cols = np.unique(np.linspace(0, w - 1, grid).round().astype(int))
+    for r in np.unique(np.linspace(0, h - 1, grid).round().astype(int)):
+        ok = trace_primary(sim.scene, int(r), int(r) + 1).valid[0, cols]
+        if ok.any():
+            d = (r - (h - 1) / 2) ** 2 + (cols[ok] - (w - 1) / 2) ** 2
+            k = int(np.argmin(d))
+            if d[k] < dist:
+                best, dist = (int(r), int(cols[ok][k])), d[k]
+    return best
+
+
+def plot_setup(sim, path: str | Path, pixel: tuple[int, int] | None = None,
                n_vision: int = 3) -> Path:
     """The set-up like the paper's Fig. 3a, with the scattered bundle of camera ``pixel``.
 
@@ -222,8 +241,10 @@ def plot_setup(sim, path: str | Path, pixel: tuple[int, int] = (0, 0),
     ----------
     sim : Simulation
     path : path of the PNG to write
-    pixel : (row, col), 0-based
-        Pixel whose bundle is drawn in red; (0, 0) is the paper's pixel (1, 1).
+    pixel : (row, col), 0-based, optional
+        Pixel whose bundle is drawn in red; (0, 0) is the paper's pixel (1, 1). Default
+        (:func:`pixel_on_part`): (0, 0) when it sees the surface, else a pixel on the part
+        near the image centre.
     n_vision : int
         Vision rays and their principal reflections are drawn for an
         ``n_vision x n_vision`` grid of pixels.
@@ -233,6 +254,8 @@ def plot_setup(sim, path: str | Path, pixel: tuple[int, int] = (0, 0),
     scene = sim.scene
     mon = scene.monitor
     h, w = sim.shape
+    if pixel is None:
+        pixel = pixel_on_part(sim)
 
     vision = []
     rows = np.unique(np.linspace(0, h - 1, n_vision).round().astype(int))
