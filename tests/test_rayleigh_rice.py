@@ -179,6 +179,16 @@ def test_smooth_finish_renders_peak_plus_halo():
         assert np.median(loss) == pytest.approx(h / (a + h), rel=0.05)
         assert np.abs(np.angle(s[ok] / m[ok])).max() < 1e-3
     assert np.median(fr.f_total[np.isfinite(fr.f_total)]) - a == pytest.approx(h, rel=0.01)
+    # weighted_mean (solid-angle cone: the polar scheme weighs the centre, where the halo keeps
+    # the fringe): peak and halo weighed by their reflectances, about the same loss (10 %:
+    # the 4 deg cone drops the halo's far tail, so its centre's residual fringe weighs more)
+    wm = make_config(brdf=brdf, sampling={"n_rays": 400, "estimator": "weighted_mean", "theta_max_deg": 4.0,
+                                           "scheme": "solid_angle"},
+                     monitor={"pixel_model": "continuous"}, camera={"resolution": [20, 16], "focal_length_px": 40.0})
+    fw = Simulation.from_config(wm).render_fringes((2.0,), ("y",), 4)
+    s, m = fw.sums[0, 0], fm.sums[1, 0]
+    ok = np.isfinite(s) & np.isfinite(m) & (np.abs(m) > 0.5) & (fw.f_hit > 0.999)
+    assert np.median(1 - np.abs(s[ok])) == pytest.approx(h / (a + h), rel=0.1)
     paper = make_config(brdf=brdf, sampling={"n_rays": 16, "estimator": "paper"})
     with pytest.raises(ConfigError, match="sampling.estimator"):
         Simulation.from_config(paper).render_fringes((20.0,), ("x",), 4)
