@@ -202,3 +202,25 @@ def test_smooth_finish_renders_peak_plus_halo():
     paper = make_config(brdf=brdf, sampling={"n_rays": 16, "estimator": "paper"})
     with pytest.raises(ConfigError, match="sampling.estimator"):
         Simulation.from_config(paper).render_fringes((20.0,), ("x",), 4)
+
+
+def test_diagnostics_count_the_specular_peak():
+    """The diagnostics sample the halo alone; with the peak the modulation is
+    (a + h m) / (a + h) and the phase error the halo's times h m / (a + h m)."""
+    from conftest import make_config
+    from pmdsim.render import Simulation
+    from pmdsim.studies.diagnostics import diagnose
+
+    brdf = {"__replace__": dict(model="rayleigh_rice", sigma_nm=3.0, correlation_length_tangential_um=12.0,
+                                correlation_length_radial_um=5.0, rho_s=0.9, halo_bins=64)}
+    cfg = make_config(brdf=brdf, sampling={"n_rays": 32, "estimator": "radiometric"},
+                      camera={"resolution": [20, 16], "focal_length_px": 40.0})
+    sim = Simulation.from_config(cfg)
+    d = diagnose(sim, widths=(4.0,), directions=("y",), grid=(3, 3), phase_method="delta")
+    halo = diagnose(Simulation(sim.scene.replace(brdf=sim.scene.brdf.halo), 8, "threads", 2),
+                    widths=(4.0,), directions=("y",), grid=(3, 3), phase_method="delta")
+    a, h = sim.scene.brdf.specular_reflectance, sim.scene.brdf.halo_reflectance
+    m = halo.rays.modulation
+    np.testing.assert_allclose(d.rays.modulation, (a + h * m) / (a + h), rtol=1e-12)
+    np.testing.assert_allclose(d.phase_se, halo.phase_se * h * m / (a + h * m), rtol=1e-12)
+    assert np.nanmedian(d.rays.modulation) > 0.99
