@@ -223,20 +223,14 @@ def write_dataset(ds, path: str | Path) -> Path:
 
     The camera-image variables are rounded and compressed one image at a time on Dask's
     threaded scheduler (NumPy and Blosc release the GIL), whatever scheduler is active
-    (a ``dask.distributed`` client would ship the run's arrays to its workers)."""
-    import warnings
-
-    import dask
-
-    from ..render import local_scheduler
+    (a ``dask.distributed`` client would ship the run's arrays to its workers). A run
+    writes its dataset in parts while it computes (:class:`pmdsim.run.writing.DatasetWriter`),
+    with the same bytes."""
+    from .writing import _write_part, finish_store
 
     path = Path(path)
-    with warnings.catch_warnings(), dask.config.set(scheduler=local_scheduler("threads")):
-        # zarr-python notes that consolidated metadata is not (yet) in the v3 spec; xarray
-        # and zarr-python read it, other readers ignore it and list the store instead
-        warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
-        storage_form(ds, lazy=True).to_zarr(path, mode="w-", consolidated=True,
-                                            encoding=_encoding(ds), zarr_format=3)
+    _write_part(ds, path, create=True)
+    finish_store(path, dict(ds.attrs))
     return path
 
 

@@ -57,6 +57,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..config import RESERVED_VARIANT_NAMES, ConfigError, RunConfig, check_resources
+from ..scene.sanity import check_physics
 from ..studies import coverage
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
@@ -95,7 +96,8 @@ class RunPlan:
 @single_blas
 def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | None = None,
                    *, overwrite: bool = False, figures: bool | None = None,
-                   decode: bool | None = None, diagnostics: bool = True) -> RunResult:
+                   decode: bool | None = None, diagnostics: bool = True,
+                   client=None) -> RunResult:
     """Simulate ``cfg`` and write a complete run folder ``outdir``.
 
     With ``cfg.variants`` every variant (:meth:`RunConfig.expand`) becomes a complete run
@@ -127,6 +129,12 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         standard error (``[diagnostics] phase_method``) on the ``[diagnostics]`` grid; maps ``diag_*`` in the
         dataset, summary and warnings in statistics.json, summary.txt, the manifest and
         ``RunResult.warnings`` (bounds from ``[diagnostics]``).
+    client : dask.distributed.Client, optional
+        Render the run's tiles (geometry, reference, patterns, diagnostics) on this
+        client's cluster instead of ``compute.scheduler``; the results are byte for byte
+        those of a local run (the stored configuration is unchanged). Everything else (the
+        chain, writing, figures) runs here. See docs/performance.md, "One run across a
+        cluster".
 
     Returns
     -------
@@ -144,7 +152,9 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
     """
     t_start = time.perf_counter()
     plan = plan_run(cfg, progress, figures, decode, diagnostics)
-    with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp:
+    if client is not None:
+        on_cluster(plan, client)
+    with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp, _current(client):
         t = time.perf_counter()
         # The vision rays and the ideal specular reference do not depend on what a variant
         # may change (BRDF, anisotropy frame, sampling): one of each for all.
@@ -206,6 +216,8 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
     dots = resolve_dots(cfg)
     image_files, levels = resolve_images(cfg)
     decoding, notes = chain_mode(cfg, decode)
+    for _, c, s in members:  # sensor, display and BRDF that leave no signal: refused here
+        notes += [n for n in check_physics(c, s.scene) if n not in notes]
     n_calls = (cfg.patterns.fringes is not None) + bool(dots) + (levels is not None)
     sim = members[0][2]
     n_tiles = math.ceil(sim.shape[0] / sim.tile_rows)
@@ -216,6 +228,23 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
                    + int(top_figures) + (n_tiles if decoding else 0) + n_diagnosed)
     return RunPlan(cfg, members, (dots, image_files, levels, n_tiles), decoding, notes,
                    figures, diagnostics, steps)
+
+
+def on_cluster(plan: RunPlan, client) -> None:
+    """Render the tiles of every member of ``plan`` on ``client``'s cluster (the
+    simulations' scheduler becomes ``"distributed"``; the configuration is unchanged)."""
+    if "Client" not in type(client).__name__ or not hasattr(client, "get"):
+        raise TypeError(f"client: expected a dask.distributed.Client, got {client!r}")
+    for _, _, sim in plan.members:
+        sim.scheduler = "distributed"
+
+
+def _current(client):
+    """``client`` as the current Dask client of this thread (the tiles' ``dask.compute``
+    finds it), or nothing."""
+    import contextlib
+
+    return client.as_current() if client is not None else contextlib.nullcontext()
 
 
 def moved(result: RunResult, tmp: Path, final: Path, **changes) -> RunResult:
@@ -230,4 +259,4 @@ def moved(result: RunResult, tmp: Path, final: Path, **changes) -> RunResult:
         variants=tuple(moved(r, tmp, final) for r in result.variants), **changes)
 
 
-__all__ = ["RunResult", "RunPlan", "run_simulation", "plan_run"]
+__all__ = ["RunResult", "RunPlan", "run_simulation", "plan_run", "on_cluster"]

@@ -1,0 +1,108 @@
+"""Machining and images to BRDF parameters: ``pmdsim texture`` and ``pmdsim fit``."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import typer
+
+from .common import _console, _fail, _guard, _output_folder
+
+
+def texture(
+    feed_um: float = typer.Option(..., "--feed-um", help="Feed per revolution f, um."),
+    nose_radius_mm: float = typer.Option(..., "--nose-radius-mm", help="Tool nose radius r, mm."),
+    rq_um: float = typer.Option(0.0, "--rq-um", help="Random roughness Rq, um."),
+    correlation_um: float = typer.Option(10.0, "--correlation-um",
+                                         help="Correlation length of the random roughness, um."),
+    wavelength_nm: float = typer.Option(545.0, "--wavelength-nm", help="Wavelength, nm."),
+    incidence_deg: float = typer.Option(0.0, "--incidence-deg", help="Angle of incidence, deg."),
+    distance_mm: float = typer.Option(600.0, "--distance-mm",
+                                      help="Surface-to-monitor distance d, mm."),
+    pitch_mm: float = typer.Option(0.25, "--pitch-mm", help="Monitor pixel pitch, mm."),
+    output: Path | None = typer.Option(None, "-o", "--output",
+                                       help="Folder for texture.json, texture.txt, texture.png."),
+    no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+) -> None:
+    """Machining to parameters: slope statistics, equivalent Ward/Beckmann alphas, specular
+    share, grating order spacing on the monitor and the regime of a diamond-turned surface
+    (docs/texture.md)."""
+    from ..run.texture import run_texture
+
+    import math
+
+    _output_folder(output)
+    if not (math.isfinite(incidence_deg) and 0 <= incidence_deg < 90):
+        _fail(f"--incidence-deg must be at least 0 and below 90 deg (grazing incidence has no "
+              f"reflection to measure), got {incidence_deg:g}")
+    for name, value, low in (("--feed-um", feed_um, 0), ("--nose-radius-mm", nose_radius_mm, 0),
+                             ("--wavelength-nm", wavelength_nm, 0),
+                             ("--distance-mm", distance_mm, 0), ("--pitch-mm", pitch_mm, 0),
+                             ("--correlation-um", correlation_um, 0)):
+        if not (math.isfinite(value) and value > low):
+            _fail(f"{name} must be a positive finite number, got {value:g}")
+    if not (math.isfinite(rq_um) and rq_um >= 0):
+        _fail(f"--rq-um must be a finite number >= 0, got {rq_um:g}")
+    try:
+        res = run_texture(output, figure=not no_figure, feed_um=feed_um,
+                          nose_radius_mm=nose_radius_mm, rq_um=rq_um,
+                          correlation_length_um=correlation_um, wavelength_nm=wavelength_nm,
+                          incidence_deg=incidence_deg, distance_mm=distance_mm,
+                          pixel_pitch_mm=pitch_mm)
+    except ValueError as err:
+        _fail(str(err))
+    console = _console()
+    console.print(res.text, markup=False)
+    if res.json is not None:
+        console.print(f"table  {res.json}")
+    if res.figure is not None:
+        console.print(f"figure {res.figure}")
+
+
+def fit(
+    config: Path = typer.Argument(..., help="Run configuration (TOML) of the set-up and model; "
+                                  "[patterns.fringes] describes the images."),
+    images: list[Path] = typer.Argument(..., help="Fringe images, ordered direction, width, "
+                                        "shift as [patterns.fringes] lists them."),
+    output: Path = typer.Option(..., "-o", "--output", help="Folder for fit.json, fit.txt, "
+                                "fit.png (created; an existing one only with --overwrite)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing fit folder."),
+    max_chi2: float = typer.Option(2.0, "--max-chi2", min=1.0,
+                                   help="Largest reduced chi-square (noise and model error) "
+                                   "of a fit that counts as describing the images."),
+    no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+) -> None:
+    """Images to parameters: fit alpha_x/alpha_y (tangential/radial) and a brightness scale
+    of the configured BRDF to fringe images at several widths (closed-form start from the
+    modulation, then least squares with the full simulator; docs/texture.md). A fit that
+    did not converge or does not describe the images (reduced chi-square above --max-chi2)
+    writes its files marked failed and exits 1; bad input exits 2."""
+    from ..config import load_config
+    from ..run.fit import check_fit_output, run_fit
+
+    _output_folder(output)
+    console = _console()
+    with _guard():
+        check_fit_output(output, overwrite)  # before reading or computing anything
+        cfg = load_config(config)
+        from ..config import check_resources
+
+        check_resources(cfg)  # one simulation of the fit, before the first one runs
+        t0 = time.perf_counter()
+        try:
+            with console.status(f"fitting {cfg.brdf.model} alphas to {len(images)} images"):
+                res = run_fit(cfg, images, output, figure=not no_figure, overwrite=overwrite,
+                              max_chi2=max_chi2)
+        except (FileNotFoundError, ValueError) as err:
+            _fail(str(err))
+    console.print(f"pmdsim fit '{cfg.name}' ({time.perf_counter() - t0:.1f} s)")
+    console.print(res.text, markup=False)
+    console.print(f"table  {res.json}")
+    if res.figure is not None:
+        console.print(f"figure {res.figure}")
+    if not res.result.success:
+        _console(stderr=True).print(f"error: the fit failed: {res.result.reason} (files "
+                                    f"written to {res.outdir}, marked failed)",
+                                    style="bold red", markup=False)
+        raise typer.Exit(1)
