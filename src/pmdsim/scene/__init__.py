@@ -8,7 +8,7 @@ import numpy as np
 
 from ..brdf import BRDF, Mirror, brdf_from_config
 from ..config import RunConfig
-from .sampling import ConeSampling
+from .sampling import ConeSampling, sampling_from_config
 from .anisotropy import AnisotropyFrame
 from .brdf_variation import BrdfVariation
 from .camera import Camera
@@ -51,6 +51,7 @@ class Scene:
             anisotropy = replace(anisotropy, axis=surface.normal.copy())
         var = getattr(cfg.brdf, "variation", None)
         camera = Camera.from_config(cfg.camera).focused_on(surface)
+        brdf = brdf_from_config(cfg.brdf)
         return cls(
             brdf_variation=(None if var is None
                             else BrdfVariation.from_config(var, surface, anisotropy)),
@@ -59,9 +60,7 @@ class Scene:
             surface=surface,
             anisotropy=anisotropy,
             brdf=brdf_from_config(cfg.brdf, set_up_incidence_deg(camera, surface)),
-            sampling=ConeSampling(
-                s.n_rays, float(np.deg2rad(s.theta_max_deg)), s.scheme, s.mode, s.seed
-            ),
+            sampling=sampling_from_config(s, brdf),
             estimator=s.estimator,
         )
 
