@@ -39,6 +39,7 @@ import numpy as np
 
 from ..measure.chain import QUANTITIES, STATISTICS, decode_problem
 from ..config import ConfigError, RunConfig, SweepConfig, SweepRange, parse_config
+from ..config.resources import check_sweep_size
 
 #: Variables of a point: name -> (dimensions after the sweep's own, dtype, attributes).
 #: ``width`` is the index into ``patterns.fringes.widths_px`` (as given), ``row``/``col``
@@ -208,6 +209,7 @@ def plan_sweep(cfg: RunConfig, sweep: SweepConfig | None = None) -> SweepPlan:
         raise ConfigError("no [sweep] table in the configuration: add one naming the fields "
                           "to sweep (see docs/sweeps.md)")
     base = cfg.model_copy(update={"sweep": sweep})
+    check_sweep_size(base)  # before planning (validating) every point
     dump = cfg.model_dump(mode="json", exclude={"sweep"})
     for path in sweep.parameters:
         if path.split(".")[0] in ("sweep", "variants", "name", "compute", "output"):
