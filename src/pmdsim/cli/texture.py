@@ -86,6 +86,9 @@ def fit(
     with _guard():
         check_fit_output(output, overwrite)  # before reading or computing anything
         cfg = load_config(config)
+        from ..config import check_resources
+
+        check_resources(cfg)  # one simulation of the fit, before the first one runs
         t0 = time.perf_counter()
         try:
             with console.status(f"fitting {cfg.brdf.model} alphas to {len(images)} images"):

@@ -50,14 +50,15 @@ class Scene:
             # a curved surface is turned about its vertex normal, not each point's normal
             anisotropy = replace(anisotropy, axis=surface.normal.copy())
         var = getattr(cfg.brdf, "variation", None)
+        camera = Camera.from_config(cfg.camera).focused_on(surface)
         return cls(
             brdf_variation=(None if var is None
                             else BrdfVariation.from_config(var, surface, anisotropy)),
-            camera=Camera.from_config(cfg.camera).focused_on(surface),
+            camera=camera,
             monitor=Monitor.from_config(cfg.monitor),
             surface=surface,
             anisotropy=anisotropy,
-            brdf=brdf_from_config(cfg.brdf),
+            brdf=brdf_from_config(cfg.brdf, set_up_incidence_deg(camera, surface)),
             sampling=ConeSampling(
                 s.n_rays, float(np.deg2rad(s.theta_max_deg)), s.scheme, s.mode, s.seed
             ),
@@ -74,6 +75,15 @@ class Scene:
     @property
     def rays_per_pixel(self) -> int:
         return 1 if self.brdf.is_delta else self.sampling.n_rays
+
+
+def set_up_incidence_deg(camera, surface) -> float:
+    """Angle (deg) between the surface normal at its centre and the direction to the camera."""
+    centre = np.asarray(getattr(surface, "centre", np.zeros(3)), np.float64)
+    normal = np.asarray(getattr(surface, "normal", np.array([0.0, 0.0, 1.0])), np.float64)
+    d = np.asarray(camera.position, np.float64) - centre
+    c = abs(float(d @ normal)) / max(float(np.linalg.norm(d) * np.linalg.norm(normal)), 1e-300)
+    return float(np.degrees(np.arccos(min(c, 1.0))))
 
 
 __all__ = ["Scene", "BrdfVariation", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]
