@@ -123,8 +123,10 @@ def plot_fit_coverage(results, path, k: float = 2.0) -> Path:
     ax.plot(idx - 0.12, z[:, 0], "o", color="tab:blue", label="alpha_x")
     ax.plot(idx + 0.12, z[:, 1], "s", color="tab:orange", label="alpha_y")
     for i in idx[~covered]:
-        ax.annotate("missed", (i, max(z[i].max(), k)), textcoords="offset points",
-                    xytext=(0, 6), ha="center", fontsize=7, color="tab:red")
+        worst = z[i][np.argmax(np.abs(z[i]))]
+        ax.annotate("missed", (i, worst), textcoords="offset points",
+                    xytext=(0, 8 if worst > 0 else -14), ha="center", fontsize=7,
+                    color="tab:red")
     ax.set_xticks(idx, [f"{r.case.seed}" for r in results], fontsize=8)
     ax.set_xlabel("case (seed); alphas 0.004-0.04, incidence 15-40 deg, exposure 1500-9000 e-, "
                   "dark noise 2-20 e-", fontsize=8)

@@ -276,11 +276,26 @@ def closed_form_start(sim: Simulation, widths, directions, modulation) -> tuple[
 
 
 # =========================================================================== the fit
+def model_error_variance(render, values, n_rays: int, model, valid) -> np.ndarray:
+    """(n,) variance (squared image units) of the model's numerical error of each fitted
+    value ``[valid]``: the fit's render ``model`` (unscaled, at ``values``) against one with
+    ``1/REFINE_FACTOR`` of the rays (an overestimate: about the coarser set's error). It
+    enters the chi-square through :func:`~pmdsim.studies.fit_stats.parameter_covariance`;
+    the rule of a renderer that reports its own per-pixel error would replace it here."""
+    coarse = max(n_rays // REFINE_FACTOR, 1)
+    if coarse == n_rays:
+        return np.zeros(int(np.sum(valid)))
+    other = render(values[0], values[1], coarse)
+    d = values[2] * (np.nan_to_num(model[valid]) - np.nan_to_num(other[valid]))
+    return d * d
+
+
 def _noise_scale(sol, images, valid, meas, noise: NoiseModel | None, sigma):
     """The noise behind the weights of ``sol`` (a least-squares solution): with a sensor
     model, its check against the residual's part no phase-shifted sinusoid makes; without
     one, that part's variance, which scales the (unit-weighted) Jacobian and residuals.
-    Returns (summary, chi-square testable, (weighted Jacobian, weighted residuals))."""
+    Returns (summary, chi-square testable, (weighted Jacobian, weighted residuals, the
+    factor that turns the fit's weights into the noise's))."""
     fitted = np.full(images.shape, np.nan)
     fitted[valid] = sol.fun * sigma + meas
     resid = np.where(valid, images - fitted, np.nan)
@@ -288,17 +303,17 @@ def _noise_scale(sol, images, valid, meas, noise: NoiseModel | None, sigma):
         var, dof = harmonic_noise_variance(resid / np.where(valid, noise.sigma(fitted), np.nan))
         return ({"source": "sensor model (EMVA 1288)", "dof": dof,
                  "observed_to_model": float(np.sqrt(var)) if np.isfinite(var) else None},
-                True, (sol.jac, sol.fun))
+                True, (sol.jac, sol.fun, 1.0))
     info = {"source": "the residual's part that no phase-shifted sinusoid makes"}
     var, dof = harmonic_noise_variance(resid)
     if not np.isfinite(var):
         return (info | {"sigma": None, "note": "K = 3 shifts and no sensor model: the noise "
                         "is unknown, the chi-square test was not made"}, False,
-                (sol.jac, sol.fun))
+                (sol.jac, sol.fun, 1.0))
     # floor: noise-free (simulated, float) images are fitted to the optimiser's precision
     # (xtol 1e-6 in the logarithms), not to 0
     s = max(np.sqrt(var), PRECISION_FLOOR * float(np.sqrt(np.mean(meas**2))))
-    return info | {"sigma": float(s), "dof": dof}, True, (sol.jac / s, sol.fun / s)
+    return info | {"sigma": float(s), "dof": dof}, True, (sol.jac / s, sol.fun / s, s)
 
 
 def _signal_check(images, noise: NoiseModel | None, directions, widths) -> dict:
@@ -457,8 +472,11 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
             refined = True
             break
     values = np.exp(sol.x)
-    fitted = render(values[0], values[1], n_rays) * values[2]
-    cv = parameter_covariance(sol_w[0], sol_w[1], shift=shift)
+    fitted_raw = render(values[0], values[1], n_rays)
+    fitted = fitted_raw * values[2]
+    var_model = model_error_variance(render, values, n_rays, fitted_raw, valid)
+    cv = parameter_covariance(sol_w[0], sol_w[1], shift=shift,
+                              model_variance=var_model / (sigma * sol_w[2]) ** 2)
     jac_exp = np.diag(values)
     cov = jac_exp @ cv.cov @ jac_exp
     std = np.sqrt(np.diag(cov))
