@@ -51,5 +51,7 @@ def test_cli_fit_recovers_noise_free_alphas(tmp_path):
     assert abs(p["alpha_x"]["value"] / 0.025 - 1) < 0.02
     assert abs(p["alpha_y"]["value"] / 0.01 - 1) < 0.02
     assert (out / "fit.png").is_file()
-    bad = CliRunner().invoke(app, ["fit", str(cfg_path), *map(str, paths[:-1]), "-o", str(out)])
+    assert json.loads((out / "fit.json").read_text())["success"] is True
+    bad = CliRunner().invoke(app, ["fit", str(cfg_path), *map(str, paths[:-1]), "-o",
+                                   str(tmp_path / "fit2")])
     assert bad.exit_code == 2 and "32" in bad.output

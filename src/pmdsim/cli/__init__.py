@@ -1,7 +1,7 @@
 """The ``pmdsim`` command line (Typer + Rich).
 
     pmdsim simulate CONFIG -o OUTDIR [--overwrite] [--no-figures] [--decode/--no-decode]
-                                     [--no-diagnostics]
+                                     [--no-diagnostics] [--scheduler tcp://..]
     pmdsim decode IMAGES... -o OUT (--widths W1,W2,.. --shifts K --extent-px E | --from-run RUN)
     pmdsim converge CONFIG -o OUTDIR [--n-values 25,50,..] [--theta 0.5,1,..] [--camera 160x128]
     pmdsim sweep CONFIG -o OUTDIR [--scheduler threads|processes|synchronous|tcp://..]

@@ -29,6 +29,7 @@ from .surface import (ApertureConfig, AsphereSurfaceConfig, ConicSurfaceConfig,
 from .anisotropy import AnisotropyConfig
 from .brdf import (Albedo, Alpha, BeckmannConfig, BrdfConfig, BrdfVariationConfig,
     MirrorConfig, SlopeDensityConfig, TurnedConfig, WardConfig)
+from .topography import RayleighRiceConfig, TopographyConfig
 from .sampling import SamplingConfig
 from .patterns import DotConfig, FringeConfig, ImageConfig, PatternsConfig
 from .diagnostics import DiagnosticsConfig
@@ -55,7 +56,7 @@ __all__ = [
     "HeightMapSurfaceConfig", "SphereSurfaceConfig", "SurfaceConfig",
     "XYPolynomialSurfaceConfig", "ZernikeSurfaceConfig", "AnisotropyConfig", "Albedo",
     "Alpha", "BeckmannConfig", "BrdfConfig", "BrdfVariationConfig", "MirrorConfig",
-    "SlopeDensityConfig", "TurnedConfig", "WardConfig", "SamplingConfig", "DotConfig",
+    "SlopeDensityConfig", "TurnedConfig", "WardConfig", "RayleighRiceConfig", "TopographyConfig", "SamplingConfig", "DotConfig",
     "FringeConfig", "ImageConfig", "PatternsConfig", "DiagnosticsConfig", "ComputeConfig",
     "OutputConfig", "ReconstructConfig", "DecodeConfig", "SensorConfig", "BudgetConfig", "CalibrationUncertainty", "SweepConfig",
     "SweepRange", "RESERVED_VARIANT_NAMES", "VariantConfig", "RunConfig", "load_config",

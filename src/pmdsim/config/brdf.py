@@ -293,5 +293,8 @@ class TurnedConfig(_RoughnessFields):
         return self
 
 
+from .topography import RayleighRiceConfig, TopographyConfig  # noqa: E402  (issue 20 models)
+
 BrdfConfig = Annotated[WardConfig | BeckmannConfig | MirrorConfig | SlopeDensityConfig
-                       | TurnedConfig, Field(discriminator="model")]
+                       | TurnedConfig | RayleighRiceConfig | TopographyConfig,
+                       Field(discriminator="model")]

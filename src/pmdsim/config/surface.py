@@ -170,15 +170,22 @@ class ZernikeSurfaceConfig(_SagSurfaceBase):
 
 
 class HeightMapSurfaceConfig(_SagSurfaceBase):
-    """A measured topography: heights on a regular grid from ``file`` (.npy, .csv, or a
-    32-bit float .tif/.tiff), rows along local y, columns along local x, ``spacing_mm`` =
-    (dx, dy), ``origin_mm`` = local (x, y) of element [0, 0] (default: the grid centred on
-    the vertex), heights in ``height_unit``, added to the base conic; interpolated with a
-    bicubic B-spline (continuous normals). The aperture defaults to the grid."""
+    """A measured topography: heights on a regular grid from ``file``, rows along local y,
+    columns along local x: an instrument file (X3P, Digital Surf .sur, Sensofar .plu,
+    Keyence .vk4, ...: units and spacing from the file; ``pmdsim.topofile``) or a plain
+    array (.npy, .csv, 32-bit float .tif/.tiff) with ``spacing_mm`` = (dx, dy) and heights
+    in ``height_unit``. ``level`` ("none", "mean", "plane"), ``outlier_sigma`` and ``fill``
+    ("error", "nearest", "mean": for non-measured points and outliers) prepare it.
+    ``origin_mm`` = local (x, y) of element [0, 0] (default: the grid centred on the
+    vertex); the heights are added to the base conic, interpolated with a bicubic B-spline
+    (continuous normals). The aperture defaults to the grid."""
 
     type: Literal["height_map"]
     file: str
-    spacing_mm: tuple[PositiveFloat, PositiveFloat]
+    spacing_mm: tuple[PositiveFloat, PositiveFloat] | None = None
+    level: Literal["none", "mean", "plane"] = "none"
+    fill: Literal["error", "nearest", "mean"] = "error"
+    outlier_sigma: PositiveFloat | None = None
     origin_mm: tuple[Coord, Coord] | None = None
     height_unit: Literal["mm", "um", "nm"] = "mm"
     radius_mm: Coord | None = None

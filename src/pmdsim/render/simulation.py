@@ -30,6 +30,7 @@ Rays that miss the monitor see black (L = 0) but keep their weight in sum f.
 from __future__ import annotations
 
 import threading
+import uuid
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -246,7 +247,10 @@ class Simulation:
         import dask
         from dask.callbacks import Callback
 
-        tasks = [dask.delayed(fn, pure=False)(r0, r1, dask_key_name=f"pmdsim-tile-{r0}") for r0, r1 in tiles]
+        # keys unique per call: a cluster may still hold the previous call's tiles
+        call = uuid.uuid4().hex[:12]
+        tasks = [dask.delayed(fn, pure=False)(r0, r1, dask_key_name=f"pmdsim-tile-{r0}-{call}")
+                 for r0, r1 in tiles]
         kwargs = {}
         if self.scheduler != "distributed":
             kwargs["scheduler"] = local_scheduler(self.scheduler)
@@ -270,18 +274,32 @@ class Simulation:
         """True when the radiometric estimator samples the BRDF lobe (not for the mirror)."""
         return self.scene.estimator == "radiometric" and not self.scene.brdf.is_delta
 
-    def _render(self, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
-                images=None, dots=None, progress=None):
-        scene = self.scene
+    def _render(self, mode, ncols, **kw):
+        """Pixel sums of the scene's BRDF; a specular peak beside a lobe is a second, mirror
+        pass added by :func:`pmdsim.render.specular.add_specular`."""
+        from .specular import add_specular, check_estimator, specular_reflectance
+
+        check_estimator(self.scene.brdf, self.scene.estimator)
+        out = self._render_brdf(self.scene, mode, ncols, **kw)
+        if specular_reflectance(self.scene.brdf) > 0:
+            kw.pop("progress", None)
+            mirror = self._render_brdf(self.scene.specular(), mode, ncols, **kw)
+            out = add_specular(out, mirror, self.scene.brdf, self.scene.estimator,
+                               self.scene.rays_per_pixel)
+        return out
+
+    def _render_brdf(self, scene, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
+                     images=None, dots=None, progress=None):
         delta = scene.brdf.is_delta
         samp = scene.sampling
-        lobe = self._lobe
+        lobe = scene.estimator == "radiometric" and not delta
         if delta:
             u1 = u2 = np.zeros(0)
         elif lobe:
             u1, u2 = samp.lobe_unit_points()
         else:
             u1, u2 = samp.unit_points()
+        w_ray = np.ones(1) if delta else samp.ray_weights(lobe)  # the mirror: P alone
         brdf = scene.brdf.kernel_params()
         mshape = np.array(scene.monitor.shape, dtype=np.int64)
         e1 = np.zeros((0, 1))
@@ -311,7 +329,8 @@ class Simulation:
             if var is not None:  # spatially varying alpha/rho_s: per-pixel parameters
                 px = var.geometry_params(geo, scene.monitor, brdf)
                 args = (geo, brdf, u1, u2, rot)
-                tail = (table_u, table_v, k_u, k_v, images, dots, out, none, none, none, mc, px)
+                tail = (table_u, table_v, k_u, k_v, images, dots, out, none, none, none, mc, px,
+                        w_ray)
                 if lobe:
                     kb.render_tile_lobe(*args, mshape, mode, *tail)
                 else:
@@ -321,11 +340,13 @@ class Simulation:
                 kb.render_tile_lobe(
                     geo, brdf, u1, u2, rot, mshape, mode,
                     table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
+                    w_ray=w_ray,
                 )
             else:
                 kb.render_tile(
                     geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, True, mshape, mode,
                     table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
+                    w_ray=w_ray,
                 )
             return out
 
@@ -571,6 +592,7 @@ class Simulation:
                           for r in np.unique(rows).tolist()}
                 rot = np.stack([by_row[int(r)][int(c)] for r, c in zip(rows, cols)])
         n = u1.size if lobe else u1.size + 1
+        w_ray = np.ones(1) if scene.brdf.is_delta else samp.ray_weights(lobe)
         ou, ov, of = (np.empty((len(rows), n)) for _ in range(3))
         out = np.empty((len(rows), kb.OUT_FIRST))
         args = (np.array(scene.monitor.shape, np.int64), kb.MODE_TRANSPORT,
@@ -581,10 +603,10 @@ class Simulation:
             px = scene.brdf_variation.geometry_params(geo, scene.monitor, scene.brdf.kernel_params())
             args = args + (None, px)  # transport renders without the display model, as below
         if lobe:
-            kb.render_tile_lobe(geo, scene.brdf.kernel_params(), u1, u2, rot, *args)
+            kb.render_tile_lobe(geo, scene.brdf.kernel_params(), u1, u2, rot, *args, w_ray=w_ray)
         else:
             kb.render_tile(geo, scene.brdf.kernel_params(), u1, u2, rot, samp.scheme_id,
-                           samp.theta_max, True, *args)
+                           samp.theta_max, True, *args, w_ray=w_ray)
         if not directions:
             return ou, ov, of, None, hits.point[0].copy()
         dirs = np.empty((len(rows), n, 3))

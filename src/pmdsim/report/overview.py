@@ -11,8 +11,8 @@ from matplotlib.ticker import FixedLocator, MaxNLocator
 from .scene import _axes_at, _figure, _fixed_figure, _save, imshow
 from .chain_common import (
     CLASS_COLOURS, DEV_CMAP, DIR_COLOURS, OVERVIEW_DPI, VS_EXACT, VS_MIRROR, _dirs, _g,
-    _histogram, _image_axes, _label, _noticks, _overlay, _stats, _wrap, coord_vs_exact,
-    symmetric_limit,
+    _histogram, _image_axes, _label, _overlay, _stats, _wrap, coord_vs_exact,
+    symmetric_limit, valid_only,
 )
 
 
@@ -178,7 +178,7 @@ def plot_variant_deviation(datasets: dict, path, descriptions: dict | None = Non
     dirs = _dirs(first)
     maps = {(n, d): datasets[n]["coord_deviation_px"].sel(direction=d).values
             for n in names for d in dirs}
-    lim = symmetric_limit(maps.values())
+    lim = symmetric_limit([valid_only(datasets[n], d, maps[n, d]) for n in names for d in dirs])
     h, w = first["surface_mask"].shape
     ph = 4.6 * h / w
     fig = _figure((4.6 * len(dirs) + 1.6, (ph + 0.7) * len(names) + 3.2))
@@ -198,12 +198,12 @@ def plot_variant_deviation(datasets: dict, path, descriptions: dict | None = Non
             ax.set_title(f"{n}: {d.upper()} coordinate deviation {VS_MIRROR}\nRMS {_g(s['rms'])} px, "
                          f"P95 {_g(s['p95'])} px, valid {100 * (s['valid_fraction'] or 0):.1f} %",
                          fontsize=8)
-            _noticks(ax)
+            _image_axes(ax)
         if descriptions.get(n):
             fig.axes[-len(dirs)].set_ylabel(_wrap(descriptions[n], 38), fontsize=7)
     cb = fig.colorbar(im, ax=map_axes, shrink=0.8, extend="both")
-    cb.set_label(f"monitor coordinate deviation (monitor px), common scale +-{lim:g}",
-                 fontsize=8)
+    cb.set_label(f"monitor coordinate deviation (monitor px), common scale +-{lim:g} "
+                 "(P99.5 of |deviation| over the valid pixels)", fontsize=8)
     colours = ["#2ca02c", "#d62728", "#9467bd", "#8c564b", "#17becf", "#7f7f7f"]
     for j, d in enumerate(dirs):
         ax = fig.add_subplot(gs[-1, j])

@@ -97,7 +97,8 @@ class RunPlan:
 @single_blas
 def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | None = None,
                    *, overwrite: bool = False, figures: bool | None = None,
-                   decode: bool | None = None, diagnostics: bool = True) -> RunResult:
+                   decode: bool | None = None, diagnostics: bool = True,
+                   client=None) -> RunResult:
     """Simulate ``cfg`` and write a complete run folder ``outdir``.
 
     With ``cfg.variants`` every variant (:meth:`RunConfig.expand`) becomes a complete run
@@ -129,6 +130,12 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         standard error (``[diagnostics] phase_method``) on the ``[diagnostics]`` grid; maps ``diag_*`` in the
         dataset, summary and warnings in statistics.json, summary.txt, the manifest and
         ``RunResult.warnings`` (bounds from ``[diagnostics]``).
+    client : dask.distributed.Client, optional
+        Render the run's tiles (geometry, reference, patterns, diagnostics) on this
+        client's cluster instead of ``compute.scheduler``; the results are byte for byte
+        those of a local run (the stored configuration is unchanged). Everything else (the
+        chain, writing, figures) runs here. See docs/performance.md, "One run across a
+        cluster".
 
     Returns
     -------
@@ -147,7 +154,9 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
     t_start = time.perf_counter()
     cfg = resolve_roi(cfg)  # camera.roi = "auto": the window that sees the part, stored as such
     plan = plan_run(cfg, progress, figures, decode, diagnostics)
-    with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp:
+    if client is not None:
+        on_cluster(plan, client)
+    with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp, _current(client):
         t = time.perf_counter()
         # The vision rays and the ideal specular reference do not depend on what a variant
         # may change (BRDF, anisotropy frame, sampling): one of each for all.
@@ -223,6 +232,23 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
                    figures, diagnostics, steps)
 
 
+def on_cluster(plan: RunPlan, client) -> None:
+    """Render the tiles of every member of ``plan`` on ``client``'s cluster (the
+    simulations' scheduler becomes ``"distributed"``; the configuration is unchanged)."""
+    if "Client" not in type(client).__name__ or not hasattr(client, "get"):
+        raise TypeError(f"client: expected a dask.distributed.Client, got {client!r}")
+    for _, _, sim in plan.members:
+        sim.scheduler = "distributed"
+
+
+def _current(client):
+    """``client`` as the current Dask client of this thread (the tiles' ``dask.compute``
+    finds it), or nothing."""
+    import contextlib
+
+    return client.as_current() if client is not None else contextlib.nullcontext()
+
+
 def moved(result: RunResult, tmp: Path, final: Path, **changes) -> RunResult:
     """The result with every path moved from the temporary folder to the final one."""
     def mv(p):
@@ -235,4 +261,4 @@ def moved(result: RunResult, tmp: Path, final: Path, **changes) -> RunResult:
         variants=tuple(moved(r, tmp, final) for r in result.variants), **changes)
 
 
-__all__ = ["RunResult", "RunPlan", "run_simulation", "plan_run"]
+__all__ = ["RunResult", "RunPlan", "run_simulation", "plan_run", "on_cluster"]

@@ -60,7 +60,7 @@ class Scene:
             monitor=Monitor.from_config(cfg.monitor),
             surface=surface,
             anisotropy=anisotropy,
-            brdf=brdf_from_config(cfg.brdf),
+            brdf=brdf_from_config(cfg.brdf, set_up_incidence_deg(camera, surface)),
             sampling=ConeSampling(
                 s.n_rays, float(np.deg2rad(s.theta_max_deg)), s.scheme, s.mode, s.seed
             ),
@@ -136,4 +136,13 @@ def resolve_roi(cfg: RunConfig) -> RunConfig:
     return cfg.model_copy(update={"camera": cfg.camera.model_copy(update={"roi": win})})
 
 
-__all__ = ["Scene", "auto_roi", "resolve_roi", "BrdfVariation", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]
+def set_up_incidence_deg(camera, surface) -> float:
+    """Angle (deg) between the surface normal at its centre and the direction to the camera."""
+    centre = np.asarray(getattr(surface, "centre", np.zeros(3)), np.float64)
+    normal = np.asarray(getattr(surface, "normal", np.array([0.0, 0.0, 1.0])), np.float64)
+    d = np.asarray(camera.position, np.float64) - centre
+    c = abs(float(d @ normal)) / max(float(np.linalg.norm(d) * np.linalg.norm(normal)), 1e-300)
+    return float(np.degrees(np.arccos(min(c, 1.0))))
+
+
+__all__ = ["Scene", "auto_roi", "resolve_roi", "set_up_incidence_deg", "BrdfVariation", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]

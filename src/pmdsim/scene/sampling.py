@@ -69,6 +69,15 @@ class ConeSampling:
         square (all ``n_rays`` rays come from the lobe; P is not added)."""
         return fibonacci_lattice(self.n_rays)
 
+    def ray_weights(self, lobe: bool) -> np.ndarray:
+        """Per-ray quadrature weights (float64) the render kernels multiply each ray's weight
+        by (``w_ray`` of :func:`pmdsim.kernels.bundle.render_tile`): (n_rays,), indexed like
+        the bundle's rays (cone: ray 0 is P, then the points of :meth:`unit_points`; lobe
+        (``lobe=True``): the points of :meth:`lobe_unit_points`). All ones for these
+        equal-weight sample sets; the estimators' normalisation (1/N or 1/sum f) is applied
+        after the sums."""
+        return np.ones(self.n_rays)
+
     def rotations(self, row_start: int, row_stop: int, width: int) -> np.ndarray:
         """Per-pixel offsets (rows * width, 2) for mode ``random``; (0, 2) when stratified."""
         if self.mode == "stratified":
