@@ -72,7 +72,7 @@ def write_x3p(path: Path, z_si: np.ndarray, x: np.ndarray, y: np.ndarray, create
         import x3pio
     except ImportError as err:  # pragma: no cover - depends on the installation
         raise InputError("--format x3p needs the x3pio library: pip install 'pmdsim[x3p]'") from err
-    from .. import __version__
+    from .._version import __version__
 
     meta = x3pio.Metadata.for_software("pmdsim", __version__, date=created)
     meta = x3pio.Metadata(date=meta.date, creator=meta.creator, instrument=meta.instrument,

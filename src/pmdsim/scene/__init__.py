@@ -53,10 +53,11 @@ class Scene:
         cam_cfg = cfg.camera
         if cam_cfg.roi == "auto":
             cam_cfg = cam_cfg.cropped(auto_roi(Camera.from_config(cam_cfg), surface))
+        camera = Camera.from_config(cam_cfg).focused_on(surface)
         return cls(
             brdf_variation=(None if var is None
                             else BrdfVariation.from_config(var, surface, anisotropy)),
-            camera=Camera.from_config(cam_cfg).focused_on(surface),
+            camera=camera,
             monitor=Monitor.from_config(cfg.monitor),
             surface=surface,
             anisotropy=anisotropy,
