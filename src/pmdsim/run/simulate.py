@@ -61,6 +61,7 @@ from ..scene.sanity import check_physics
 from ..studies import coverage
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
+from ..scene import resolve_roi
 from . import files as pio
 from .manifest import write_run_manifest, write_variants_manifest
 from .member import run_member
@@ -151,6 +152,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         fringe widths do not allow it (the message names ``patterns.fringes.widths_px``).
     """
     t_start = time.perf_counter()
+    cfg = resolve_roi(cfg)  # camera.roi = "auto": the window that sees the part, stored as such
     plan = plan_run(cfg, progress, figures, decode, diagnostics)
     if client is not None:
         on_cluster(plan, client)
