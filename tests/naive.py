@@ -187,11 +187,12 @@ def cone_basis(n, p, y_axis):
     return np.cross(e2, p), e2, p
 
 
-def bundle(cfg, prim, sampling, offsets=None):
+def bundle(cfg, prim, sampling, offsets=None, weights=None):
     """Every scattered ray of every valid pixel.
 
     ``sampling`` is the scene's :class:`~pmdsim.scene.sampling.ConeSampling`; ``offsets``
-    ((H*W, 2), random mode) the per-pixel rotations of its sample set. Returns a dict of
+    ((H*W, 2), random mode) the per-pixel rotations of its sample set; ``weights`` (R,)
+    per-ray quadrature weights multiplying ray j's BRDF weight (None = 1). Returns a dict of
     (H, W, R) arrays ``u``, ``v`` (monitor px, NaN where the ray misses the monitor),
     ``f`` (BRDF weight of every ray, hit or not) and ``hit``; ``near_edge`` (H, W) marks
     pixels with a ray within 1e-7 px of a monitor pixel boundary (nearest-pixel gathers
@@ -224,6 +225,8 @@ def bundle(cfg, prim, sampling, offsets=None):
                 local = sampling.local_directions(off)
                 dirs = local[:, :1] * e1 + local[:, 1:2] * e2 + local[:, 2:3] * e3
                 f = ward(i, dirs, n, x, y, ax, ay, cfg.brdf.rho_s, cfg.brdf.normalization)
+            if weights is not None:
+                f = f * weights
             u, v, hit = monitor_hit(cfg.monitor, s, dirs)
             res["f"][row, col] = f
             res["hit"][row, col] = hit

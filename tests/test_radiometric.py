@@ -19,6 +19,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -190,9 +191,10 @@ def test_mirror_sample_is_the_principal_ray():
 
 
 # =========================================================================== kernel vs NumPy
-def _lobe_reference(sim, widths, directions):
+def _lobe_reference(sim, widths, directions, weights=None):
     """Per-ray NumPy reference of the radiometric estimator's raw sums for every pixel:
-    sum w, sum w over hits, nearest-pixel table sums and continuous harmonic sums."""
+    sum w, sum w over hits, nearest-pixel table sums and continuous harmonic sums;
+    ``weights`` (N,): per-ray quadrature weights multiplying ray j's w (None = 1)."""
     sc = sim.scene
     hits = trace_primary(sc)
     h, w = sim.shape
@@ -214,6 +216,8 @@ def _lobe_reference(sim, widths, directions):
                 s1, s2 = u1, u2
             o = sc.brdf.sample(s1, s2, i)
             wt = lobe_weight(sc.brdf, np.broadcast_to(i, o.shape), o)
+            if weights is not None:
+                wt = wt * weights
             world = o[:, :1] * frame[0] + o[:, 1:2] * frame[1] + o[:, 2:] * frame[2]
             mu, mv, hit = sc.monitor.intersect(hits.point[r, c], world)
             wh = np.where(hit, wt, 0.0)
@@ -259,6 +263,52 @@ def test_lobe_kernel_matches_numpy_reference(brdf, mode):
         got = r.sums[:, :, ok]
         np.testing.assert_allclose(got, ref[key][:, :, ok] / n, rtol=0, atol=1e-10 * scale)
         assert np.all(np.isnan(r.f_total[~ok]))
+
+
+@dataclasses.dataclass(frozen=True)
+class _WeightedSampling(ConeSampling):
+    """The sample set with uneven, index-asymmetric per-ray quadrature weights (what a
+    deterministic rule's ``ray_weights`` returns), to check that they reach every sum."""
+
+    def ray_weights(self, lobe: bool) -> np.ndarray:
+        j = np.arange(self.n_rays)
+        return 0.5 + 1.7 * (j / self.n_rays) ** 2 + 0.3 * np.sin(1.3 * j)
+
+
+@pytest.mark.parametrize("brdf", [LOBE_MODELS[0], LOBE_MODELS[3]], ids=["ward", "beckmann"])
+def test_lobe_kernel_per_ray_weights_match_reference(brdf):
+    """``ConeSampling.ray_weights`` reaches the lobe kernel through ``Simulation``: sums,
+    sums over hits, fringe sums (both monitor models) and the transported weights equal the
+    per-ray reference given the same weights."""
+    widths, directions, n = (20.0, 70.0), ("x", "y"), 40
+    res = {}
+    for model in ("nearest", "continuous"):
+        sim = Simulation.from_config(make_config(
+            brdf={"__replace__": brdf}, monitor={"pixel_model": model},
+            sampling={"estimator": "radiometric", "n_rays": n, "mode": "random", "seed": 5}))
+        samp = sim.scene.sampling
+        sim = Simulation(sim.scene.replace(sampling=_WeightedSampling(**dataclasses.asdict(samp))),
+                         tile_rows=8)
+        res[model] = sim.render_fringes(widths, directions, 4)
+    weights = sim.scene.sampling.ray_weights(True)
+    ref = _lobe_reference(sim, widths, directions, weights)
+    ok = np.isfinite(ref["ftot"])
+    assert ok.sum() > 100
+    scale = ref["ftot"][ok].max() / n
+    for model, key in (("nearest", "tables"), ("continuous", "harmonic")):
+        r = res[model]
+        np.testing.assert_allclose(r.f_total[ok], ref["ftot"][ok] / n, rtol=1e-10)
+        np.testing.assert_allclose(r.f_hit[ok], ref["fhit"][ok] / n, rtol=1e-10,
+                                   atol=1e-12 * scale)
+        np.testing.assert_allclose(r.sums[:, :, ok], ref[key][:, :, ok] / n, rtol=0,
+                                   atol=1e-10 * scale)
+    plain = Simulation.from_config(make_config(
+        brdf={"__replace__": brdf},
+        sampling={"estimator": "radiometric", "n_rays": n, "mode": "random", "seed": 5}))
+    u0, _, w0, _, _ = plain.transport([5, 16], [10, 20], directions=False)
+    u1_, _, w1, _, _ = sim.transport([5, 16], [10, 20], directions=False)
+    np.testing.assert_array_equal(u1_, u0)
+    np.testing.assert_allclose(w1, w0 * weights, rtol=1e-14, atol=0)
 
 
 def test_lobe_kernel_accepts_rows_in_any_basis():

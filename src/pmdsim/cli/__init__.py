@@ -1,12 +1,13 @@
 """The ``pmdsim`` command line (Typer + Rich).
 
     pmdsim simulate CONFIG -o OUTDIR [--overwrite] [--no-figures] [--decode/--no-decode]
-                                     [--no-diagnostics]
+                                     [--no-diagnostics] [--scheduler tcp://..]
     pmdsim decode IMAGES... -o OUT (--widths W1,W2,.. --shifts K --extent-px E | --from-run RUN)
     pmdsim converge CONFIG -o OUTDIR [--n-values 25,50,..] [--theta 0.5,1,..] [--camera 160x128]
     pmdsim sweep CONFIG -o OUTDIR [--scheduler threads|processes|synchronous|tcp://..]
                                   [--workers N] [--overwrite] [--no-figures]
     pmdsim report RUN [--all | --figure NAME ...] [--variant NAME] [-o FOLDER]
+    pmdsim export RUN --format x3p|csv|xyz [-o FOLDER] [--overwrite]
     pmdsim texture --feed-um F --nose-radius-mm R [--rq-um Q --correlation-um L] [-o OUT]
     pmdsim fit CONFIG IMAGES... -o OUT
     pmdsim warmup
@@ -27,10 +28,11 @@ from .decode import decode
 from .studies import budget, converge, sweep
 from .texture import fit, texture
 from .report import report
+from .export import export
 from .install import version, warmup
 
 #: The commands, in the order ``pmdsim --help`` lists them.
-COMMANDS = (simulate, decode, converge, budget, texture, fit, version, sweep, report, warmup)
+COMMANDS = (simulate, decode, converge, budget, texture, fit, version, sweep, report, export, warmup)
 for _command in COMMANDS:
     app.command()(_command)
 del _command
@@ -41,4 +43,4 @@ def main() -> None:  # pragma: no cover - console entry for `python -m pmdsim.cl
 
 
 __all__ = ["app", "main", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "COMMANDS",
-           "simulate", "decode", "converge", "budget", "texture", "fit", "version", "sweep", "report", "warmup"]
+           "simulate", "decode", "converge", "budget", "texture", "fit", "version", "sweep", "report", "export", "warmup"]

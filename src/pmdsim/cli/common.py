@@ -87,12 +87,18 @@ def _si(x: float) -> str:
 def _numbers(text: str | None, name: str, kind=float) -> list | None:
     if text is None:
         return None
-    try:
-        return [kind(x) for x in text.replace(" ", "").split(",") if x]
-    except ValueError:
-        from ..config import InputError
+    import math
 
+    from ..config import InputError
+
+    try:
+        values = [kind(x) for x in text.replace(" ", "").split(",") if x]
+    except ValueError:
         raise InputError(f"{name} must be comma-separated numbers, got {text!r}") from None
+    bad = [v for v in values if not math.isfinite(v) or v <= 0]
+    if bad:
+        raise InputError(f"{name} must be positive finite numbers, got {bad[0]!r} in {text!r}")
+    return values
 
 
 def _output_folder(path, option: str = "-o") -> None:

@@ -52,10 +52,22 @@ def decode(
     statistics.json and PNG maps."""
     from ..run.decode_run import decode_files, make_setup
 
+    import math
+
     from ..config import InputError
 
     console = _console()
     with _guard():
+        # the options first, before any image is read
+        if not (math.isfinite(max_order_residual) and 0 < max_order_residual <= 0.5):
+            raise InputError(f"--max-order-residual must lie in (0, 0.5] (0.5 = ambiguous "
+                             f"order), got {max_order_residual:g}")
+        if not (math.isfinite(min_relative_amplitude) and min_relative_amplitude >= 0):
+            raise InputError(f"--min-relative-amplitude must be a finite number >= 0, got "
+                             f"{min_relative_amplitude:g}")
+        if output.exists() and not output.is_dir():
+            raise InputError(f"-o {output}: exists and is a file, not a folder; choose "
+                             "another -o")
         width_list = None
         if widths is not None:
             try:

@@ -18,7 +18,8 @@ from .common import _console
 
 def warmup() -> None:
     """Compile every kernel once into Numba's on-disk cache (run once after installing, so
-    that the first simulation does not pay for compilation); tiny runs that reach every kernel, about a minute on 2 cores."""
+    that the first simulation does not pay for compilation); tiny runs that reach every kernel,
+    about 90 s on 2 cores (docs/performance.md)."""
     from ..run.warmup import CASES, warmup as run_warmup
 
     console = _console()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 
@@ -18,6 +19,33 @@ from rich.progress import (
 from rich.table import Table
 
 from .common import _guard, _console, _fail, _si
+
+
+@contextlib.contextmanager
+def _cluster(address: str | None):
+    """A ``dask.distributed`` client of the scheduler at ``address`` (None: no client);
+    a bad address or a missing package is bad input (exit 2)."""
+    if address is None:
+        yield None
+        return
+    from ..config import InputError
+
+    if "://" not in address and not address.rsplit(":", 1)[-1].isdigit():
+        raise InputError(f"--scheduler: {address!r} is not a Dask scheduler address; give "
+                         "one such as tcp://host:8786 (the local scheduler is the "
+                         "configuration's compute.scheduler)")
+    try:
+        from distributed import Client
+    except ImportError:
+        raise InputError("--scheduler needs dask.distributed: pip install "
+                         "'pmdsim[distributed]'") from None
+    try:
+        client = Client(address, timeout="20s")
+    except (OSError, TimeoutError) as err:
+        raise InputError(f"--scheduler: no Dask scheduler answers at {address} ({err}); "
+                         "start one (dask scheduler) or check the address") from None
+    with client:
+        yield client
 
 
 def simulate(
@@ -37,6 +65,11 @@ def simulate(
         False, "--no-diagnostics",
         help="Do not compute the run diagnostics (lobe energy inside theta_max, effective "
         "sample size, phase standard error) and their warnings."),
+    scheduler: str | None = typer.Option(
+        None, "--scheduler",
+        help="Render the run's tiles on the Dask cluster at this scheduler address "
+        "(tcp://host:8786; same results as a local run; needs pmdsim[distributed]). "
+        "Default: the configuration's compute.scheduler, on this machine."),
 ) -> None:
     """Render the configured patterns and write a run folder (images, run.zarr, figures);
     by default also decode the fringes and measure their deviation from the ideal specular
@@ -70,9 +103,10 @@ def simulate(
             def progress(done: int, total: int) -> None:
                 bar.update(task, completed=done, total=total)
 
-            result = run_simulation(cfg, output, progress, overwrite=overwrite,
-                                    figures=figures, decode=decode,
-                                    diagnostics=not no_diagnostics)
+            with _cluster(scheduler) as client:
+                result = run_simulation(cfg, output, progress, overwrite=overwrite,
+                                        figures=figures, decode=decode,
+                                        diagnostics=not no_diagnostics, client=client)
     wall = time.perf_counter() - t0
 
     h, w = result.shape

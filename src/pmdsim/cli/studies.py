@@ -17,7 +17,7 @@ from rich.progress import (
 )
 from rich.table import Table
 
-from .common import _guard, _console, _fail, _numbers
+from .common import _guard, _console, _fail, _numbers, _output_folder
 
 
 def converge(
@@ -61,6 +61,9 @@ def converge(
             cw, ch = (int(x) for x in camera.lower().split("x"))
         except ValueError:
             raise InputError(f"--camera must be WxH in px, e.g. 160x128, got {camera!r}") from None
+        if not (0 < cw <= 65536 and 0 < ch <= 65536):
+            raise InputError(f"--camera must be WxH with 1 to 65536 px per axis, e.g. 160x128, "
+                             f"got {camera!r}")
         t0 = time.perf_counter()
         with console.status(f"convergence study of {cfg.name}") as status:
             result = run_convergence(
@@ -126,7 +129,7 @@ def budget(
     what = "centre ray" if truth == "centre" else "vision rays (footprint average)"
     console.print(f"pmdsim budget '{cfg.name}' ({time.perf_counter() - t0:.1f} s); deviation from "
                   f"the exact reflection point of each pixel's {what}")
-    console.print(budget_text(result.rows), markup=False)
+    console.print(budget_text(result.rows, result.height_rows, result.settings), markup=False)
     console.print(f"table  {result.table}")
     if result.figure is not None:
         console.print(f"figure {result.figure}")
@@ -153,6 +156,13 @@ def sweep(
     random design over any configuration fields) into one Zarr store with a dimension per
     swept field; resumes an interrupted sweep with only its unfinished points. See
     docs/sweeps.md."""
+    from ..run.claim import OutputBusy, check_free
+
+    try:  # a sweep already writing there: fail before the heavy imports and the planning
+        check_free(output)
+    except OutputBusy as err:
+        _fail(str(err))
+    _output_folder(output)
     from ..config import ConfigError, load_config
     from ..run.sweep import run_sweep
     from ..studies.sweep import plan_sweep

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from .common import _console, _fail, _output_folder
+from .common import _console, _fail, _guard, _output_folder
 
 
 def texture(
@@ -118,26 +118,44 @@ def fit(
                                   "[patterns.fringes] describes the images."),
     images: list[Path] = typer.Argument(..., help="Fringe images, ordered direction, width, "
                                         "shift as [patterns.fringes] lists them."),
-    output: Path = typer.Option(..., "-o", "--output", help="Folder for fit.json, fit.txt, fit.png."),
+    output: Path = typer.Option(..., "-o", "--output", help="Folder for fit.json, fit.txt, "
+                                "fit.png (created; an existing one only with --overwrite)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing fit folder."),
+    max_chi2: float = typer.Option(2.0, "--max-chi2", min=1.0,
+                                   help="Largest reduced chi-square (noise and model error) "
+                                   "of a fit that counts as describing the images."),
     no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
 ) -> None:
     """Images to parameters: fit alpha_x/alpha_y (tangential/radial) and a brightness scale
     of the configured BRDF to fringe images at several widths (closed-form start from the
-    modulation, then least squares with the full simulator; docs/texture.md)."""
-    from ..config import ConfigError, load_config
-    from ..run.texture import run_fit
+    modulation, then least squares with the full simulator; docs/texture.md). A fit that
+    did not converge or does not describe the images (reduced chi-square above --max-chi2)
+    writes its files marked failed and exits 1; bad input exits 2."""
+    from ..config import load_config
+    from ..run.fit import check_fit_output, run_fit
 
     _output_folder(output)
     console = _console()
-    try:
+    with _guard():
+        check_fit_output(output, overwrite)  # before reading or computing anything
         cfg = load_config(config)
+        from ..config import check_resources
+
+        check_resources(cfg)  # one simulation of the fit, before the first one runs
         t0 = time.perf_counter()
-        with console.status(f"fitting {cfg.brdf.model} alphas to {len(images)} images"):
-            res = run_fit(cfg, images, output, figure=not no_figure)
-    except (ConfigError, FileNotFoundError, ValueError) as err:
-        _fail(str(err))
+        try:
+            with console.status(f"fitting {cfg.brdf.model} alphas to {len(images)} images"):
+                res = run_fit(cfg, images, output, figure=not no_figure, overwrite=overwrite,
+                              max_chi2=max_chi2)
+        except (FileNotFoundError, ValueError) as err:
+            _fail(str(err))
     console.print(f"pmdsim fit '{cfg.name}' ({time.perf_counter() - t0:.1f} s)")
     console.print(res.text, markup=False)
     console.print(f"table  {res.json}")
     if res.figure is not None:
         console.print(f"figure {res.figure}")
+    if not res.result.success:
+        _console(stderr=True).print(f"error: the fit failed: {res.result.reason} (files "
+                                    f"written to {res.outdir}, marked failed)",
+                                    style="bold red", markup=False)
+        raise typer.Exit(1)

@@ -7,7 +7,7 @@ be reproduced from its own output.
 
 One module per section of a configuration file (``camera``, ``monitor``, ``surface``,
 ``anisotropy``, ``brdf``, ``sampling``, ``patterns``, ``diagnostics``, ``compute``,
-``output``, ``reconstruct``, ``decode``, ``sensor``, ``sweep``, ``variants``), the shared
+``output``, ``reconstruct``, ``decode``, ``sensor``, ``budget``, ``sweep``, ``variants``), the shared
 base types and errors (``base``), :class:`RunConfig` composing them (``run``), reading
 and validating (``loading``) and the memory and time estimate (``resources``). Every
 public name is re-exported here: ``from pmdsim.config import X``.
@@ -38,6 +38,7 @@ from .output import OutputConfig
 from .reconstruct import ReconstructConfig
 from .decode import DecodeConfig
 from .sensor import SensorConfig
+from .budget import BudgetConfig, CalibrationUncertainty
 from .sweep import SweepConfig, SweepRange
 from .variants import RESERVED_VARIANT_NAMES, VariantConfig
 from .run import RunConfig
@@ -57,7 +58,7 @@ __all__ = [
     "Alpha", "BeckmannConfig", "BrdfConfig", "BrdfVariationConfig", "MirrorConfig",
     "SlopeDensityConfig", "TurnedConfig", "WardConfig", "RayleighRiceConfig", "TopographyConfig", "SamplingConfig", "DotConfig",
     "FringeConfig", "ImageConfig", "PatternsConfig", "DiagnosticsConfig", "ComputeConfig",
-    "OutputConfig", "ReconstructConfig", "DecodeConfig", "SensorConfig", "SweepConfig",
+    "OutputConfig", "ReconstructConfig", "DecodeConfig", "SensorConfig", "BudgetConfig", "CalibrationUncertainty", "SweepConfig",
     "SweepRange", "RESERVED_VARIANT_NAMES", "VariantConfig", "RunConfig", "load_config",
     "parse_config", "BASE_MEMORY_BYTES", "RAYS_PER_CPU_SECOND", "ResourceEstimate",
     "available_memory_bytes", "check_resources", "estimate_resources",

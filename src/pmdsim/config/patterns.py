@@ -56,11 +56,15 @@ class ImageConfig(_Model):
     """Arbitrary monitor images (PNG/TIFF files, paths relative to the config file)."""
 
     files: Annotated[tuple[Annotated[str, Field(min_length=1, max_length=4096)], ...],
-                     Field(min_length=1, max_length=10000)]
+                     Field(max_length=10000)]
 
     @field_validator("files")
     @classmethod
     def _paths(cls, v):
+        # checked here, after the items: pydantic's own length check would also report
+        # "at least 1 item ... not 0" for a list whose items are wrong (files = [1])
+        if len(v) == 0:
+            raise ValueError("give at least one image file")
         if any("\x00" in f for f in v):
             raise ValueError("file names must not contain NUL characters")
         return v

@@ -17,7 +17,8 @@ class ReconstructConfig(_Model):
 
     ``enabled``: None = whenever the chain decodes both directions x and y; ``spacing_mm``:
     the surface grid; ``remove``: terms removed before the height statistics (``piston``,
-    ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism);
+    ``tilt`` = piston + tilt, ``power`` = + power, ``astigmatism`` = + astigmatism,
+    ``sphere`` = the best-fit sphere, radius reported; docs/reconstruction.md);
     ``order``: 2 = classic Southwell, 4 = higher-order; ``anchor``: where the height is
     tied to the nominal shape (the aperture centre, or the mean over the aperture);
     ``prior``: the nominal shape (a surface table like ``[surface]``, e.g. the design when
@@ -26,7 +27,7 @@ class ReconstructConfig(_Model):
 
     enabled: Bool | None = None
     spacing_mm: PositiveFloat = 0.5
-    remove: Literal["none", "piston", "tilt", "power", "astigmatism"] = "piston"
+    remove: Literal["none", "piston", "tilt", "power", "astigmatism", "sphere"] = "piston"
     order: Literal[2, 4] = 4
     anchor: Literal["centre", "mean"] = "centre"
     prior: SurfaceConfig | None = Field(

@@ -21,6 +21,7 @@ from .output import OutputConfig
 from .reconstruct import ReconstructConfig
 from .decode import DecodeConfig
 from .sensor import SensorConfig
+from .budget import BudgetConfig
 from .sweep import SweepConfig
 from .variants import VariantConfig
 
@@ -46,6 +47,7 @@ class RunConfig(_Model):
     reconstruct: ReconstructConfig = ReconstructConfig()
     diagnostics: DiagnosticsConfig = DiagnosticsConfig()
     sensor: SensorConfig = SensorConfig()
+    budget: BudgetConfig = BudgetConfig()
     variants: Annotated[tuple[VariantConfig, ...], Field(max_length=64)] = ()
     sweep: SweepConfig | None = None
 

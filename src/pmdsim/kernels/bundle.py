@@ -197,7 +197,7 @@ def _store_ray(j, w, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf):
 
 
 @fastjit(inline="always")
-def _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
+def _phase1(g, a, b, c, n, brdf, wr, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
     """Monitor hits and weights of one pixel's bundle; returns (sum f, sum f over hits).
 
     Rays that miss the monitor (behind the surface, parallel, outside the pixel grid) get
@@ -272,7 +272,7 @@ def _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
             else:
                 hh = hx * hx + hy * hy + hz2
                 f = k0 * e * hh * (dn * inv) * (dn * inv)
-            f = f if oz > 0.0 else 0.0
+            f = (f if oz > 0.0 else 0.0) * wr[j]
             ftot += f
             fhit += _store_ray(j, f, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     else:  # ideal mirror: weight 1 per ray (the caller passes the principal ray only)
@@ -284,13 +284,13 @@ def _phase1(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
             t = T / dn
             u = U0 + t * (aj * B1 + bj * B2 + cj * B3)
             v = V0 + t * (aj * C1 + bj * C2 + cj * C3)
-            ftot += 1.0
-            fhit += _store_ray(j, 1.0, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
+            ftot += wr[j]
+            fhit += _store_ray(j, wr[j], dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     return ftot, fhit
 
 
 @fastjit
-def _phase1_beckmann(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
+def _phase1_beckmann(g, a, b, c, n, brdf, wr, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
     """Phase 1 of the cone estimators for the Beckmann model (:func:`_phase1` does Ward and
     the mirror); returns (sum f, sum f over hits). Buffers as in :func:`_phase1`.
 
@@ -356,7 +356,7 @@ def _phase1_beckmann(g, a, b, c, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf
         f = k0 * e * (hh * ihz2) * (hh * ihz2) / ozp
         if smith:
             f *= _smith_g1_beckmann(hx - X0, hy - Y0, oz, ax, ay)
-        f = f if oz > 0.0 else 0.0
+        f = (f if oz > 0.0 else 0.0) * wr[j]
         ftot += f
         fhit += _store_ray(j, f, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     return ftot, fhit
@@ -385,7 +385,7 @@ def _micronormals(u1, u2, r1, r2, ax, ay, mx, my, mz, mz3):
 
 
 @fastjit(inline="always")
-def _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
+def _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wr, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf):
     """Phase 1 of the radiometric estimator for one pixel: rays reflected about the
     micro-normals, their monitor hits and weights f cos_o / pdf; returns (sum w, sum w over
     hits). Buffers as in :func:`_phase1`."""
@@ -450,7 +450,7 @@ def _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, 
                 w = k0 * mz3[j] * im
             else:
                 w = k0 * oz / (im * mzj)
-            w = w if oz > 0.0 else 0.0
+            w = (w if oz > 0.0 else 0.0) * wr[j]
             ftot += w
             fhit += _store_ray(j, w, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     else:  # Beckmann: w = rho G1(i) G1(o) (i.m) / (cos_i cos theta_m)
@@ -474,7 +474,7 @@ def _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, 
             w = k0 * im / mzj
             if smith:
                 w *= _smith_g1_beckmann(ox, oy, oz, ax, ay)
-            w = w if oz > 0.0 else 0.0
+            w = (w if oz > 0.0 else 0.0) * wr[j]
             ftot += w
             fhit += _store_ray(j, w, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     return ftot, fhit
@@ -597,7 +597,7 @@ def _orders_density(brdf, sx, sy, osx, osy, ow, wsum):
 
 
 @fastjit
-def _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wm, hm, ubuf, vbuf, iubuf,
+def _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wr, wm, hm, ubuf, vbuf, iubuf,
                    ivbuf, fbuf):
     """Phase 1 of the cone estimators for the slope-density models (as
     :func:`_phase1_beckmann`, with D = p(s_x, s_y) / cos^4(theta_h), s = -(h_x, h_y) / h_z);
@@ -668,6 +668,7 @@ def _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wm, hm, ubuf, vbuf, 
             f = k0 * p * hh * hh / ozp
             if smith:
                 f *= _smith_g1_beckmann(hx - X0, hy - Y0, oz, ax, ay)
+        f *= wr[j]
         ftot += f
         fhit += _store_ray(j, f, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
     return ftot, fhit
@@ -1020,6 +1021,20 @@ def _phase2(p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_
             out_f[p, j] = fbuf[j]
 
 
+@fastjit(inline="always")
+def _ray_weights(w_ray, n, npad):
+    """The per-ray weights as a buffer of ``npad`` entries: ``w_ray`` (``n``,) or ones when
+    it is None, then zeros for the padding rays."""
+    wr = np.zeros(npad)
+    if w_ray is None:
+        wr[:n] = 1.0
+    else:
+        if w_ray.shape[0] != n:
+            raise ValueError("w_ray: one weight per ray of the bundle expected")
+        wr[:n] = w_ray
+    return wr
+
+
 @jit
 def _keep_alive(*arrays):
     """Uses its arguments: arrays whose :func:`~._jit.borrow` views a loop uses are passed
@@ -1051,6 +1066,7 @@ def render_tile(
     out_f,
     mon_corr=None,
     brdf_px=None,
+    w_ray=None,
 ):
     """Render one tile of pixels.
 
@@ -1095,6 +1111,11 @@ def render_tile(
         Per-pixel ``(rho, alpha_x, alpha_y)`` replacing ``brdf[B_RHO]``, ``brdf[B_AX]``,
         ``brdf[B_AY]`` (spatially varying parameters; Ward and Beckmann); omitted = the
         vector's constants for every pixel.
+    w_ray : (R,) float64, optional
+        Per-ray quadrature weights, R = M (+ 1 with the principal ray, which is ray 0): ray
+        j's weight f_j (stored in ``out_f``, summed into ``OUT_FTOTAL``, ``OUT_FHIT`` and
+        every pattern sum) is multiplied by ``w_ray[j]``; omitted = all ones. The
+        estimators' normalisation (1/N or 1/sum f) stays with the caller.
     """
     npix = geo.shape[0]
     m = u1.shape[0]
@@ -1112,6 +1133,7 @@ def render_tile(
     if int(brdf[B_MODEL]) == MODEL_WARD or beckmann:
         npad = (n + RAY_BLOCK - 1) // RAY_BLOCK * RAY_BLOCK
     n2 = npad if mode == MODE_HARMONIC else n
+    wr_own = _ray_weights(w_ray, n, npad)
     ord_own = np.zeros((3, nord))
     ocum_own = np.zeros(nord + 1)
     a_own = np.zeros(npad)
@@ -1125,7 +1147,7 @@ def render_tile(
     z_own = np.empty((2, k_u.shape[0] + k_v.shape[0], npad))
     pix_own = brdf.copy()  # the pixel's own parameter vector (brdf_px)
     # reference-count-free views for the pixel loop (kept alive by the owners' use below)
-    a, b, c = borrow(a_own), borrow(b_own), borrow(c_own)
+    a, b, c, wr = borrow(a_own), borrow(b_own), borrow(c_own), borrow(wr_own)
     osx, osy, ow = borrow(ord_own[0]), borrow(ord_own[1]), borrow(ord_own[2])
     ocum = borrow(ocum_own)
     ubuf, vbuf, fbuf = borrow(buf_own[0]), borrow(buf_own[1]), borrow(buf_own[2])
@@ -1160,22 +1182,23 @@ def render_tile(
             pix[B_AX] = brdf_px[p, 1]
             pix[B_AY] = brdf_px[p, 2]
             if beckmann:
-                ftot, fhit = _phase1_beckmann(g, a, b, c, npad, pix, wm, hm, ubuf, vbuf, iubuf,
-                                              ivbuf, fbuf)
+                ftot, fhit = _phase1_beckmann(g, a, b, c, npad, pix, wr, wm, hm, ubuf, vbuf,
+                                              iubuf, ivbuf, fbuf)
             else:
-                ftot, fhit = _phase1(g, a, b, c, npad, pix, wm, hm, ubuf, vbuf, iubuf, ivbuf,
-                                     fbuf)
+                ftot, fhit = _phase1(g, a, b, c, npad, pix, wr, wm, hm, ubuf, vbuf, iubuf,
+                                     ivbuf, fbuf)
         elif beckmann:
-            ftot, fhit = _phase1_beckmann(g, a, b, c, npad, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf,
-                                          fbuf)
+            ftot, fhit = _phase1_beckmann(g, a, b, c, npad, brdf, wr, wm, hm, ubuf, vbuf, iubuf,
+                                          ivbuf, fbuf)
         elif slopes:
             wsum = 1.0
             if nord > 0:
                 wsum = _order_centres(brdf, g[G_X], g[G_Y], g[G_Z], osx, osy, ow, ocum)
-            ftot, fhit = _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wm, hm, ubuf,
-                                        vbuf, iubuf, ivbuf, fbuf)
+            ftot, fhit = _phase1_slopes(g, a, b, c, n, brdf, osx, osy, ow, wsum, wr, wm, hm,
+                                        ubuf, vbuf, iubuf, ivbuf, fbuf)
         else:
-            ftot, fhit = _phase1(g, a, b, c, npad, brdf, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+            ftot, fhit = _phase1(g, a, b, c, npad, brdf, wr, wm, hm, ubuf, vbuf, iubuf, ivbuf,
+                                 fbuf)
         if mon_corr is not None:
             fhit = monitor_correction(g, mon_corr, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         out[p, OUT_FTOTAL] = ftot
@@ -1184,7 +1207,7 @@ def render_tile(
             p, mode, n2, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_ut, table_vt,
             k_u, k_v, plan, zcb, zsb, images, dots, out, out_u, out_v, out_f,
         )
-    _keep_alive(a_own, b_own, c_own, ord_own, ocum_own, buf_own, ibuf_own, table_ut_own, table_vt_own, pix_own,
+    _keep_alive(a_own, b_own, c_own, wr_own, ord_own, ocum_own, buf_own, ibuf_own, table_ut_own, table_vt_own, pix_own,
                 plan_own, z_own)
 
 
@@ -1209,6 +1232,7 @@ def render_tile_lobe(
     out_f,
     mon_corr=None,
     brdf_px=None,
+    w_ray=None,
 ):
     """Render one tile with the radiometric estimator: directions sampled from the lobe.
 
@@ -1230,8 +1254,9 @@ def render_tile_lobe(
     over the hemisphere. The parameters are those of :func:`render_tile` without the cone
     (``scheme``, ``theta_max``, ``include_principal``); ``geo`` rows may use any orthonormal
     basis; ``mon_corr`` and ``brdf_px`` (per-pixel rho and alphas, which also shape each
-    pixel's micro-normals) as there. The mirror (no lobe) is not accepted: render it with
-    :func:`render_tile`.
+    pixel's micro-normals) as there; ``w_ray`` (M,): the weight of ray j (the lattice point
+    ``(u1[j], u2[j])``) is multiplied by ``w_ray[j]``. The mirror (no lobe) is not accepted:
+    render it with :func:`render_tile`.
     """
     if int(brdf[B_MODEL]) == MODEL_MIRROR:
         raise ValueError("render_tile_lobe: the mirror has no lobe to sample; use render_tile")
@@ -1247,6 +1272,7 @@ def render_tile_lobe(
     ord_own = np.zeros((3, nord))
     ocum_own = np.zeros(nord + 1)
     m_own = np.empty((4, n))
+    wr_own = _ray_weights(w_ray, n, n)
     buf_own = np.empty((3, n))
     ibuf_own = np.empty((2, n), dtype=np.int64)
     table_ut_own = np.ascontiguousarray(table_u.T)
@@ -1258,6 +1284,7 @@ def render_tile_lobe(
     osx, osy, ow = borrow(ord_own[0]), borrow(ord_own[1]), borrow(ord_own[2])
     ocum = borrow(ocum_own)
     mx, my, mz, mz3 = borrow(m_own[0]), borrow(m_own[1]), borrow(m_own[2]), borrow(m_own[3])
+    wr = borrow(wr_own)
     ubuf, vbuf, fbuf = borrow(buf_own[0]), borrow(buf_own[1]), borrow(buf_own[2])
     iubuf, ivbuf = borrow(ibuf_own[0]), borrow(ibuf_own[1])
     table_ut, table_vt, pix = borrow(table_ut_own), borrow(table_vt_own), borrow(pix_own)
@@ -1301,11 +1328,11 @@ def render_tile_lobe(
             _micronormals(u1, u2, 0.0 if shared else rotation[p, 0],
                           0.0 if shared else rotation[p, 1], pix[B_AX], pix[B_AY],
                           mx, my, mz, mz3)
-            ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, pix, wm, hm, ubuf, vbuf, iubuf,
-                                      ivbuf, fbuf)
+            ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, pix, wr, wm, hm, ubuf, vbuf,
+                                      iubuf, ivbuf, fbuf)
         else:
-            ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wm, hm, ubuf, vbuf, iubuf,
-                                      ivbuf, fbuf)
+            ftot, fhit = _phase1_lobe(g, mx, my, mz, mz3, n, brdf, wr, wm, hm, ubuf, vbuf,
+                                      iubuf, ivbuf, fbuf)
         if nord > 0 and wsum != 1.0:  # only the propagating orders' share leaves the surface
             for j in range(n):
                 fbuf[j] *= wsum
@@ -1319,5 +1346,5 @@ def render_tile_lobe(
             p, mode, n, ubuf, vbuf, iubuf, ivbuf, fbuf, table_u, table_v, table_ut, table_vt,
             k_u, k_v, plan, zcb, zsb, images, dots, out, out_u, out_v, out_f,
         )
-    _keep_alive(ord_own, ocum_own, m_own, buf_own, ibuf_own, table_ut_own, table_vt_own, pix_own,
+    _keep_alive(ord_own, ocum_own, m_own, wr_own, buf_own, ibuf_own, table_ut_own, table_vt_own, pix_own,
                 plan_own, z_own)

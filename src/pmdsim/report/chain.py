@@ -24,8 +24,6 @@ in-memory xarray Datasets with the variables of :func:`pmdsim.run.dataset.assign
 
 from __future__ import annotations
 
-from pathlib import Path
-
 # The figures live in chain_common (shared), chain_maps, overview and dots; every name is
 # re-exported here (``from pmdsim.report import chain as plot_chain``).
 from .chain_common import (  # noqa: F401
@@ -41,19 +39,6 @@ from .dots import dot_crop_size, dot_figures, plot_dot_contact_sheet, plot_dot_s
 from .scene import DPI
 
 
-def chain_figures(ds, folder, name: str | None = None, description: str = "") -> list[Path]:
-    """All measurement-chain figures of one run or variant into ``folder``."""
-    folder = Path(folder)
-    return [
-        plot_overview(ds, folder / "overview.png", name, description),
-        plot_phase(ds, folder / "phase.png", name),
-        plot_deviation(ds, folder / "deviation.png", name),
-        plot_histograms(ds, folder / "histograms.png", name),
-        plot_modulation_ratio(ds, folder / "modulation_ratio.png", name),
-        plot_masks(ds, folder / "masks.png", name),
-    ]
-
-
 __all__ = ["plot_phase", "plot_deviation", "plot_histograms", "plot_modulation_ratio",
            "plot_masks", "plot_overview", "plot_variant_deviation", "plot_dot_contact_sheet",
-           "plot_dot_shapes", "plot_decoded", "chain_figures", "dot_figures", "symmetric_limit", "DPI"]
+           "plot_dot_shapes", "plot_decoded", "dot_figures", "symmetric_limit", "DPI"]

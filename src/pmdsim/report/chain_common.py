@@ -10,8 +10,8 @@ import math
 import numpy as np
 from matplotlib.colors import to_rgba
 from matplotlib.patches import Patch
-from matplotlib.ticker import MaxNLocator
 
+from .scene import camera_axes as _image_axes  # noqa: F401  (the maps' axes)
 from .scene import imshow
 
 
@@ -23,6 +23,17 @@ CLASS_COLOURS = {
     "no valid reference": "#bdbdbd",
     "off surface": "#ffffff",
     "bundle off monitor": "#8c564b",
+}
+
+
+#: Colours of the decoder's flags (``pmdsim decode`` flags.png and the run's masks.png):
+#: distinct hues, none near another or near the valid pixels' light blue.
+FLAG_COLOURS = {
+    "valid": "#9ecae1",
+    "NAN_INPUT": "#d62728",
+    "LOW_AMPLITUDE": "#111111",
+    "ORDER_RESIDUAL": "#fd8d3c",
+    "OUT_OF_RANGE": "#756bb1",
 }
 
 
@@ -93,6 +104,12 @@ def symmetric_limit(arrays, percentile: float = 99.5) -> float:
     return _nice(lim) if lim > 0 else 1e-6
 
 
+def valid_only(ds, d: str, a) -> np.ndarray:
+    """``a`` (H, W) on the valid pixels of direction ``d``, NaN elsewhere: what colour limits
+    are taken from (a masked pixel's value must not stretch the scale of the others)."""
+    return np.where(ds["valid"].sel(direction=d).values, a, np.nan)
+
+
 def _classes(ds, d: str):
     """Boolean maps (valid, low, flagged, no_ref, off) of direction ``d``."""
     valid = ds["valid"].sel(direction=d).values.astype(bool)
@@ -130,20 +147,6 @@ def _overlay(ax, ds, d: str, legend: bool = False, counts: bool = True):
     if legend:
         ax.legend(handles=handles, loc="lower left", fontsize=6, framealpha=0.85)
     return handles
-
-
-def _noticks(ax):
-    ax.set_xticks([])
-    ax.set_yticks([])
-
-
-def _image_axes(ax):
-    ax.set_xlabel("camera column", fontsize=8)
-    ax.set_ylabel("camera row", fontsize=8)
-    ax.tick_params(labelsize=7)
-    # a few whole-pixel ticks (each tick is ~3 ms of drawing)
-    ax.xaxis.set_major_locator(MaxNLocator(5, integer=True))
-    ax.yaxis.set_major_locator(MaxNLocator(4, integer=True))
 
 
 def _stats(ds) -> dict:

@@ -11,9 +11,9 @@ from matplotlib.patches import Patch
 
 from .scene import _figure, _save, imshow
 from .chain_common import (
-    CLASS_COLOURS, DEVIATIONS, DEV_CMAP, DIR_COLOURS, VS_EXACT, VS_MIRROR, _classes, _dirs,
-    _g, _histogram, _image_axes, _label, _map_size, _noticks, _off_monitor, _overlay,
-    _stats, coord_vs_exact, symmetric_limit,
+    CLASS_COLOURS, DEVIATIONS, DEV_CMAP, DIR_COLOURS, FLAG_COLOURS, VS_EXACT, VS_MIRROR,
+    _classes, _dirs, _g, _histogram, _image_axes, _label, _map_size, _off_monitor, _overlay,
+    _stats, coord_vs_exact, symmetric_limit, valid_only,
 )
 
 
@@ -33,7 +33,7 @@ def plot_phase(ds, path, name: str | None = None) -> Path:
             im = imshow(ax, ds["wrapped_phase"].sel(direction=d, width=wd).values, cmap="twilight",
                            vmin=-np.pi, vmax=np.pi, interpolation="nearest")
             ax.set_title(f"{name}: {d.upper()} wrapped phase\nwidth {wd:g} monitor px", fontsize=8)
-            _noticks(ax)
+            _image_axes(ax)
         cb = fig.colorbar(im, ax=list(axes[i, :len(widths)]), shrink=0.8, pad=0.01)
         cb.set_label("wrapped phase (rad)", fontsize=8)
         cb.set_ticks([-np.pi, -np.pi / 2, 0, np.pi / 2, np.pi],
@@ -45,7 +45,7 @@ def plot_phase(ds, path, name: str | None = None) -> Path:
         ax.set_facecolor(CLASS_COLOURS["no valid reference"])
         ax.set_title(f"{name}: {d.upper()} absolute phase\nwidth {min(widths):g} px "
                      "(flagged pixels grey)", fontsize=8)
-        _noticks(ax)
+        _image_axes(ax)
         cb = fig.colorbar(im, ax=ax, shrink=0.8, pad=0.01)
         cb.set_label("absolute phase (rad)", fontsize=8)
     return _save(fig, path)
@@ -64,7 +64,8 @@ def plot_deviation(ds, path, name: str | None = None) -> Path:
     stats = _stats(ds)["directions"]
     coord_mirror = [ds["coord_deviation_px"].sel(direction=d).values for d in dirs]
     coord_exact = [coord_vs_exact(ds, d) for d in dirs]
-    coord_lim = symmetric_limit(coord_mirror + coord_exact)
+    coord_lim = symmetric_limit([valid_only(ds, d, m) for d, m in zip(dirs + dirs,
+                                                                     coord_mirror + coord_exact)])
     panels = [  # (maps, colour limit, title, unit, statistics key, colour-bar label)
         ([ds["phase_deviation"].sel(direction=d).values * 1e3 for d in dirs], None,
          f"phase deviation {VS_MIRROR}", "mrad", "phase_mrad", "phase deviation (mrad)"),
@@ -78,7 +79,8 @@ def plot_deviation(ds, path, name: str | None = None) -> Path:
     fig = _figure(_map_size(ds, len(panels), len(dirs), 3.9, 1.6, 1.4))
     axes = fig.subplots(len(dirs), len(panels), squeeze=False)
     for j, (maps, lim, title, unit, key, label) in enumerate(panels):
-        lim = symmetric_limit(maps) if lim is None else lim
+        lim = (symmetric_limit([valid_only(ds, d, m) for d, m in zip(dirs, maps)])
+               if lim is None else lim)
         im = None
         for i, d in enumerate(dirs):
             ax = axes[i, j]
@@ -90,7 +92,8 @@ def plot_deviation(ds, path, name: str | None = None) -> Path:
             _image_axes(ax)
         cb = fig.colorbar(im, ax=list(axes[:, j]), orientation="horizontal", shrink=0.9,
                           extend="both", pad=0.02)
-        cb.set_label(label + f"\nscale +-{lim:g} (P99.5)", fontsize=8)
+        cb.set_label(label + f"\nscale +-{lim:g} (P99.5 of |deviation|, valid pixels)",
+                     fontsize=8)
     return _save(fig, path)
 
 
@@ -107,8 +110,8 @@ def plot_histograms(ds, path, name: str | None = None) -> Path:
                    {d.upper(): DIR_COLOURS.get(d, None) for d in dirs},
                    {d.upper(): stats[d][key] for d in dirs})
         ax.set_xlabel(label)
+        ax.set_ylabel("pixels")
         ax.set_title(f"{name}: {label.split(' (')[0]}", fontsize=9)
-    axes[0].set_ylabel("pixels")
     return _save(fig, path)
 
 
@@ -133,7 +136,7 @@ def plot_modulation_ratio(ds, path, name: str | None = None) -> Path:
             below = int(np.count_nonzero(r < thr))
             ax.set_title(f"{name}: {d.upper()}, width {wd:g} monitor px\nmedian ratio {med:.3f}; "
                          f"{below:,} px < {thr:g}", fontsize=8)
-            _noticks(ax)
+            _image_axes(ax)
     cb = fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, extend="max")
     cb.set_label("modulation / reference modulation (1)", fontsize=8)
     cb.ax.axhline(thr, color="#e377c2", linewidth=2)
@@ -145,7 +148,8 @@ def plot_masks(ds, path, name: str | None = None) -> Path:
     reason), no valid reference, off the surface; counts in the legend."""
     name = _label(ds, name)
     dirs = _dirs(ds)
-    cols = ["#9ecae1", CLASS_COLOURS["low modulation"], "#111111", "#fd8d3c", "#8c6d31",
+    cols = [FLAG_COLOURS["valid"], CLASS_COLOURS["low modulation"], FLAG_COLOURS["LOW_AMPLITUDE"],
+            FLAG_COLOURS["ORDER_RESIDUAL"], FLAG_COLOURS["OUT_OF_RANGE"],
             CLASS_COLOURS["no valid reference"], "#ffffff", CLASS_COLOURS["bundle off monitor"]]
     labels = ["valid", "low modulation (masked)", "flagged: low amplitude",
               "flagged: order residual", "flagged: out of range / other",
@@ -173,7 +177,7 @@ def plot_masks(ds, path, name: str | None = None) -> Path:
                    for k, (c, lab) in enumerate(zip(cols, labels))]
         lax.legend(handles=handles, loc="upper center", ncol=2, fontsize=7, frameon=False)
         ax.set_title(f"{name}: {d.upper()} pixel classes", fontsize=9)
-        _noticks(ax)
+        _image_axes(ax)
     return _save(fig, path)
 
 
@@ -216,12 +220,12 @@ def plot_decoded(ds, folder) -> list[Path]:
         im = imshow(ax, m, cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
         ax.set_title(f"{d} modulation B/A, width {wd:g} px\nmedian "
                      f"{_g(np.nanmedian(m) if np.isfinite(m).any() else np.nan)}", fontsize=8)
-        _noticks(ax)
+        _image_axes(ax)
     fig.colorbar(im, ax=list(axes), shrink=0.85, extend="max").set_label("modulation B/A (1)",
                                                                        fontsize=8)
     paths.append(_save(fig, folder / "modulation.png"))
-    cols = ["#9ecae1", "#111111", "#1f77b4", "#fd8d3c", "#8c6d31"]
     labels = ["valid", "NAN_INPUT", "LOW_AMPLITUDE", "ORDER_RESIDUAL", "OUT_OF_RANGE"]
+    cols = [FLAG_COLOURS[k] for k in labels]
     cls = np.zeros(flags.shape, int)
     cls[flags & 8 > 0] = 4
     cls[flags & 4 > 0] = 3
@@ -238,6 +242,6 @@ def plot_decoded(ds, folder) -> list[Path]:
                         for c, lab, n in zip(cols, labels, counts)],
                loc="upper center", ncol=3, fontsize=7, frameon=False)
     ax.set_title(f"{d} decode flags (a pixel with several flags shows the first)", fontsize=9)
-    _noticks(ax)
+    _image_axes(ax)
     paths.append(_save(fig, folder / "flags.png"))
     return paths

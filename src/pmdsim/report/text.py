@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import math
+
 import os
 
 
@@ -138,12 +140,28 @@ def reconstruction_text(name: str, rec: dict) -> str:
         f"  slope error x RMS {sx['rms_about_zero']:.3g} urad  PV {sx['pv']:.3g} urad;  "
         f"y RMS {sy['rms_about_zero']:.3g} urad  PV {sy['pv']:.3g} urad",
     ]
-    terms = rec.get("terms_nm") or {}
-    if terms:
-        names = [k for k in terms if k != "basis"]
-        big = sorted(names, key=lambda k: -abs(terms[k]))[:6]
-        lines.append(f"  largest {terms['basis']} terms of the height error (nm RMS each): "
-                     + ", ".join(f"{k} {terms[k]:+.3g}" for k in big))
+    if rec.get("sphere"):
+        sp = rec["sphere"]
+        lines.append(f"  best-fit sphere: radius {sp['radius_measured_mm']:.8g} mm reconstructed, "
+                     + (f"{sp['radius_true_mm']:.8g} mm true (change {sp['radius_change_mm']:+.3g} mm)"
+                        if math.isfinite(sp["radius_true_mm"]) else "the true surface is flat")
+                     + f"; curvature change {sp['curvature_change_per_mm'] * 1e3:+.3g} 1/m")
+    table = rec.get("zernike_noll_nm") or []
+    if table:
+        left = [t for t in table if not t["removed"] and t["index"] > 1]
+        big = sorted(left, key=lambda t: -abs(t["coefficient"]))[:6]
+        lines.append(f"  largest Zernike terms of the height error AFTER removal ({rec.get('removal', '')}; "
+                     "Noll, nm RMS each): " + ", ".join(f"Z{t['index']} {t['coefficient']:+.3g}" for t in big))
+        gone = [f"Z{t['index']}" for t in table if t["removed"]]
+        if gone:
+            lines.append(f"  removed terms (about 0 after removal): {', '.join(gone)}")
+    else:
+        terms = rec.get("terms_nm") or {}
+        if terms:
+            names = [k for k in terms if k != "basis"]
+            big = sorted(names, key=lambda k: -abs(terms[k]))[:6]
+            lines.append(f"  largest {terms['basis']} terms of the height error (nm RMS each): "
+                         + ", ".join(f"{k} {terms[k]:+.3g}" for k in big))
     if "reference_height_error_nm" in rec:
         r = rec["reference_height_error_nm"]
         lines.append(f"  specular reference (the chain's floor): height RMS {r['rms']:.3g} nm  PV {r['pv']:.3g} nm")

@@ -109,6 +109,40 @@ def plot_fit(res, path, frame: str = "fixed") -> Path:
     return path
 
 
+def plot_fit_coverage(results, path, k: float = 2.0) -> Path:
+    """Normalised errors ``(fitted - true) / u`` of alpha_x and alpha_y of each case of a
+    coverage study (:mod:`pmdsim.studies.fit_coverage`), with the +-k band; a case covers
+    the truth when both points lie inside. ``results``: a list of ``CoverageResult``."""
+    z = np.array([r.normalised_errors for r in results])
+    covered = np.array([r.covered for r in results])
+    idx = np.arange(len(results))
+    fig = _figure((9.0, 4.2))
+    ax = fig.add_subplot()
+    ax.axhspan(-k, k, color="tab:green", alpha=0.12, label=f"k = {k:g} interval")
+    ax.axhline(0, color="0.5", lw=0.8)
+    ax.plot(idx - 0.12, z[:, 0], "o", color="tab:blue", label="alpha_x")
+    ax.plot(idx + 0.12, z[:, 1], "s", color="tab:orange", label="alpha_y")
+    for i in idx[~covered]:
+        worst = z[i][np.argmax(np.abs(z[i]))]
+        ax.annotate("missed", (i, worst), textcoords="offset points",
+                    xytext=(0, 8 if worst > 0 else -14), ha="center", fontsize=7,
+                    color="tab:red")
+    ax.set_xticks(idx, [f"{r.case.seed}" for r in results], fontsize=8)
+    ax.set_xlabel("case (seed); alphas 0.004-0.04, incidence 15-40 deg, exposure 1500-9000 e-, "
+                  "dark noise 2-20 e-", fontsize=8)
+    ax.set_ylabel("(fitted - true) / u  (k = 1)")
+    lim = max(3.0, float(np.nanmax(np.abs(z))) * 1.15)
+    ax.set_ylim(-lim, lim)
+    ax.set_title(f"fit coverage: both alphas inside k = {k:g} in {int(covered.sum())} of "
+                 f"{len(results)} cases (default fit settings, truth rendered with "
+                 "4096 rays)", fontsize=9)
+    ax.legend(fontsize=8, loc="lower right", ncols=3)
+    ax.grid(alpha=0.3)
+    path = Path(path)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
 def plot_topography(analysis, heights, dx: float, dy: float, path) -> Path:
     """A measured topography (``pmdsim texture --from``): the height map (nm, local frame:
     x tangential, y radial), the PSD along each axis (the periodogram's central row and

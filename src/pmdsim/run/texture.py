@@ -1,5 +1,5 @@
-"""Write the machining -> parameters report (``pmdsim texture``) and a BRDF fit
-(``pmdsim fit``) to a folder: JSON with every number, a text table, a figure."""
+"""Write the machining -> parameters report (``pmdsim texture``) to a folder: JSON with
+every number, a text table, a figure. (The BRDF fit's folder, ``pmdsim fit``: :mod:`.fit`.)"""
 
 from __future__ import annotations
 
@@ -7,13 +7,8 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from ..brdf.turning import TextureParameters, format_texture, texture_parameters
-from ..config import ConfigError, RunConfig
-from ..report.texture import plot_fit, plot_texture
-from ..studies.fit import FitResult, NoiseModel, fit_fringe_images, format_fit
-from .threads import single_blas
+from ..report.texture import plot_texture
 
 
 @dataclass(frozen=True)
@@ -40,51 +35,6 @@ def run_texture(outdir=None, *, figure: bool = True, wavelengths_nm=(610.0, 545.
         if figure:
             fig = plot_texture(p, out / "texture.png", wavelengths_nm, weights)
     return TextureRun(p, text, js, fig)
-
-
-@dataclass(frozen=True)
-class FitRun:
-    result: FitResult
-    text: str
-    json: Path
-    figure: Path | None
-
-
-@single_blas
-def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True) -> FitRun:
-    """Fit the configured model's alphas to fringe images (files in the order direction,
-    width, shift of ``patterns.fringes``), write fit.json, fit.txt, fit.png to ``outdir``."""
-    from ..measure.images import load_image_stack
-
-    fr = cfg.patterns.fringes
-    if fr is None:
-        raise ConfigError("fit: the configuration needs [patterns.fringes] (widths_px, shifts, "
-                          "directions) describing the images")
-    paths = [Path(p) for p in image_paths]
-    nd, nw, k = len(fr.directions), len(fr.widths_px), fr.shifts
-    stack = load_image_stack(paths).astype(np.float64)
-    if stack.shape[0] != nd * nw * k:
-        raise ConfigError(f"fit: {stack.shape[0]} frames in {len(paths)} files, but "
-                          f"patterns.fringes describes {nd} directions x {nw} widths x {k} "
-                          f"shifts = {nd * nw * k} (order: direction, width, shift)")
-    images = stack.reshape(nd, nw, k, *stack.shape[-2:])
-    noise = None
-    sensor = getattr(cfg, "sensor", None)
-    if sensor is not None and sensor.enabled:
-        from ..scene.sensor import Sensor
-
-        s = Sensor.from_config(sensor)
-        noise = NoiseModel(s.gain, s.dark_noise_electrons)
-    res = fit_fringe_images(cfg, images, fr.widths_px, fr.directions, noise)
-    text = format_fit(res, cfg.anisotropy.frame)
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
-    js = out / "fit.json"
-    js.write_text(json.dumps(res.as_dict() | {"model": cfg.brdf.model,
-                                              "frame": cfg.anisotropy.frame}, indent=2))
-    (out / "fit.txt").write_text(text + "\n")
-    fig = plot_fit(res, out / "fit.png", cfg.anisotropy.frame) if figure else None
-    return FitRun(res, text, js, fig)
 
 
 @dataclass(frozen=True)
