@@ -70,6 +70,8 @@ MAX_CHI2 = 2.0
 #: A direction's fringes count as signal when the first harmonic's power exceeds what
 #: noise alone gives by this many standard errors (1 / sqrt(pixels)) in some width.
 SIGNAL_SIGMAS = 6.0
+#: Default most rays per pixel of the refinement (100 -> 400 -> 1600 -> 6400).
+MAX_RAYS = 6400
 #: Pixels whose lobe puts more than this share of its weight off the monitor are not fitted.
 EDGE_SHARE = 1e-6
 #: Relative floor of the noise estimated from noise-free images (the fit's own precision).
@@ -347,7 +349,7 @@ def _signal_check(images, noise: NoiseModel | None, directions, widths) -> dict:
 def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
                       noise: NoiseModel | None = None, start=None, diff_step: float = 2e-3,
                       max_nfev: int = 60, max_chi2: float = MAX_CHI2,
-                      max_rays: int = 6400) -> FitResult:
+                      max_rays: int = MAX_RAYS) -> FitResult:
     """Fit (alpha_x, alpha_y, scale) to fringe images; see the module docstring.
 
     Parameters
