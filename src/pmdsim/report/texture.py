@@ -110,7 +110,7 @@ def plot_fit(res, path, frame: str = "fixed") -> Path:
         why = textwrap.fill(f"FIT FAILED ({res.reason}): not a result",
                             width=int(14 * 5.0 * len(res.directions)))
         text = f"{why}\n{text}"
-    else:
+    elif np.isfinite(res.chi2_reduced):
         text += f"; reduced chi-square {res.chi2_reduced:.3g}"
     fig.suptitle(text, fontsize=9, color="tab:red" if not getattr(res, "success", True) else "k")
     path = Path(path)

@@ -134,7 +134,8 @@ class FitResult:
                            for i, (n, v, s, s0) in enumerate(zip(self.names, self.values,
                                                                  self.std, self.start))},
             "covariance": self.cov.tolist(),
-            "chi2_reduced": self.chi2_reduced, "max_chi2": self.max_chi2,
+            "chi2_reduced": self.chi2_reduced if np.isfinite(self.chi2_reduced) else None,
+            "max_chi2": self.max_chi2,
             "residual_rms": self.residual_rms,
             "n_data": self.n_data, "n_evaluations": self.n_evaluations,
             "converged": self.converged, "message": self.message,
@@ -484,7 +485,7 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
     std = np.sqrt(np.diag(cov))
     std_noise = np.sqrt(np.diag(jac_exp @ cv.cov_noise @ jac_exp))
     std_model = np.sqrt(np.diag(jac_exp @ cv.cov_model @ jac_exp))
-    chi2 = cv.chi2_reduced
+    chi2 = cv.chi2_reduced if tested else float("nan")  # no noise estimate: no test
     model_info = {"estimator": cfg.sampling.estimator, "mode": cfg.sampling.mode,
                   "n_rays": n_rays, "ladder": ladder, "birge_factor": cv.birge,
                   "method": ("the change of the fitted values from the last refinement (rays "
@@ -536,8 +537,10 @@ def format_fit(res: FitResult, frame: str = "fixed") -> str:
     for n, v, s, a, b, s0 in zip(res.names, res.values, res.std, sn, sm, res.start):
         lines.append(f"{label[n]:<22} {v:12.6g} {s:12.3g} {2 * s:12.3g} {a:10.3g} {b:10.3g} "
                      f"{s0:12.6g}")
-    lines.append(f"reduced chi-square {res.chi2_reduced:.3g} (noise and model error; accepted "
-                 f"<= {res.max_chi2:g}), residual RMS {res.residual_rms:.4g} over {res.n_data} "
+    chi2 = (f"reduced chi-square {res.chi2_reduced:.3g} (noise and model error; accepted "
+            f"<= {res.max_chi2:g})" if np.isfinite(res.chi2_reduced) else
+            "reduced chi-square not tested (no sensor model and 3 shifts: the noise is unknown)")
+    lines.append(f"{chi2}, residual RMS {res.residual_rms:.4g} over {res.n_data} "
                  f"values, {res.n_evaluations} simulations; {res.message}")
     if res.model:
         steps = " -> ".join(str(s["n_rays"]) for s in res.model.get("ladder", []))
