@@ -150,3 +150,56 @@ def plot_fit_coverage(results, path, k: float = 2.0) -> Path:
     path = Path(path)
     fig.savefig(path, dpi=DPI)
     return path
+
+
+def plot_topography(analysis, heights, dx: float, dy: float, path) -> Path:
+    """A measured topography (``pmdsim texture --from``): the height map (nm, local frame:
+    x tangential, y radial), the PSD along each axis (the periodogram's central row and
+    column, positive frequencies, Hann window) with the K-correlation fit, and the slope
+    densities per axis with the equivalent Gaussian (Ward/Beckmann) lobes.
+    ``analysis``: :class:`~pmdsim.brdf.topography.TopographyAnalysis`; lengths in mm."""
+    from ..brdf import topography as tp
+
+    a = analysis
+    h = np.asarray(heights, np.float64)
+    h = h - h.mean()
+    ny, nx = h.shape
+    fig = _figure((13.0, 4.2))
+    ax0, ax1, ax2 = fig.subplots(1, 3)
+    im = ax0.imshow(h * 1e6, origin="lower", cmap="viridis", aspect="equal",
+                    extent=(0, nx * dx * 1e3, 0, ny * dy * 1e3))
+    fig.colorbar(im, ax=ax0, label="height, nm")
+    ax0.set_xlabel("x (tangential), um")
+    ax0.set_ylabel("y (radial), um")
+    ax0.set_title(f"Sq {a.sq_um * 1e3:.3g} nm, Sdq {a.sdq:.3g}")
+    fx, fy, s = tp.periodogram(h, dx, dy, "hann")
+    kc = tp.KCorrelation(a.kc_sigma_um * 1e-3, 2 * math.pi * a.kc_correlation_tangential_um * 1e-3,
+                         2 * math.pi * a.kc_correlation_radial_um * 1e-3, a.kc_exponent)
+    ix, iy = nx // 2, ny // 2  # zero frequency after fftshift
+    for f, row, fit, colour, name in (
+            (fx[ix + 1:], s[iy, ix + 1:], kc(fx[ix + 1:], 0.0), "tab:blue", "fx (tangential)"),
+            (fy[iy + 1:], s[iy + 1:, ix], kc(0.0, fy[iy + 1:]), "tab:orange", "fy (radial)")):
+        ax1.loglog(f * 1e-3, row * 1e12, ".", ms=2, color=colour, alpha=0.5, label=f"periodogram, {name}")
+        ax1.loglog(f * 1e-3, fit * 1e12, "-", color=colour, lw=1.5, label=f"K-correlation fit, {name}")
+    ax1.set_xlabel("spatial frequency, 1/um")
+    ax1.set_ylabel("PSD, um^4")
+    ax1.set_title(f"correlation lengths {a.kc_correlation_tangential_um:.3g} / "
+                  f"{a.kc_correlation_radial_um:.3g} um, C = {a.kc_exponent:.3g}", fontsize=9)
+    ax1.legend(fontsize=7)
+    gy, gx = np.gradient(h, dy, dx)
+    for g, alpha, colour, name in ((gx, a.alpha_tangential, "tab:blue", "tangential"),
+                                   (gy, a.alpha_radial, "tab:orange", "radial")):
+        lim = 5 * max(a.alpha_tangential, a.alpha_radial)
+        hist, edges = np.histogram(g.ravel(), bins=121, range=(-lim, lim), density=True)
+        c = 0.5 * (edges[1:] + edges[:-1])
+        ax2.plot(c * 1e3, hist * 1e-3, color=colour, lw=1.2, label=f"slopes, {name}")
+        ax2.plot(c * 1e3, np.exp(-(c / alpha) ** 2) / (math.sqrt(math.pi) * alpha) * 1e-3, "--",
+                 color=colour, lw=1, label=f"Gaussian, alpha = {alpha:.3g}")
+    ax2.set_xlabel("slope, mrad")
+    ax2.set_ylabel("density, 1/mrad")
+    ax2.set_title(f"{a.regime} (Rayleigh {a.rayleigh:.3g} at {a.wavelength_nm:g} nm, "
+                  f"{a.incidence_deg:g} deg)", fontsize=9)
+    ax2.legend(fontsize=7)
+    path = Path(path)
+    fig.savefig(path, dpi=DPI)
+    return path
