@@ -135,3 +135,27 @@ def test_three_shifts_without_a_sensor_model_fit_but_say_the_test_was_not_made()
     assert res.success and np.isnan(res.chi2_reduced) and "not made" in res.noise["note"]
     assert res.as_dict()["chi2_reduced"] is None
     assert np.all(np.abs(res.values[:2] / (case.alpha_x, case.alpha_y) - 1) < 0.02)
+
+
+def test_a_fit_that_cannot_fit_the_machine_is_refused_before_the_images_are_read(tmp_path):
+    from typer.testing import CliRunner
+
+    from pmdsim.cli import app
+    from pmdsim.config import ConfigError, parse_config
+    from pmdsim.studies.fit import check_fit_resources, fit_levels
+    from test_budget import _write_toml
+
+    d = fc.case_dict(fc.coverage_cases(1)[0])
+    assert fit_levels(parse_config(d)) == [100, 400, 1600, 6400]
+    assert fit_levels(parse_config(d), 1000) == [100, 400]
+    slow = d | {"compute": d["compute"] | {"max_cpu_hours": 1e-5}}
+    with pytest.raises(ConfigError, match=r"sampling\.n_rays: the fit .*max_cpu_hours"):
+        check_fit_resources(parse_config(slow))
+    huge = d | {"camera": d["camera"] | {"resolution": [40000, 30000]}}
+    with pytest.raises(ConfigError, match=r"camera\.resolution: .* memory"):
+        check_fit_resources(parse_config(huge))
+    _write_toml(tmp_path / "slow.toml", slow)
+    res = CliRunner().invoke(app, ["fit", str(tmp_path / "slow.toml"),
+                                   str(tmp_path / "missing.tif"), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 2 and "max_cpu_hours" in res.output, res.output
+    assert "missing.tif" not in res.output and not (tmp_path / "out").exists()

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..config import ConfigError, InputError, RunConfig
-from ..studies.fit import MAX_CHI2, MAX_RAYS, FitResult, NoiseModel, fit_fringe_images, format_fit
+from ..studies.fit import (MAX_CHI2, MAX_RAYS, FitResult, NoiseModel, check_fit_resources,
+                           fit_fringe_images, format_fit)
 from . import files as pio
 from .threads import single_blas
 
@@ -84,6 +85,7 @@ def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwri
     width, shift of ``patterns.fringes``), write fit.json, fit.txt, fit.png to ``outdir``.
     Returns also when the fit failed (``result.success`` false; the files say so)."""
     final = check_fit_output(outdir, overwrite)
+    check_fit_resources(cfg, max_rays)  # memory and time, before the images are read
     fr = cfg.patterns.fringes
     images, noise, saturated = load_fit_images(cfg, image_paths)
     res = fit_fringe_images(cfg, images, fr.widths_px, fr.directions, noise, max_chi2=max_chi2,

@@ -57,7 +57,7 @@ from .fit_stats import (NoiseModel, fringe_signal_ratio, harmonic_noise_variance
                         parameter_covariance)
 
 __all__ = ["FIT_FIELDS", "NoiseModel", "FitResult", "fit_fringe_images", "fit_config",
-           "decoded_modulation", "median_modulation", "closed_form_start",
+           "check_fit_resources", "fit_levels", "decoded_modulation", "median_modulation", "closed_form_start",
            "slope_jacobian", "format_fit"]
 
 #: Models whose alphas can be fitted, with the configuration fields of (alpha_x, alpha_y).
@@ -291,6 +291,47 @@ def model_error_variance(render, values, n_rays: int, model, valid) -> np.ndarra
     other = render(values[0], values[1], coarse)
     d = values[2] * (np.nan_to_num(model[valid]) - np.nan_to_num(other[valid]))
     return d * d
+
+
+def fit_levels(cfg: RunConfig, max_rays: int = None) -> list[int]:
+    """The rays per pixel the fit may render with: ``sampling.n_rays`` and its refinements
+    (x ``REFINE_FACTOR`` up to ``max_rays``)."""
+    max_rays = MAX_RAYS if max_rays is None else max_rays
+    levels = [cfg.sampling.n_rays]
+    while levels[-1] * REFINE_FACTOR <= max_rays:
+        levels.append(levels[-1] * REFINE_FACTOR)
+    return levels
+
+
+def check_fit_resources(cfg: RunConfig, max_rays: int = None, max_nfev: int = 60) -> float:
+    """Refuse, before any work, a fit that cannot fit this machine: one render at the
+    largest ray count must fit the memory (:func:`pmdsim.config.check_resources`), and all
+    renders together (about ``2 max_nfev`` at the first count, ``2 REFINE_NFEV`` per
+    refinement, each at most a run's estimate) ``compute.max_cpu_hours``. Returns the
+    estimated CPU seconds."""
+    from ..config import check_resources, estimate_resources
+
+    cfg = fit_config(cfg)
+    levels = fit_levels(cfg, max_rays)
+
+    def at(n):
+        d = cfg.model_dump()
+        d["sampling"]["n_rays"] = int(n)
+        return RunConfig.model_validate(d)
+
+    check_resources(at(levels[-1]), max_cpu_hours=float("inf"))
+    cpu = sum(estimate_resources(at(n)).cpu_seconds * (2 * (max_nfev if i == 0 else REFINE_NFEV))
+              for i, n in enumerate(levels))
+    limit = cfg.compute.max_cpu_hours
+    if cpu > limit * 3600:
+        raise ConfigError(
+            f"invalid configuration:\n  sampling.n_rays: the fit may render up to "
+            f"{2 * max_nfev} times with {levels[0]} rays per pixel and refine to "
+            f"{levels[-1]} (--max-rays), about {cpu / 3600:.3g} CPU hours, more than "
+            f"compute.max_cpu_hours = {limit:g}; use a smaller camera (camera.resolution or "
+            "camera.roi), fewer rays (sampling.n_rays, --max-rays), or raise "
+            "compute.max_cpu_hours if you mean it")
+    return cpu
 
 
 def _noise_scale(sol, images, valid, meas, noise: NoiseModel | None, sigma):
