@@ -88,6 +88,7 @@ def _fit(cfg, images, out, *extra):
                           env=env, capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow  # a fit refined to 1600 rays and a second run: ~20 s
 def test_good_images_fit_and_cover_the_truth(case):
     out = case["root"] / "out-good"
     p = _fit(case["cfg"], case["good"], out)

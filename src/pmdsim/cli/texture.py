@@ -124,6 +124,9 @@ def fit(
     max_chi2: float = typer.Option(2.0, "--max-chi2", min=1.0,
                                    help="Largest reduced chi-square (noise and model error) "
                                    "of a fit that counts as describing the images."),
+    max_rays: int = typer.Option(6400, "--max-rays", min=1, max=10_000_000,
+                                 help="Most rays per pixel when the fit refines its model (x4 "
+                                 "steps from sampling.n_rays) to bound its numerical error."),
     no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
 ) -> None:
     """Images to parameters: fit alpha_x/alpha_y (tangential/radial) and a brightness scale
@@ -146,7 +149,7 @@ def fit(
         try:
             with console.status(f"fitting {cfg.brdf.model} alphas to {len(images)} images"):
                 res = run_fit(cfg, images, output, figure=not no_figure, overwrite=overwrite,
-                              max_chi2=max_chi2)
+                              max_chi2=max_chi2, max_rays=max_rays)
         except (FileNotFoundError, ValueError) as err:
             _fail(str(err))
     console.print(f"pmdsim fit '{cfg.name}' ({time.perf_counter() - t0:.1f} s)")

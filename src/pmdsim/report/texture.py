@@ -82,7 +82,8 @@ def plot_texture(params, path, wavelengths_nm=(610.0, 545.0, 465.0), weights=(1.
 
 def plot_fit(res, path, frame: str = "fixed") -> Path:
     """Median decoded modulation against fringe width: measured (dots), closed-form start
-    (dashed), fitted simulation (line), per direction. ``res``: :class:`~pmdsim.studies.fit.FitResult`."""
+    (dashed), fitted simulation (line), per direction; a failed fit says so in red in the
+    title. ``res``: :class:`~pmdsim.studies.fit.FitResult`."""
     fig = _figure((5.0 * len(res.directions), 4.0))
     w = np.asarray(res.widths)
     names = {"alpha_x": "alpha_tangential" if frame == "rotational" else "alpha_x",
@@ -103,7 +104,15 @@ def plot_fit(res, path, frame: str = "fixed") -> Path:
         ax.set_title(f"{d.upper()} fringes", fontsize=10)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
-    fig.suptitle(text, fontsize=9)
+    if not getattr(res, "success", True):
+        import textwrap
+
+        why = textwrap.fill(f"FIT FAILED ({res.reason}): not a result",
+                            width=int(14 * 5.0 * len(res.directions)))
+        text = f"{why}\n{text}"
+    elif np.isfinite(res.chi2_reduced):
+        text += f"; reduced chi-square {res.chi2_reduced:.3g}"
+    fig.suptitle(text, fontsize=9, color="tab:red" if not getattr(res, "success", True) else "k")
     path = Path(path)
     fig.savefig(path, dpi=DPI)
     return path
