@@ -78,7 +78,7 @@ def _member_estimate(cfg: "RunConfig", n_px: float, width: int) -> tuple[dict, f
     passes = 0
     fr = cfg.patterns.fringes
     workers = cfg.compute.num_workers or os.cpu_count() or 1
-    tile_px = min(cfg.compute.tile_rows, cfg.camera.resolution[1]) * width
+    tile_px = min(cfg.compute.tile_rows, cfg.camera.rendered_resolution[1]) * width
     tiles = 0.0
     if fr is not None:
         nd, nw, k = len(fr.directions), len(fr.widths_px), fr.shifts
@@ -121,7 +121,8 @@ def _member_estimate(cfg: "RunConfig", n_px: float, width: int) -> tuple[dict, f
 def estimate_resources(cfg: "RunConfig") -> ResourceEstimate:
     """Estimate the peak memory and the CPU time of running ``cfg`` (see
     :class:`ResourceEstimate`); pure arithmetic on the configuration."""
-    width, height = cfg.camera.resolution
+    # the rendered pixels: the camera's region of interest (camera.roi), else the sensor
+    width, height = cfg.camera.rendered_resolution
     n_px = float(width) * float(height)
     cam = cfg.camera
     # vision rays per pixel (sub-pixels x thin-lens aperture samples): every one carries a
@@ -216,7 +217,8 @@ def available_memory_bytes() -> int | None:
 
 
 _FIX = {
-    "camera.resolution": "a smaller camera.resolution (or fewer patterns: "
+    "camera.resolution": "a smaller camera.resolution or a window camera.roi (\"auto\": the "
+                         "pixels that see the part) (or fewer patterns: "
                          "patterns.fringes.widths_px/shifts/directions, dots, images)",
     "patterns.fringes": "fewer fringe images (patterns.fringes.widths_px, .shifts, .directions)",
     "patterns.dots": "fewer dots (patterns.dots.positions_px / grid) per run",
@@ -243,7 +245,7 @@ def check_resources(cfg: "RunConfig", available_bytes: int | None = None,
     avail = available_memory_bytes() if available_bytes is None else available_bytes
     if avail is not None and est.memory_bytes > avail:
         field, part = max(est.parts.items(), key=lambda kv: kv[1])
-        width, height = cfg.camera.resolution
+        width, height = cfg.camera.rendered_resolution
         if field.startswith("patterns.") and width * height > 4096 * 4096:
             # the images of an enormous camera, not too many patterns
             field = "camera.resolution"
