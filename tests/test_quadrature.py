@@ -196,7 +196,7 @@ def test_nearest_monitor_uses_rqmc_and_its_error_bounds_the_true_one():
     (8 scrambled Sobol replicates), whose stated 95 % error must bound the error against a
     converged reference of another method (the Cranley-Patterson-rotated lattice, 64 x the
     rays) in about 95 % of the pixels."""
-    cfg = make_config(sampling={"n_rays": 256}, monitor={"pixel_model": "nearest"})
+    cfg = make_config(sampling={"n_rays": 256, "mode": "rule"}, monitor={"pixel_model": "nearest"})
     sim = Simulation.from_config(cfg)
     fr = sim.render_fringes([20.0], ["x", "y"])
     assert fr.sampling["mode"] == "rqmc" and fr.sampling["error"] == "replicates"
