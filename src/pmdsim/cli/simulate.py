@@ -70,6 +70,11 @@ def simulate(
         help="Render the run's tiles on the Dask cluster at this scheduler address "
         "(tcp://host:8786; same results as a local run; needs pmdsim[distributed]). "
         "Default: the configuration's compute.scheduler, on this machine."),
+    target_error_mrad: float | None = typer.Option(
+        None, "--target-error-mrad",
+        help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
+        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Render the configured patterns and write a run folder (images, run.zarr, figures);
     by default also decode the fringes and measure their deviation from the ideal specular
@@ -87,6 +92,13 @@ def simulate(
     console = _console()
     with _guard():
         cfg = load_config(config)
+        if target_error_mrad is not None:
+            from ..config import ConfigError
+
+            if not target_error_mrad > 0:
+                raise ConfigError(f"--target-error-mrad must be > 0, got {target_error_mrad}")
+            cfg = cfg.model_validate({**cfg.model_dump(), "sampling": {
+                **cfg.sampling.model_dump(), "target_error_mrad": target_error_mrad}})
         from ..report.text import warning_text
         from ..run import run_simulation
         from ..run.files import check_output_dir
