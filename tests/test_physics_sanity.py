@@ -168,3 +168,22 @@ def test_texture_refuses_grazing_incidence():
         assert result.exit_code == 2, result.output
         assert "--incidence-deg" in result.output
     assert not math.isnan(0.0)
+
+
+@pytest.mark.parametrize("bits", [1, 2, 4])
+def test_camera_values_stay_in_the_displays_range(bits):
+    """Continuous monitor, gamma 2.2, a coarsely quantised drive: the 16-harmonic series
+    rings; every camera value must stay within [black, white] x the weight on the monitor
+    (the range of a weighted mean of displayed luminances), so never negative."""
+    from pmdsim.render import Simulation
+
+    cfg = parse_config(merge(base_dict(), {"monitor": {"pixel_model": "continuous",
+                                                       "gamma": 2.2, "bit_depth": bits,
+                                                       "black_level": 0.0}}))
+    fr = Simulation.from_config(cfg).render_fringes(widths=[20.0], shifts=4)
+    img = fr.images.astype(np.float64)
+    ok = np.isfinite(img)
+    assert ok.any()
+    hit = np.broadcast_to(fr.f_hit, img.shape)[ok]
+    assert img[ok].min() >= 0.0
+    assert np.all(img[ok] <= hit * cfg.monitor.white_level * (1 + 1e-6) + 1e-12)

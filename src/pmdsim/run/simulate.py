@@ -187,6 +187,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         finally:
             if reference is not None:  # a failed or interrupted run leaves no thread behind
                 reference.settle()
+        result = replace(result, notes=result.notes + _check_valid(cfg, result))
         timings = dict(result.timings, total=time.perf_counter() - t_start)
         result = replace(result, timings=timings)
         # the folder's size, measured now that everything but the manifest is written
@@ -201,6 +202,20 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         else:
             write_run_manifest(tmp, cfg, result, timings)
     return moved(result, tmp, Path(outdir).absolute())
+
+
+def _check_valid(cfg: RunConfig, result: RunResult) -> tuple[str, ...]:
+    """Refuse (before the folder is kept) a decoded run with a fringe direction without a
+    valid pixel, naming the stage that removed them (:mod:`pmdsim.studies.valid_pixels`);
+    notes when ``diagnostics.allow_no_valid_pixels`` keeps it."""
+    from ..studies.valid_pixels import check_valid
+
+    h, w = result.shape
+    notes: list[str] = []
+    for sub in result.variants or (result,):
+        notes += check_valid(sub.statistics or {}, h * w, cfg.diagnostics.allow_no_valid_pixels,
+                             sub.config.name if result.variants else "")
+    return tuple(notes)
 
 
 def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..brdf import BRDF, Mirror, brdf_from_config
 from ..config import RunConfig
-from .sampling import ConeSampling
+from .sampling import ConeSampling, sampling_from_config
 from .anisotropy import AnisotropyFrame
 from .brdf_variation import BrdfVariation
 from .camera import Camera
@@ -54,6 +54,7 @@ class Scene:
         if cam_cfg.roi == "auto":
             cam_cfg = cam_cfg.cropped(auto_roi(Camera.from_config(cam_cfg), surface))
         camera = Camera.from_config(cam_cfg).focused_on(surface)
+        brdf = brdf_from_config(cfg.brdf, set_up_incidence_deg(camera, surface))
         return cls(
             brdf_variation=(None if var is None
                             else BrdfVariation.from_config(var, surface, anisotropy)),
@@ -61,10 +62,8 @@ class Scene:
             monitor=Monitor.from_config(cfg.monitor),
             surface=surface,
             anisotropy=anisotropy,
-            brdf=brdf_from_config(cfg.brdf, set_up_incidence_deg(camera, surface)),
-            sampling=ConeSampling(
-                s.n_rays, float(np.deg2rad(s.theta_max_deg)), s.scheme, s.mode, s.seed
-            ),
+            brdf=brdf,
+            sampling=sampling_from_config(s, brdf),
             estimator=s.estimator,
         )
 
