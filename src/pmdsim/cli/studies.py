@@ -108,9 +108,11 @@ def budget(
                               "'footprint' (averaged over the pixel's vision rays)."),
 ) -> None:
     """Error budget: the chain with each system effect of CONFIG alone and all together on
-    the ideal mirror, and the surface's scattering minus that mirror; deviation from the
-    exact reflection points in mrad, monitor px, mm and urad. Writes OUT/budget.csv,
-    budget.json, budget.png (docs/system.md)."""
+    the ideal mirror, the surface's scattering minus that mirror, and the calibration
+    errors (sensitivity x uncertainty); per effect the reconstructed slope error (urad X/Y)
+    and height error (nm RMS/PV/P95 after [budget] removal), per direction the deviation from
+    the exact reflection points in mrad, monitor px, mm and urad. Writes OUT/budget.csv,
+    heights.csv, zernike.csv, budget.json, budget.png (docs/system.md)."""
     from ..config import ConfigError, load_config
     from ..report.budget import budget_text
     from ..run.budget import run_budget
