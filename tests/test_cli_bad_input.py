@@ -128,3 +128,12 @@ def test_converge_is_sized_before_it_renders(tmp_path, config_file):
     assert result.exit_code == 2, result.output
     assert "converge:" in result.output and "sampling.n_rays" in result.output
     assert not out.exists()
+
+
+def test_budget_refuses_a_sensor_without_signal_naming_it(tmp_path):
+    cfg = tmp_path / "dark.toml"
+    cfg.write_text(_toml(merge(base_dict(), {"sensor": {"enabled": True,
+                                                        "dark_signal_electrons": 20000.0}})))
+    result = _invoke("budget", cfg, "-o", tmp_path / "b")
+    assert result.exit_code == 2, result.output
+    assert "sensor.dark_signal_electrons" in result.output and not (tmp_path / "b").exists()
