@@ -64,6 +64,10 @@ def converge(
         if not (0 < cw <= 65536 and 0 < ch <= 65536):
             raise InputError(f"--camera must be WxH with 1 to 65536 px per axis, e.g. 160x128, "
                              f"got {camera!r}")
+        from ..config.resources import check_study, convergence_configs
+
+        # the study's renders, one after the other: the largest must fit, all the CPU limit
+        check_study(convergence_configs(cfg, ns, thetas, ests, (cw, ch)), "converge")
         t0 = time.perf_counter()
         with console.status(f"convergence study of {cfg.name}") as status:
             result = run_convergence(
