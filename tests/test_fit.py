@@ -46,9 +46,12 @@ def test_fit_defaults_to_the_radiometric_estimator_unless_set():
     from pmdsim.config import parse_config
 
     cfg = fit_config(parse_config(d))
-    assert (cfg.sampling.estimator, cfg.sampling.mode) == ("radiometric", "stratified")
-    own = fit_config(parse_config(d | {"sampling": {"estimator": "paper", "mode": "random"}}))
+    assert (cfg.sampling.estimator, cfg.sampling.mode) == ("radiometric", "rule")
+    assert cfg.sampling.error_estimate is False  # the fit refines instead
+    own = fit_config(parse_config(d | {"sampling": {"estimator": "paper", "mode": "random",
+                                                    "error_estimate": True}}))
     assert (own.sampling.estimator, own.sampling.mode) == ("paper", "random")
+    assert own.sampling.error_estimate is True
 
 
 @pytest.mark.slow  # six fits, ~1 min

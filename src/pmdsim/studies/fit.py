@@ -36,10 +36,10 @@ or ``slope_density`` with the Gaussian density) and a brightness scale:
 
 The brightness ``scale`` multiplies the simulated camera values (it absorbs ``rho_s``, the
 exposure and the sensor gain, which images alone cannot separate). The model's sampling
-settings are the configuration's, except that the estimator is ``radiometric`` (the
-rendering integral: the physical answer) and the sample set ``stratified`` (smooth in the
-parameters) unless the configuration sets ``sampling.estimator``/``mode`` explicitly
-(:func:`fit_config`). Use ``monitor.pixel_model = "continuous"``: a nearest-pixel monitor
+settings are the configuration's (by default ``mode = "rule"``: a deterministic Gauss rule,
+smooth in the parameters), except that the estimator is ``radiometric`` (the rendering
+integral: the physical answer) unless the configuration sets ``sampling.estimator``
+explicitly (:func:`fit_config`). Use ``monitor.pixel_model = "continuous"``: a nearest-pixel monitor
 makes the model piecewise constant on the scale of a ray crossing a pixel edge.
 """
 
@@ -172,15 +172,16 @@ def median_modulation(images) -> np.ndarray:
 
 
 def fit_config(cfg: RunConfig) -> RunConfig:
-    """The configuration the fit renders with: ``sampling.estimator = "radiometric"`` and
-    ``sampling.mode = "stratified"`` unless the configuration sets them explicitly; no
-    variants."""
+    """The configuration the fit renders with: ``sampling.estimator = "radiometric"`` unless
+    the configuration sets it explicitly (the sample set is the configuration's, by
+    default the deterministic Gauss rule); the rule's embedded error estimate off unless
+    set (the fit estimates its model's error by refinement); no variants."""
     d = cfg.model_dump()
     given = cfg.sampling.model_fields_set
     if "estimator" not in given:
         d["sampling"]["estimator"] = "radiometric"
-    if "mode" not in given:
-        d["sampling"]["mode"] = "stratified"
+    if "error_estimate" not in given:
+        d["sampling"]["error_estimate"] = False  # the fit estimates its model's error itself
     d["variants"] = []
     return RunConfig.model_validate(d)
 
