@@ -110,3 +110,30 @@ def test_a_thin_lens_whose_centre_misses_the_part_is_a_clean_error():
         "f_number": 4.0, "look_at_mm": [400.0, 2.3, 0.0]}}))
     with pytest.raises(ConfigError, match="camera.focus_distance_mm"):
         Scene.from_config(cfg)
+
+
+def test_converge_is_sized_before_it_renders(tmp_path, config_file):
+    """Its largest render (10 million rays per pixel) cannot fit: refused naming the study
+    and the setting, before any output."""
+    from pmdsim.config.resources import convergence_configs
+
+    cfg = parse_config(base_dict())
+    runs = convergence_configs(cfg, [10, 20], [1.0], ["paper", "radiometric"], (16, 12))
+    # paper: N in {10, 20, 48} x theta in {1, 2}; radiometric: N in {10, 20, 48}
+    assert len(runs) == 3 * 2 + 3
+    assert {r.camera.resolution for r in runs} == {(16, 12)}
+    out = tmp_path / "conv"
+    result = _invoke("converge", config_file, "-o", out, "--n-values", "10000000",
+                     "--camera", "4000x3000")
+    assert result.exit_code == 2, result.output
+    assert "converge:" in result.output and "sampling.n_rays" in result.output
+    assert not out.exists()
+
+
+def test_budget_refuses_a_sensor_without_signal_naming_it(tmp_path):
+    cfg = tmp_path / "dark.toml"
+    cfg.write_text(_toml(merge(base_dict(), {"sensor": {"enabled": True,
+                                                        "dark_signal_electrons": 20000.0}})))
+    result = _invoke("budget", cfg, "-o", tmp_path / "b")
+    assert result.exit_code == 2, result.output
+    assert "sensor.dark_signal_electrons" in result.output and not (tmp_path / "b").exists()

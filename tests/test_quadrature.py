@@ -196,7 +196,7 @@ def test_nearest_monitor_uses_rqmc_and_its_error_bounds_the_true_one():
     (8 scrambled Sobol replicates), whose stated 95 % error must bound the error against a
     converged reference of another method (the Cranley-Patterson-rotated lattice, 64 x the
     rays) in about 95 % of the pixels."""
-    cfg = make_config(sampling={"n_rays": 256}, monitor={"pixel_model": "nearest"})
+    cfg = make_config(sampling={"n_rays": 256, "mode": "rule"}, monitor={"pixel_model": "nearest"})
     sim = Simulation.from_config(cfg)
     fr = sim.render_fringes([20.0], ["x", "y"])
     assert fr.sampling["mode"] == "rqmc" and fr.sampling["error"] == "replicates"
@@ -217,3 +217,38 @@ def test_modes_keep_their_earlier_meaning():
     fr = Simulation.from_config(cfg).render_fringes([20.0], ["x"])
     assert fr.sums_err is None and fr.phase_error() is None
     assert fr.sampling["mode"] == "stratified"
+
+
+# ----------------------------------------------------------------------------- error control
+def test_target_error_raises_the_order_until_met():
+    cfg = make_config(sampling={"mode": "rule", "n_rays": 16, "target_error_mrad": 2.0},
+                      monitor={"pixel_model": "continuous"})
+    sim = Simulation.from_config(cfg)
+    fr = sim.render_fringes([40.0], ["x", "y"])
+    info = fr.sampling
+    assert info["target_met"] and info["n_rays"] > 16
+    assert info["achieved_p95_mrad"] <= 2.0
+    from pmdsim.render.simulation import worst_phase_error
+
+    assert worst_phase_error(fr) * 1e3 == pytest.approx(info["achieved_p95_mrad"])
+    # the order before the last did not meet it (the doubling stopped at the first that did)
+    half = Simulation.from_config(make_config(
+        sampling={"mode": "rule", "n_rays": info["n_rays"] // 2},
+        monitor={"pixel_model": "continuous"})).render_fringes([40.0], ["x", "y"])
+    assert worst_phase_error(half) * 1e3 > 2.0
+
+
+def test_target_error_out_of_reach_warns_with_the_figure():
+    cfg = make_config(sampling={"mode": "rule", "n_rays": 16, "max_rays": 32,
+                                "target_error_mrad": 1e-9},
+                      monitor={"pixel_model": "continuous"})
+    with pytest.warns(RuntimeWarning, match=r"target_error_mrad = 1e-09: the stated phase error is .* mrad"):
+        fr = Simulation.from_config(cfg).render_fringes([40.0], ["x"])
+    assert not fr.sampling["target_met"] and fr.sampling["n_rays"] == 32
+
+
+def test_target_error_needs_an_error_estimate():
+    from pmdsim.config import ConfigError
+
+    with pytest.raises((ConfigError, ValueError), match="target_error_mrad needs an error estimate"):
+        make_config(sampling={"mode": "stratified", "target_error_mrad": 0.1})

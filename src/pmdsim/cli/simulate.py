@@ -70,6 +70,11 @@ def simulate(
         help="Render the run's tiles on the Dask cluster at this scheduler address "
         "(tcp://host:8786; same results as a local run; needs pmdsim[distributed]). "
         "Default: the configuration's compute.scheduler, on this machine."),
+    target_error_mrad: float | None = typer.Option(
+        None, "--target-error-mrad",
+        help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
+        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Render the configured patterns and write a run folder (images, run.zarr, figures);
     by default also decode the fringes and measure their deviation from the ideal specular
@@ -87,6 +92,13 @@ def simulate(
     console = _console()
     with _guard():
         cfg = load_config(config)
+        if target_error_mrad is not None:
+            from ..config import ConfigError
+
+            if not target_error_mrad > 0:
+                raise ConfigError(f"--target-error-mrad must be > 0, got {target_error_mrad}")
+            cfg = cfg.model_validate({**cfg.model_dump(), "sampling": {
+                **cfg.sampling.model_dump(), "target_error_mrad": target_error_mrad}})
         from ..report.text import warning_text
         from ..run import run_simulation
         from ..run.files import check_output_dir
@@ -197,7 +209,8 @@ def _print_statistics(console: Console, result) -> None:
         return
     table = Table(title="deviation from the ideal specular reference (decoded mirror; "
                   "'vs exact P': of the monitor coordinate from the exact specular point); "
-                  "each cell: RMS (upper) and P95 (lower) over the valid pixels; all "
+                  "each cell: RMS (upper) and P95 (lower) over the valid pixels, ± the "
+                  "rendering's numerical error of that statistic where stated; all "
                   "statistics in statistics.json, summary.txt", title_justify="left",
                   show_lines=True)
     # fits 80 columns: two short lines per cell; the variant column only with variants
@@ -208,13 +221,24 @@ def _print_statistics(console: Console, result) -> None:
                 "valid\n%"):
         table.add_column(col, justify="left" if col == "dir" else "right", no_wrap=True)
 
-    def pair(s):
-        return "nan" if not s or s["rms"] is None else f"{s['rms']:.3g}\n{s['p95']:.3g}"
+    def pair(s, e=None):
+        if not s or s["rms"] is None:
+            return "nan"
+        if not e or e.get("rms") is None:
+            return f"{s['rms']:.3g}\n{s['p95']:.3g}"
+        return f"{s['rms']:.3g} ± {e['rms']:.1g}\n{s['p95']:.3g} ± {e['p95']:.1g}"
 
     for name, st in per.items():
         for d, s in st["directions"].items():
-            cells = (d.upper(), pair(s["phase_mrad"]), pair(s["coord_px"]),
-                     pair(s.get("coord_vs_exact_px")), pair(s["slope_urad"]),
+            ne = s.get("numerical_error") or {}
+            cells = (d.upper(), pair(s["phase_mrad"], ne.get("phase_mrad")),
+                     pair(s["coord_px"], ne.get("coord_px")),
+                     pair(s.get("coord_vs_exact_px")), pair(s["slope_urad"], ne.get("slope_urad")),
                      f"{100 * s['coord_px']['valid_fraction']:.1f}")
             table.add_row(*((name,) + cells if named else cells))
     console.print(table)
+    from ..report.text import numerical_warnings
+
+    for name, st in per.items():
+        for w in numerical_warnings(st):
+            console.print(f"[yellow]warning: {(name + ': ') if named else ''}{w}[/yellow]")

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import threading
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -41,6 +41,8 @@ from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
 from ..kernels.synth import shifted_images
+from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, phase_error,  # noqa: F401
+                      worst_phase_error)
 from .rows import (local_scheduler, reduce_subrays, scene_geometry_rows,  # noqa: F401
                    vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels
@@ -50,104 +52,6 @@ ProgressFn = Callable[[int, int], None]
 
 #: Harmonics used for analytic fringes on a continuous monitor with gamma != 1.
 GAMMA_HARMONICS = 16
-
-
-def phase_error(sums: np.ndarray, sums_err: np.ndarray, kind: str | None) -> np.ndarray:
-    """Phase error (rad) of ``arg sums`` for the sums' errors (:attr:`FringeResult.sums_err`);
-    ``kind``: ``"embedded"`` (signed differences) or ``"replicates"`` (half-widths)."""
-    mag = np.abs(sums)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        if kind == "replicates":
-            c, s = sums.real / mag, sums.imag / mag
-            out = np.hypot(sums_err.real * s, sums_err.imag * c) / mag
-        else:
-            out = (np.abs((sums_err * np.conj(sums)).imag) / (mag * mag)
-                   + EMBEDDED_FLOOR * np.abs(sums_err) / mag)
-    return np.where(mag > 0, out, np.nan)
-
-
-#: The share of the relative sum difference ``|delta S| / |S|`` added to the embedded
-#: rule's phase difference: where the two rules are not yet in their asymptotic regime
-#: (a lobe that nearly fills a wide cone) their phase difference alone can fall below the
-#: rendered rule's error; with this floor the statement bounded the true error (SciPy
-#: cubature) in >= 94 % of (pixel, fringe) on 1 and 2 deg cones, orders 4 x 16 to 16 x 64.
-EMBEDDED_FLOOR = 0.1
-
-
-@dataclass(frozen=True)
-class FringeResult:
-    """Camera fringe images and the sums they come from.
-
-    Attributes
-    ----------
-    images : (n_directions, n_widths, K, H, W) float32
-        Camera values (estimator units); NaN where the vision ray misses the surface.
-    sums : (n_directions, n_widths, H, W) complex128 or None
-        Normalised ``sum_p f_p exp(i k c_p)`` (c = u or v, the fringe coordinate): its
-        argument is the phase a K >= 3 phase-shift decoder returns (gamma = 1 only).
-    f_total, f_hit : (H, W) float64
-        Normalised sum of all weights / of the weights of rays that hit the monitor.
-    sums_err : (n_directions, n_widths, H, W) complex128 or None
-        Numerical error of every sum (same units as ``sums``), real and imaginary parts
-        separately: ``S - S_embedded`` (mode ``rule``: the difference to the embedded rule,
-        signed) or ``t(0.975, R - 1)`` standard errors of the rqmc mean (each part >= 0);
-        None without an estimate (modes ``stratified``/``random``, ``error_estimate =
-        false``, a display with gamma != 1).
-    sampling : dict
-        What was rendered: ``mode`` (the effective one), ``rule``, ``nodes``, ``order``,
-        ``error`` (``"embedded"``, ``"replicates"`` or None), ``smooth``.
-    """
-
-    directions: tuple[str, ...]
-    widths: tuple[float, ...]
-    shifts: np.ndarray
-    images: np.ndarray
-    sums: np.ndarray | None
-    f_total: np.ndarray
-    f_hit: np.ndarray
-    sums_err: np.ndarray | None = None
-    sampling: dict | None = None
-
-    def image(self, direction: str, width: float, k: int) -> np.ndarray:
-        return self.images[self.directions.index(direction), self.widths.index(width), k]
-
-    def phase_error(self) -> np.ndarray | None:
-        """(n_directions, n_widths, H, W) rad: the numerical error of the phase
-        ``arg S`` each sum decodes to, from the part of the sum's error across ``S``
-        (first order; the part along ``S`` changes the modulation, not the phase):
-        ``|Im(delta S conj(S))| / |S|^2 + 0.1 |delta S| / |S|`` for the embedded rule (the
-        phase difference of the two rules and a floor, :data:`EMBEDDED_FLOOR`),
-        ``sqrt((e_re sin phi)^2 + (e_im cos phi)^2) / |S|`` for the rqmc errors; None
-        without :attr:`sums_err`."""
-        if self.sums_err is None or self.sums is None:
-            return None
-        return phase_error(self.sums, self.sums_err, (self.sampling or {}).get("error"))
-
-
-@dataclass(frozen=True)
-class Geometry:
-    """Per-pixel results of the vision rays alone.
-
-    ``surface_mask``: the vision ray hits the front of the surface. ``monitor_mask``: P hits
-    the monitor as well. ``specular_u``/``specular_v``: exact monitor coordinates (monitor
-    px) of P (NaN where it misses), ``specular_u_px``/``..._v_px`` the nearest monitor pixel.
-    ``points``: the surface points.
-    """
-
-    surface_mask: np.ndarray
-    monitor_mask: np.ndarray
-    specular_u: np.ndarray
-    specular_v: np.ndarray
-    #: (H, W, 3) surface point of each pixel's vision ray (mm; NaN off the surface)
-    points: np.ndarray
-
-    @property
-    def specular_u_px(self) -> np.ndarray:
-        return np.floor(self.specular_u + 0.5)
-
-    @property
-    def specular_v_px(self) -> np.ndarray:
-        return np.floor(self.specular_v + 0.5)
 
 
 class Simulation:
@@ -463,8 +367,42 @@ class Simulation:
     ) -> FringeResult:
         """Camera images of X/Y fringes of the given widths (periods, monitor px), K shifts.
 
-        One pass over the scattered rays gives all widths, directions and shifts.
+        One pass over the scattered rays gives all widths, directions and shifts (plus the
+        passes of the error estimate, :meth:`plan`). With a ``target_error`` in the
+        scene's sampling (``sampling.target_error_mrad``) the number of nodes is doubled
+        until the stated phase error (P95 over the pixels whose fringe keeps a modulation
+        >= 0.05, worst fringe) is below the target or ``max_rays`` is reached (then a
+        ``RuntimeWarning`` with the figure); ``sampling`` of the result reports
+        ``target_error_mrad``, ``achieved_p95_mrad``, ``n_rays`` used and ``target_met``.
         """
+        samp = self.scene.sampling
+        if samp.target_error is None or self.scene.brdf.is_delta:
+            return self._fringes_once(widths, directions, shifts, progress)
+        import warnings
+
+        sim = self
+        while True:
+            fr = sim._fringes_once(widths, directions, shifts, progress)
+            worst = worst_phase_error(fr)
+            n = sim.scene.sampling.n_rays
+            met = worst is not None and worst <= samp.target_error
+            if met or worst is None or 2 * n > samp.max_rays:
+                break
+            sim = Simulation(self.scene.replace(sampling=replace(sim.scene.sampling, n_rays=2 * n)),
+                             self.tile_rows, self.scheduler, self.num_workers)
+        info = dict(fr.sampling or {}, target_error_mrad=samp.target_error * 1e3,
+                    achieved_p95_mrad=None if worst is None else worst * 1e3, n_rays=n,
+                    target_met=bool(met))
+        if not met:
+            warnings.warn(
+                f"sampling.target_error_mrad = {samp.target_error * 1e3:g}: the stated phase "
+                f"error is {'unknown' if worst is None else f'{worst * 1e3:.3g} mrad'} (P95, "
+                f"worst fringe) at n_rays = {n}, and doubling would pass sampling.max_rays = "
+                f"{samp.max_rays}: raise max_rays or accept the error", RuntimeWarning,
+                stacklevel=2)
+        return replace(fr, sampling=info)
+
+    def _fringes_once(self, widths, directions, shifts, progress) -> FringeResult:
         widths = tuple(float(w) for w in widths)
         directions = tuple(directions)
         if not widths or any(not np.isfinite(w) or w <= 0 for w in widths):

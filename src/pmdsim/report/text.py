@@ -28,11 +28,16 @@ def summary_text(stats: dict, timings: dict | None = None) -> str:
     lines.append(head)
     lines.append("-" * len(head))
     for d, s in stats["directions"].items():
+        ne = s.get("numerical_error")
         for q, unit in stats["units"].items():
             r = s[q]
             label = q.rsplit("_", 1)[0] + f" ({unit})"
             lines.append(f"{d.upper():<4}{label:<20}" + "".join(
                 f"{_num(r[k]):>11}" for k in ("mean", "rms", "p95", "max")))
+            if ne and q in ne:  # the rendering's own numerical error of the same statistic
+                e = ne[q]
+                lines.append(f"{'':<4}{'  ± numerical':<20}{'':>11}" + "".join(
+                    f"{_num(e[k], 2):>11}" for k in ("rms", "p95", "max")))
         ex = s.get("coord_vs_exact_px")
         if ex:  # the same coordinate against the exact specular point P
             lines.append(f"{d.upper():<4}{'coord vs exact (px)':<20}" + "".join(
@@ -49,9 +54,28 @@ def summary_text(stats: dict, timings: dict | None = None) -> str:
         lines.append(f"    reference vs exact specular point: RMS {_num(rq['rms'])} px "
                      f"(monitor pixel quantisation of the reference)")
         lines.append("")
+    for w in numerical_warnings(stats):
+        lines.append("warning: " + w)
     if timings:
         lines.append("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
     return "\n".join(lines).rstrip() + "\n"
+
+
+def numerical_warnings(stats: dict, share: float = 0.1) -> list[str]:
+    """Warnings where the numerical error (RMS or P95) of a deviation printed is more than
+    ``share`` of it (issue 18: a number whose error is not small is not yet the answer)."""
+    out = []
+    for d, s in stats.get("directions", {}).items():
+        ne = s.get("numerical_error") or {}
+        for q in ("phase_mrad", "slope_urad"):
+            for k in ("rms", "p95"):
+                v, e = (s.get(q) or {}).get(k), (ne.get(q) or {}).get(k)
+                if v is not None and e is not None and math.isfinite(e) and e > share * abs(v):
+                    out.append(f"{d} {q} {k} {v:.3g} ± {e:.2g}: the numerical error is more "
+                               f"than {100 * share:.0f} % of the deviation; raise "
+                               "sampling.n_rays or set sampling.target_error_mrad")
+                    break
+    return out
 
 
 def _fmt(x, spec: str = ".3g") -> str:

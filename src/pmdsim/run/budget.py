@@ -59,6 +59,10 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     cfg = resolve_roi(cfg)  # camera.roi = "auto": the window that sees the part
     check_resources(cfg)  # the budget's largest run, before anything is computed
     pio.check_output_dir(final, overwrite, MARKER)
+    from ..scene import Scene
+    from ..scene.sanity import check_physics
+
+    check_physics(cfg, Scene.from_config(cfg))  # a sensor/display that leaves no signal
     result = budget(cfg, progress, truth)
     rows = result.rows
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:

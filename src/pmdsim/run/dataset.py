@@ -391,6 +391,16 @@ def dataset_variables(chain: ChainResult) -> dict:
     v["surface_to_monitor_mm"] = (("row", "col"), chain.distance_mm, {
         "units": "mm", "description": "distance from the surface point to the monitor point of "
                                       "the principal reflection P"})
+    if all(dc.numerical is not None for dc in dcs):
+        for q, name, units in (("phase_mrad", "phase_deviation_error", "rad"),
+                               ("coord_px", "coord_deviation_px_error", "monitor px"),
+                               ("coord_mm", "coord_deviation_mm_error", "mm"),
+                               ("slope_urad", "slope_deviation_urad_error", "urad")):
+            scale = 1e-3 if q == "phase_mrad" else None
+            v[name] = (D, per(lambda dc, q=q: dc.numerical[q], np.float32, scale), {
+                "units": units, "description": f"numerical (quadrature) error of "
+                f"{name[:-6]}: the render's stated error of the finest width's sums, "
+                "propagated (pmdsim.measure.numerical); NaN where not valid"})
     qs = list(QUANTITIES)
     table = np.array([[[float("nan") if (x := direction_quantity_stats(dc)[q][s]) is None
                         else x for s in STATISTICS] for q in qs] for dc in dcs])

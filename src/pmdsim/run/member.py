@@ -66,6 +66,7 @@ class Member:
     dot_images: object = None
     images: object = None
     off_monitor: object = None
+    phase_error: dict | None = None  # direction -> (H, W) numerical phase error, finest width
     sensor: Sensor | None = None
     exposure: float = float("nan")
     ds: object = None              # the xarray Dataset, replaced (never changed) by steps
@@ -131,6 +132,18 @@ def capture(m: Member) -> None:
         m.images = capture_dn(sensor, m.images, 3)
 
 
+def describe_error(sampling: dict | None) -> str:
+    """How a render's numerical error was estimated, in words."""
+    s = sampling or {}
+    if s.get("error") == "embedded":
+        return (f"{s.get('rule')} against the embedded {s.get('embedded_rule')}: the phase "
+                "difference of the two rules plus 0.1 |dS|/|S| (a bound)")
+    if s.get("error") == "replicates":
+        return (f"t(0.975) standard error of the mean of {s.get('passes')} scrambled Sobol "
+                f"replicates of {s.get('nodes')} points (95 % per pixel)")
+    return "none"
+
+
 def dataset(m: Member) -> None:
     """The run's dataset from the rendered arrays (the writer starts on it after this
     step), and the image files, written by a thread while the chain runs."""
@@ -147,6 +160,16 @@ def dataset(m: Member) -> None:
             "units": "bool", "description": "surface pixels whose bundle puts more than "
             f"diagnostics.max_off_monitor_fraction = {cfg.diagnostics.max_off_monitor_fraction:g}"
             " of its weight off the monitor (never valid; counted)"})
+    m.phase_error = None
+    if m.fringes is not None and m.fringes.phase_error() is not None:
+        from ..measure.numerical import finest_phase_error
+
+        pe = m.fringes.phase_error()
+        ds["fringe_phase_error"] = (("direction", "width", "row", "col"), pe.astype("float32"), {
+            "units": "rad", "description": "numerical (quadrature) error of the phase each "
+            "fringe sum decodes to, per direction and width: "
+            + describe_error(m.fringes.sampling)})
+        m.phase_error = {d: finest_phase_error(m.fringes, d) for d in m.fringes.directions}
     m.ds = ds
     if m.fringes is not None and m.fringes.sums is not None:
         # the dataset holds the sums' real and imaginary parts: free the complex copy
@@ -170,7 +193,8 @@ def decode(m: Member) -> None:
 
 def compare(m: Member) -> None:
     """Compare the decoded surface with the decoded specular reference: deviations, masks
-    and statistics into the dataset."""
+    and statistics (with the render's numerical error, when it states one) into the
+    dataset."""
     if m.decoded is None:
         return
     cfg, geometry, reference = m.cfg, m.geometry, m.reference
@@ -179,7 +203,7 @@ def compare(m: Member) -> None:
         cfg.monitor.pixel_pitch_mm, cfg.decode, len(m.fringes.shifts),
         slope_geometry=chain.SlopeGeometry(geometry.points, m.sim.scene.camera.position,
                                            m.sim.scene.monitor),
-        off_monitor=m.off_monitor)
+        off_monitor=m.off_monitor, phase_error=m.phase_error)
     m.decoded = None
     m.stats = chain.statistics(m.measured, cfg.name)
     m.ds = assign_to_dataset(m.ds, m.measured, m.stats)

@@ -77,6 +77,9 @@ class ConeSampling:
     lobe_gaussian: bool = True
     part: int = 0
     error_estimate: bool = True
+    #: target of the stated phase error (rad, P95 over pixels) and the cap on n_rays for it
+    target_error: float | None = None
+    max_rays: int = 65536
 
     def __post_init__(self):
         if self.n_rays < 1:
@@ -206,4 +209,6 @@ def sampling_from_config(s, brdf=None) -> ConeSampling:
     """The :class:`ConeSampling` of a ``[sampling]`` section for a BRDF."""
     sigma, gaussian = lobe_shape(brdf) if brdf is not None else (None, True)
     return ConeSampling(s.n_rays, float(np.deg2rad(s.theta_max_deg)), s.scheme, s.mode, s.seed,
-                        s.replicates, sigma, gaussian, 0, s.error_estimate)
+                        s.replicates, sigma, gaussian, 0, s.error_estimate,
+                        None if s.target_error_mrad is None else s.target_error_mrad * 1e-3,
+                        s.max_rays)
