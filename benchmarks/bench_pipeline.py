@@ -3,6 +3,7 @@
 Usage::
 
     python benchmarks/bench_pipeline.py [--baseline a9ba054] [--skip-rss] [--skip-baseline-rss] [--repeat 2]
+    python benchmarks/bench_pipeline.py --baseline 3f89f5a --warm-only --skip-rss   # vs the previous tree
 
 For this working tree and for the baseline commit (checked out with ``git worktree`` into a
 temporary folder; default ``a9ba054``, the release the issue's numbers were measured on)
@@ -14,6 +15,10 @@ it measures, each in fresh subprocesses:
 - **warm run**: the same command again (kernels cached), wall, default figures;
 - **render**: the whole Fig. 3 fringe sequence (X+Y, 3 widths, 4 shifts, 1280 x 1024,
   N = 100) after compilation: wall and scattered rays per CPU-second of the process;
+- **warm run CPU-seconds**: of the process and the processes it waited for (figures);
+- **sweep example** (unless ``--skip-sweep``): ``examples/sweep_roughness.toml`` on one
+  process (synchronous scheduler), CPU-seconds, wall, and the share of the CPU spent
+  outside the render calls (start-up, geometry, decoding, store, figures: the overhead);
 - **5 MP peak RSS** (unless ``--skip-rss``): ``pmdsim simulate`` of the Fig. 3 set-up with a
   2448 x 2048 camera (same field of view) and N = 1000, full chain, peak resident memory
   of the process (``ru_maxrss``).
@@ -37,6 +42,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 FIG3 = ROOT / "examples" / "paper_fig3.toml"
+SWEEP = ROOT / "examples" / "sweep_roughness.toml"
 CONFIG = FIG3
 
 RENDER_CODE = r"""
@@ -69,6 +75,45 @@ finally:
 
 CLI_CODE = "import sys; from pmdsim.cli import app; app(sys.argv[1:])"
 
+#: The warm run's CPU-seconds: the process and every process it waited for (the forked
+#: figure processes included), printed after the run.
+TIMED_CLI_CODE = r"""
+import json, resource, sys
+from pmdsim.cli import app
+try:
+    app(sys.argv[1:], standalone_mode=False)
+finally:
+    s, c = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    print(json.dumps({"cpu": s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime}))
+"""
+
+#: The sweep example on one process (synchronous scheduler), CPU-seconds in all and in the
+#: render calls (``Simulation.render_fringes``: the points' fringes and the specular
+#: references; on the synchronous scheduler the tiles run in the calling thread). What is
+#: not rendering is the sweep's overhead: start-up, geometry, decoding, comparison, the
+#: store, figures.
+SWEEP_CODE = r"""
+import json, resource, sys, time
+from pmdsim.render import Simulation
+render, calls = [0.0], [0]
+original = Simulation.render_fringes
+def timed(self, *args, **kwargs):
+    c = time.thread_time()
+    try:
+        return original(self, *args, **kwargs)
+    finally:
+        render[0] += time.thread_time() - c
+        calls[0] += 1
+Simulation.render_fringes = timed
+from pmdsim.run.sweep import run_sweep
+w = time.perf_counter()
+run_sweep(sys.argv[1], sys.argv[2], scheduler="synchronous", figures=True)
+wall = time.perf_counter() - w
+s, c = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+cpu = s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime
+print(json.dumps({"cpu": cpu, "render_cpu": render[0], "render_calls": calls[0], "wall": wall}))
+"""
+
 
 def _env(src: Path, cache: Path | None) -> dict:
     env = dict(os.environ, PYTHONPATH=str(src), MPLBACKEND="Agg")
@@ -98,7 +143,8 @@ def _five_mp(tmp: Path) -> Path:
     return path
 
 
-def measure(name: str, src: Path, tmp: Path, repeat: int, rss: bool) -> dict:
+def measure(name: str, src: Path, tmp: Path, repeat: int, rss: bool, sweep: bool = True,
+            warm_only: bool = False) -> dict:
     out: dict = {}
     work = tmp / name
     work.mkdir()
@@ -106,13 +152,30 @@ def measure(name: str, src: Path, tmp: Path, repeat: int, rss: bool) -> dict:
     print(f"[{name}] first run after install (empty NUMBA_CACHE_DIR) ...", flush=True)
     out["first_run_s"], _ = _run(CLI_CODE, ["simulate", str(CONFIG), "-o", str(work / "r0")],
                                  src, cache, work)
-    walls = []
+    walls, cpus = [], []
     for k in range(repeat):
         print(f"[{name}] warm run {k + 1}/{repeat} ...", flush=True)
-        w, _ = _run(CLI_CODE, ["simulate", str(CONFIG), "-o", str(work / f"r{k + 1}")],
-                    src, cache, work)
+        w, text = _run(TIMED_CLI_CODE, ["simulate", str(CONFIG), "-o", str(work / f"r{k + 1}")],
+                       src, cache, work)
         walls.append(w)
+        cpus.append(json.loads(text.strip().splitlines()[-1])["cpu"])
     out["warm_run_s"] = min(walls)
+    out["warm_run_cpu_s"] = min(cpus)
+    if sweep:
+        print(f"[{name}] sweep example, one process ...", flush=True)
+        _run(SWEEP_CODE, [str(SWEEP), str(work / "sweep-warm")], src, cache, work)  # compile
+        best = None
+        for k in range(repeat):
+            _, text = _run(SWEEP_CODE, [str(SWEEP), str(work / f"sweep{k}")], src, cache, work)
+            r = json.loads(text.strip().splitlines()[-1])
+            best = r if best is None or r["cpu"] < best["cpu"] else best
+        out["sweep_cpu_s"] = best["cpu"]
+        out["sweep_wall_s"] = best["wall"]
+        out["sweep_render_calls"] = best["render_calls"]
+        out["sweep_overhead_pct"] = 100.0 * (1.0 - best["render_cpu"] / best["cpu"])
+    if warm_only:
+        shutil.rmtree(work, ignore_errors=True)
+        return out
     has_warmup = subprocess.run([sys.executable, "-c", CLI_CODE, "warmup", "--help"],
                                 env=_env(src, None), capture_output=True).returncode == 0
     if has_warmup:
@@ -137,6 +200,11 @@ def measure(name: str, src: Path, tmp: Path, repeat: int, rss: bool) -> dict:
 
 ROWS = [
     ("warm_run_s", "warm `pmdsim simulate` Fig. 3, wall (s)", "<= 5"),
+    ("warm_run_cpu_s", "warm Fig. 3 run, CPU-s (figure processes too)", "<= 6"),
+    ("sweep_cpu_s", "sweep example, one process, CPU-s", ""),
+    ("sweep_wall_s", "sweep example, one process, wall (s)", ""),
+    ("sweep_render_calls", "sweep example, render calls", ""),
+    ("sweep_overhead_pct", "sweep example, CPU outside rendering (%)", "< 25"),
     ("first_run_s", "first run, empty Numba cache, wall (s)", "<= 12"),
     ("warmup_s", "`pmdsim warmup` (install step), wall (s)", ""),
     ("first_run_after_warmup_s", "first run after `pmdsim warmup`, wall (s)", "<= 12"),
@@ -148,7 +216,12 @@ ROWS = [
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--baseline", default="a9ba054", help="commit or tag of the baseline")
+    ap.add_argument("--baseline", default="a9ba054", help="commit or tag of the baseline "
+                    "(e.g. 3f89f5a, the tree before wave 3, for the previous tree)")
+    ap.add_argument("--warm-only", action="store_true",
+                    help="only the warm run (wall and CPU-s) and the sweep example: no "
+                    "first runs, warm-up, render or memory runs")
+    ap.add_argument("--skip-sweep", action="store_true", help="skip the sweep example")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--skip-rss", action="store_true", help="skip the 5 MP memory run")
     ap.add_argument("--skip-baseline", action="store_true")
@@ -171,12 +244,14 @@ def main() -> None:
                             args.baseline], check=True, capture_output=True)
             try:
                 results["baseline"] = measure("baseline", base / "src", tmp, args.repeat,
-                                              not (args.skip_rss or args.skip_baseline_rss))
+                                              not (args.skip_rss or args.skip_baseline_rss),
+                                              not args.skip_sweep, args.warm_only)
             finally:
                 subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
                                 str(base)], capture_output=True)
         results["this tree"] = measure("this", ROOT / "src", tmp, args.repeat,
-                                       not args.skip_rss)
+                                       not args.skip_rss, not args.skip_sweep,
+                                       args.warm_only)
     print(f"load average after: {os.getloadavg()}")
     cols = list(results)
     print()

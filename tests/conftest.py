@@ -49,7 +49,9 @@ def base_dict() -> dict:
         "surface": {"type": "flat", "size_mm": [100.0, 80.0]},
         "anisotropy": {"frame": "fixed", "x_direction": [1.0, 0.0, 0.0]},
         "brdf": {"model": "ward", "alpha_x": 0.025, "alpha_y": 0.002, "rho_s": 0.4},
-        "sampling": {"n_rays": 48, "theta_max_deg": 2.0},
+        # mode "stratified" (the default before issue 18's rules): the naive references
+        # take its sample set (P + lattice, equal weights); tests of the rules set "rule"
+        "sampling": {"n_rays": 48, "theta_max_deg": 2.0, "mode": "stratified"},
         "compute": {"tile_rows": 8, "scheduler": "threads", "num_workers": 2},
     }
 

@@ -529,6 +529,8 @@ def test_unwrap_kernels_match_naive(method, widths, extent):
     np.testing.assert_allclose(res.order_residual, residual, atol=1e-9)
     np.testing.assert_array_equal(res.flags, flags)
     assert len(np.unique(flags)) >= 3  # the random case exercises several flags
+    np.testing.assert_array_equal(res.valid, flags == 0)
+    assert res.finest_width_px == min(widths)
 
 
 @pytest.mark.parametrize("method, widths, extent", UNWRAP_CASES)

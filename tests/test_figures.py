@@ -135,15 +135,17 @@ def test_a_failed_fork_draws_in_the_run_process(decoded_run, tmp_path, monkeypat
 
 def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch):
     """The overview needs only the chain: its drawing starts before the surface is
-    reconstructed and diagnosed, the reconstruction's figure after; the run's statistics
-    still hold the reconstruction, and a run without decoding draws its figures too."""
+    reconstructed and diagnosed, the reconstruction's figure right after the
+    reconstruction (the diagnostics run meanwhile); the run's statistics still hold the
+    reconstruction, and a run without decoding draws its figures too."""
     import json
 
+    from pmdsim.run import figures as figures_mod
     from pmdsim.run import member as member_mod
     from pmdsim.run import reconstruction as recon
 
     events = []
-    start, from_chain, diagnose = (member_mod.start_drawings, recon.from_chain,
+    start, from_chain, diagnose = (figures_mod.start_drawings, recon.from_chain,
                                    member_mod.diagnose_run)
 
     def start_drawings(names, *args, **kwargs):
@@ -156,7 +158,7 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
             return fn(*args, **kwargs)
         return wrapped
 
-    monkeypatch.setattr(member_mod, "start_drawings", start_drawings)
+    monkeypatch.setattr(figures_mod, "start_drawings", start_drawings)
     monkeypatch.setattr(recon, "from_chain", record("reconstruction", from_chain))
     monkeypatch.setattr(member_mod, "diagnose_run", record("diagnostics", diagnose))
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
@@ -164,7 +166,7 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
     res = pipeline.run_simulation(parse_config(d), tmp_path / "run")
     drawn = [e for e in events if e[0] == "figures" and e[1]]
     assert events.index(("figures", ("overview",))) < events.index(("reconstruction",)) \
-        < events.index(("diagnostics",)) < events.index(("figures", ("surface_errors",)))
+        < events.index(("figures", ("surface_errors",))) < events.index(("diagnostics",))
     assert [e[1] for e in drawn] == [("setup",), ("overview",), ("surface_errors",)]
     stats = json.loads((res.outdir / "statistics.json").read_text())
     assert "reconstruction" in stats and "diagnostics" in stats
@@ -176,3 +178,134 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
     res = pipeline.run_simulation(parse_config(d), tmp_path / "plain")
     assert sorted(p.name for p in res.figure_paths) == [
         "fringes.png", "modulation.png", "setup.png"]
+
+
+# ------------------------------------------------------------------ readable figures
+def _axis_problems(ax, which: str) -> list[str]:
+    """What an axis of a drawn axes lacks: a label, or at least two labelled ticks."""
+    axis = getattr(ax, f"{which}axis")
+    out = []
+    if not axis.get_label_text().strip():
+        out.append(f"no {which} label")
+    shown = [t.get_text() for t in axis.get_ticklabels() if t.get_visible() and t.get_text()]
+    if len(shown) < 2:
+        out.append(f"{which}: {len(shown)} labelled ticks")
+    return out
+
+
+def figure_problems(fig) -> list[str]:
+    """Every visible axes of a drawn figure has labelled ticks: a map or a plot both its x and
+    y axis (label and at least two tick labels), a colour bar its long axis. Axes switched
+    off (legend panels, text boxes) carry no data and are skipped."""
+    problems = []
+    for ax in fig.axes:
+        if not ax.axison or not ax.get_visible():
+            continue
+        name = ax.get_title().split("\n")[0] or ax.get_label() or "?"
+        colorbar = getattr(ax, "_colorbar", None)
+        if colorbar is not None:
+            which = ["x" if colorbar.orientation == "horizontal" else "y"]
+        else:
+            which = ["x", "y"] + (["z"] if hasattr(ax, "zaxis") else [])
+        problems += [f"{name!r}: {p}" for w in which for p in _axis_problems(ax, w)]
+    return problems
+
+
+@pytest.fixture
+def recorded(monkeypatch):
+    """{file name: problems} of every figure saved while the fixture is active (checked
+    right after it is drawn, before anything closes it)."""
+    seen: dict = {}
+    save = Figure.savefig
+
+    def savefig(self, fname, *args, **kwargs):
+        save(self, fname, *args, **kwargs)
+        from pathlib import Path
+
+        seen[Path(fname).name] = figure_problems(self)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    return seen
+
+
+def test_every_run_figure_has_labelled_axes(decoded_run, tmp_path, recorded):
+    from pmdsim.report import chain as plot_chain
+    from pmdsim.report.scene import plot_variant_fringes
+    from pmdsim.run.figures import FIGURES, _simulation, draw_one
+
+    ds = pipeline.load_run(decoded_run.outdir).load()
+    sim = _simulation(ds)
+    for name in FIGURES:  # every figure a run draws (pmdsim report --all)
+        draw_one(ds, name, tmp_path, "tiny", "a tiny run", sim=sim)
+    both = {"a": ds, "b": ds}  # the variants' comparison figures
+    plot_chain.plot_variant_deviation(both, tmp_path / "deviation_variants.png")
+    plot_variant_fringes(both, tmp_path / "fringes_variants.png")
+    expected = {f for f, _ in FIGURES.values()} | {"deviation_variants.png",
+                                                   "fringes_variants.png"}
+    assert set(recorded) == expected
+    bad = {k: v for k, v in recorded.items() if v}
+    assert not bad, bad
+
+
+def test_decoded_image_set_figures_have_labelled_axes_and_distinct_flag_colours(tmp_path, recorded):
+    """``pmdsim decode``'s maps, on frames with flagged pixels (no fringes, NaN)."""
+    import tifffile
+    from matplotlib.colors import to_rgb
+
+    from pmdsim.report.chain_common import FLAG_COLOURS
+    from pmdsim.run.decode_run import decode_files, make_setup
+
+    widths, k = [10.0, 40.0, 160.0], 4
+    rows, cols = np.mgrid[0:40, 0:56]
+    u = 1.0 + 2.7 * cols + 0.3 * rows  # monitor px seen by each camera pixel
+    paths = []
+    for w in widths:
+        for s in range(k):
+            img = 0.5 + 0.4 * np.cos(2 * np.pi * u / w + 2 * np.pi * s / k)
+            img[:8, :8] = 0.5  # no fringes: LOW_AMPLITUDE
+            img[20, 20] = np.nan  # NAN_INPUT
+            paths.append(tmp_path / f"f_{len(paths):02d}.tif")
+            tifffile.imwrite(paths[-1], img.astype(np.float32))
+    setup = make_setup(widths=widths, shifts=k, direction="x", extent_px=160.0)
+    decode_files(paths, tmp_path / "out", setup)
+    assert {"absolute_phase.png", "monitor_coord.png", "modulation.png", "flags.png"} <= set(recorded)
+    bad = {k: v for k, v in recorded.items() if v}
+    assert not bad, bad
+    rgb = np.array([to_rgb(c) for c in FLAG_COLOURS.values()])
+    dist = np.linalg.norm(rgb[:, None] - rgb[None], axis=-1)[np.triu_indices(len(rgb), 1)]
+    assert dist.min() > 0.3, dist.min()  # no two flags in colours that cannot be told apart
+
+
+def test_problems_are_found():
+    # the checker itself: a map without ticks and a colour bar without a label are reported
+    fig = Figure()
+    ax = fig.add_subplot()
+    im = ax.imshow(np.arange(12.0).reshape(3, 4))
+    ax.set_xticks([])
+    ax.set_xlabel("camera column (px)")
+    fig.colorbar(im, ax=ax)
+    FigureCanvasAgg(fig).draw()
+    found = figure_problems(fig)
+    assert any("x: 0 labelled ticks" in p for p in found)
+    assert any("no y label" in p for p in found)
+    assert sum("no y label" in p for p in found) == 2  # the map's and the colour bar's
+
+
+def test_dot_shape_figure_has_labelled_axes(tmp_path, recorded):
+    """The dot scan's shapes (maps and the orientation plot). The contact sheet's crops are
+    thumbnails whose size its title states; they carry no ticks by design."""
+    from types import SimpleNamespace
+
+    from pmdsim.measure.chain import dot_table
+    from pmdsim.report.dots import plot_dot_shapes
+
+    rows, cols = np.mgrid[0:40, 0:56]
+    dots, images = [], []
+    for k, (u, v) in enumerate([(60, 60), (300, 60), (60, 200), (300, 200)]):
+        c, r = 10 + 30 * (k % 2), 10 + 18 * (k // 2)
+        images.append(np.exp(-0.5 * ((cols - c) ** 2 / (1.5 + k) ** 2 + (rows - r) ** 2 / 1.2 ** 2)))
+        dots.append(SimpleNamespace(u=u, v=v, size=15))
+    images = np.array(images)
+    table = dot_table(images, dots, "a")
+    plot_dot_shapes({"a": images}, {"a": table}, tmp_path / "dot_shapes.png", centre_px=(27.5, 19.5))
+    assert recorded == {"dot_shapes.png": []}

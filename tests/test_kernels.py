@@ -129,6 +129,7 @@ def test_geometry_tile_matches_numpy_trace_and_naive(geometry):
     np.testing.assert_allclose(geo, naive.geometry_rows(cfg, prim), rtol=0, atol=1e-10)
     np.testing.assert_allclose(spec[:, 0].reshape(h, w), prim["u"], rtol=0, atol=1e-10)
     np.testing.assert_allclose(spec[:, 1].reshape(h, w), prim["v"], rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(on, prim["on_monitor"])  # where P hits the monitor
     np.testing.assert_allclose(hits.point, prim["point"], rtol=0, atol=1e-10)
     np.testing.assert_allclose(hits.principal, prim["principal"], rtol=0, atol=1e-13)
     np.testing.assert_allclose(hits.x_axis, prim["x_axis"], rtol=0, atol=1e-12)

@@ -61,7 +61,7 @@ def test_the_run_forks_its_figures_only_after_the_reference_thread(tmp_path, mon
     import threading
     import time
 
-    from pmdsim.run import member as member_mod
+    from pmdsim.run import figures as figures_mod
     from pmdsim.run import reconstruction as recon
     from pmdsim.run.simulate import run_simulation
 
@@ -75,7 +75,7 @@ def test_the_run_forks_its_figures_only_after_the_reference_thread(tmp_path, mon
         return out
 
     alive_at_fork = []
-    start = member_mod.start_drawings
+    start = figures_mod.start_drawings
 
     def start_drawings(names, *args, **kwargs):
         alive_at_fork.append(any(t.name.startswith("pmdsim-reference-reconstruction")
@@ -84,7 +84,7 @@ def test_the_run_forks_its_figures_only_after_the_reference_thread(tmp_path, mon
 
     monkeypatch.setattr(ref, "_threadsafe_numba", lambda: True)
     monkeypatch.setattr(recon, "reference_reconstruction", slow)
-    monkeypatch.setattr(member_mod, "start_drawings", start_drawings)
+    monkeypatch.setattr(figures_mod, "start_drawings", start_drawings)
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
     d["output"] = {"figures": True, "write_images": False}
     res = run_simulation(parse_config(d), tmp_path / "run")

@@ -24,23 +24,29 @@ from ._version import __version__
 #: Imported on first use (``pmdsim.Simulation``, ``from pmdsim import run_simulation``):
 #: ``import pmdsim`` and the command line's first checks stay fast (no Numba, xarray,
 #: zarr), so that e.g. a second run on a busy output folder fails at once.
+#: Names of objects -> the module that defines them.
 _LAZY = {
     "ConfigError": ".config", "RunConfig": ".config", "load_config": ".config",
     "parse_config": ".config",
     "run_simulation": ".run", "load_run": ".run", "RunResult": ".run",
-    "Simulation": ".render", "Scene": ".scene", "patterns": None, "decode": ".measure",
+    "Simulation": ".render", "Scene": ".scene",
 }
+#: Names of modules -> the module.
+_LAZY_MODULES = {"patterns": ".patterns", "decode": ".measure.decode"}
 
 
 def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
+    import importlib
 
-        where = _LAZY[name]
-        if where is None:
-            return importlib.import_module(f".{name}", __name__)
-        return getattr(importlib.import_module(where, __name__), name)
+    if name in _LAZY_MODULES:
+        return importlib.import_module(_LAZY_MODULES[name], __name__)
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
     raise AttributeError(f"module 'pmdsim' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY) | set(_LAZY_MODULES))
 
 
 __all__ = [

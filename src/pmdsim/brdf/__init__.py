@@ -9,7 +9,10 @@ from .slope_density import SlopeDensityBRDF
 from .ward import Ward
 
 
-def brdf_from_config(cfg) -> BRDF:
+def brdf_from_config(cfg, incidence_deg: float = 0.0) -> BRDF:
+    """The BRDF of a ``[brdf]`` configuration; ``incidence_deg``: the set-up's incidence at
+    the surface centre, for the models built for one (``rayleigh_rice``, ``topography``)
+    when the configuration gives none."""
     if cfg.model == "ward":
         ax, ay = cfg.alphas
         return Ward(ax, ay, cfg.rho_s, cfg.normalization)
@@ -20,6 +23,14 @@ def brdf_from_config(cfg) -> BRDF:
         return Mirror()
     if cfg.model in ("slope_density", "turned"):
         return _slope_brdf(cfg)
+    if cfg.model == "rayleigh_rice":
+        from . import rayleigh_rice
+
+        return rayleigh_rice.from_config(cfg, incidence_deg)
+    if cfg.model == "topography":
+        from . import topography
+
+        return topography.from_config(cfg, incidence_deg)
     raise ValueError(f"brdf.model: unknown model {cfg.model!r}")
 
 

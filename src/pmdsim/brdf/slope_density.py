@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from scipy.special import ndtr
@@ -420,7 +419,7 @@ def kinematic_slopes(feed: float, radius: float, sigma_radial: float, sigma_tang
 
 
 def tabulated_from_file(path, pitch_mm: tuple[float, float] | None = None,
-                        bins: int = 128) -> TabulatedSlopes:
+                        bins: int = 128, field: str = "brdf.file") -> TabulatedSlopes:
     """A slope table from a file.
 
     - ``.npz`` with ``counts`` (nx, ny) and ``edges_x`` (nx + 1,), ``edges_y`` (ny + 1,):
@@ -428,25 +427,17 @@ def tabulated_from_file(path, pitch_mm: tuple[float, float] | None = None,
     - ``.npz`` with ``heights`` (rows along y) or a ``.npy`` height map: a measured height
       map; ``pitch_mm`` (x, y) is the sample spacing (heights in mm too).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"slope table file not found: {path}")
-    if path.suffix == ".npy":
-        heights = np.load(path)
-        data = {"heights": heights}
-    elif path.suffix == ".npz":
-        with np.load(path) as z:
-            data = {k: z[k] for k in z.files}
-    else:
-        raise ValueError(f"{path}: a slope table must be .npz (counts + edges_x/edges_y, or "
-                         "heights) or .npy (a height map)")
+    from ..config.files import read_slope_table
+
+    data = read_slope_table(path, field)
     if "counts" in data:
         return TabulatedSlopes.from_histogram(data["counts"], data["edges_x"], data["edges_y"])
-    if "heights" in data:
-        if pitch_mm is None:
-            raise ValueError(f"{path}: a height map needs pitch_mm (x, y), the sample spacing")
-        return TabulatedSlopes.from_height_map(data["heights"], pitch_mm[0], pitch_mm[1], bins)
-    raise ValueError(f"{path}: expected arrays 'counts', 'edges_x', 'edges_y' or 'heights'")
+    if pitch_mm is None:  # read_slope_table returns a histogram or heights
+        from ..config.files import FileInputError
+
+        raise FileInputError(f"brdf.pitch_mm: {path} is a height map: give pitch_mm (x, y), "
+                             "the sample spacing")
+    return TabulatedSlopes.from_height_map(data["heights"], pitch_mm[0], pitch_mm[1], bins)
 
 
 # =========================================================================== the BRDF

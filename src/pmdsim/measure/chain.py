@@ -165,6 +165,9 @@ class DirectionChain:
     slope_urad: np.ndarray
     stats_slope_urad: analysis.DeviationStats
     exact_px: np.ndarray  # exact monitor coordinate of P (specular_u or specular_v)
+    #: numerical error maps {quantity: (H, W)} (:mod:`pmdsim.measure.numerical`); None when
+    #: the render stated none
+    numerical: dict | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,7 +194,7 @@ class ChainResult:
 
 def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, pitch_mm: float,
             decode_cfg, shifts: int, slope_geometry: SlopeGeometry | None = None,
-            off_monitor: np.ndarray | None = None) -> ChainResult:
+            off_monitor: np.ndarray | None = None, phase_error: dict | None = None) -> ChainResult:
     """Deviation of every decoded direction from the decoded reference.
 
     Parameters
@@ -209,7 +212,12 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
     off_monitor : (H, W) bool ndarray, optional
         Pixels whose bundle hangs off the monitor: excluded from the valid pixels and
         counted (``pixels.lobe_off_monitor`` of the statistics).
+    phase_error : dict of direction -> (H, W) rad, optional
+        The render's numerical phase error of the finest width
+        (:func:`pmdsim.measure.numerical.finest_phase_error`): propagated to every quantity
+        (``DirectionChain.numerical``, ``numerical_error`` of the statistics).
     """
+    from . import numerical
     per = {}
     keep = None if off_monitor is None else ~np.asarray(off_monitor, bool)
     for d, res in decoded.items():
@@ -223,9 +231,17 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
                 decode_cfg.min_modulation_ratio)
         slope = slope_deviation_urad(d, dev.coord_px, geometry, slope_geometry, distance_mm, pitch_mm)
         considered = np.asarray(ref.valid, bool)
+        num = None
+        if phase_error is not None and phase_error.get(d) is not None:
+            num = numerical.propagate(
+                phase_error[d], float(min(res.widths_px)), pitch_mm,
+                lambda c, d=d: slope_deviation_urad(d, c, geometry, slope_geometry, distance_mm,
+                                                    pitch_mm),
+                dev.coord_px)
+            num = {k: np.where(dev.valid, v, np.nan) for k, v in num.items()}
         per[d] = DirectionChain(
             d, res, ref, dev, slope, analysis.deviation_stats(slope, dev.valid, considered),
-            geometry.specular_u if d == "x" else geometry.specular_v)
+            geometry.specular_u if d == "x" else geometry.specular_v, num)
     first = next(iter(decoded.values()))
     return ChainResult(per, distance_mm, first.widths_px, int(shifts), first.method, pitch_mm,
                        decode_cfg.min_modulation_ratio, geometry.surface_mask,
@@ -325,6 +341,15 @@ def statistics(chain: ChainResult, name: str) -> dict:
             coord_vs_exact_px=_stats_dict(analysis.deviation_stats(vs_exact, dv.valid,
                                                                    considered)),
         )
+        if dc.numerical is not None:
+            from . import numerical
+
+            out["directions"][d]["numerical_error"] = numerical.summary(dc.numerical, dv.valid)
+    if any(dc.numerical is not None for dc in chain.directions.values()):
+        out["definitions"]["numerical_error"] = (
+            "the rendering's own numerical (quadrature) error of the deviation, propagated "
+            "from the stated error of the finest width's fringe sums: RMS, P95 and max over "
+            "the valid pixels, same units as the deviation")
     return out
 
 

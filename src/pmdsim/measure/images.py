@@ -69,16 +69,23 @@ def load_image_stack(paths: Iterable[str | os.PathLike]) -> np.ndarray:
     if not path_list:
         raise InputError("paths must name at least one image file")
     stack = []
-    shape = None
+    shape = dtype = None
     for path in path_list:
         if not path.is_file():
             raise MissingInputError(f"paths: image file {str(path)!r} does not exist")
         img = _read_one(path)
         if shape is None:
-            shape = img.shape[1:]
+            shape, dtype = img.shape[1:], img.dtype
         elif img.shape[1:] != shape:
             raise InputError(
                 f"paths: {str(path)!r} has size {img.shape[1:]} but the first image has {shape}"
             )
+        elif img.dtype != dtype:
+            # 8-bit and 16-bit counts of one sequence differ by a factor ~257: decoding them
+            # together gives wrong phases silently
+            raise InputError(
+                f"paths: {str(path)!r} holds {img.dtype} values but the first image holds "
+                f"{dtype}: all frames of a sequence must come from one camera setting (convert "
+                "them to one bit depth first)")
         stack.append(img.astype(np.float64))
     return np.concatenate(stack, axis=0)

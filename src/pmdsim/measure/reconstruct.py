@@ -407,10 +407,18 @@ class SurfaceErrors:
     stats: dict
 
 
-def surface_errors(rec: Reconstruction, truth, remove="piston") -> SurfaceErrors:
+def surface_errors(rec: Reconstruction, truth, remove="piston", form=None) -> SurfaceErrors:
     """Errors of a :class:`Reconstruction` against the true surface (a scene surface or a
-    :class:`PriorFrame`; its sag and gradient are evaluated on the grid)."""
-    from .integrate import height_stats, remove_terms
+    :class:`PriorFrame`; its sag and gradient are evaluated on the grid).
+
+    ``remove``: a removal level or term names (:data:`pmdsim.measure.form.LEVELS`, e.g.
+    ``"power"`` or ``"sphere"``); ``form``: a :class:`~pmdsim.measure.form.FormSpec`
+    instead (Zernike terms, rim band). ``stats["terms_nm"]`` holds the Noll Zernike terms
+    Z2..Z15 of the height error *after* the removal (nm RMS each, fitted to the residual on
+    the aperture's disc), ``stats["zernike_noll_nm"]``/``["zernike_fringe_nm"]`` the full
+    tables with their ``removed`` column, ``stats["removal"]`` what was removed."""
+    from .form import FormSpec, remove_form
+    from .integrate import height_stats
 
     x, y = np.meshgrid(rec.x_mm, rec.y_mm)
     if hasattr(truth, "sag") and not isinstance(truth, PriorFrame):
@@ -420,8 +428,14 @@ def surface_errors(rec: Reconstruction, truth, remove="piston") -> SurfaceErrors
         z = np.asarray(pf.sag(x, y), np.float64)
         gx = np.zeros_like(z)
         gy = np.zeros_like(z)
-    m = rec.mask
-    dh = remove_terms(rec.height_mm - z, m, x, y, remove) * 1e6
+    spec = form if form is not None else FormSpec.of(remove)
+    ap = getattr(truth, "aperture", None)
+    disc = ((ap[1], ap[2]), ap[3]) if isinstance(ap, tuple) and ap[0] in ("circular", "annular") else (None, None)
+    m0 = rec.mask & np.isfinite(rec.height_mm)
+    res = remove_form(np.where(m0, rec.height_mm - z, np.nan), m0, x, y, spec,
+                      true_height=np.where(m0, z, 0.0), disc=disc)
+    m = res.mask
+    dh = res.residual * 1e6
     ex = np.where(m, rec.slope_x - gx, np.nan) * 1e6
     ey = np.where(m, rec.slope_y - gy, np.nan) * 1e6
     stats = {"height_error_nm": height_stats(dh).as_dict(),
@@ -430,28 +444,16 @@ def surface_errors(rec: Reconstruction, truth, remove="piston") -> SurfaceErrors
     # slope statistics are about zero, not the mean: report the RMS about zero too
     for k, a in (("slope_error_x_urad", ex), ("slope_error_y_urad", ey)):
         stats[k]["rms_about_zero"] = float(np.sqrt(np.nanmean(a**2))) if np.isfinite(a).any() else float("nan")
-    stats["terms_nm"] = _error_terms(rec, truth, ex, ey)
-    return SurfaceErrors(dh, ex, ey, remove if isinstance(remove, str) else "+".join(remove), stats)
-
-
-def _error_terms(rec, truth, ex, ey, n_zernike=15, n_legendre=10):
-    """Low-order content of the height error (nm) from a modal fit of the slope errors:
-    Noll Zernikes Z2..Z15 on the aperture's disc (circular and annular apertures), else
-    Legendre products on the grid's rectangle; each coefficient is that term's RMS over the
-    disc (rectangle). Empty when too few points."""
-    from .integrate import modal_fit
-
-    m = rec.mask & np.isfinite(ex) & np.isfinite(ey)
-    if m.sum() < 4 * n_zernike:
-        return {}
-    ap = getattr(truth, "aperture", None)
-    x0 = float(rec.x_mm[0])
-    y0 = float(rec.y_mm[0])
-    if isinstance(ap, tuple) and ap[0] in ("circular", "annular"):
-        fit = modal_fit(ex * 1e-6, ey * 1e-6, rec.spacing, m, basis="zernike", n_terms=n_zernike,
-                        centre_mm=(ap[1], ap[2]), radius_mm=ap[3], origin_mm=(x0, y0))
-    else:
-        fit = modal_fit(ex * 1e-6, ey * 1e-6, rec.spacing, m, basis="legendre", n_terms=n_legendre,
-                        origin_mm=(x0, y0),
-                        centre_mm=(0.5 * (rec.x_mm[0] + rec.x_mm[-1]), 0.5 * (rec.y_mm[0] + rec.y_mm[-1])))
-    return {"basis": fit.basis, **{n: float(c * 1e6) for n, c in zip(fit.names[1:], fit.coefficients[1:])}}
+    stats["removal"] = res.removed
+    stats["rim_excluded"] = res.excluded_rim
+    if res.sphere is not None:
+        stats["sphere"] = res.sphere
+    stats["zernike_noll_nm"] = [dict(t, coefficient=t["coefficient"] * 1e6) for t in res.noll]
+    stats["zernike_fringe_nm"] = [dict(t, coefficient=t["coefficient"] * 1e6) for t in res.fringe]
+    stats["terms_nm"] = ({"basis": "zernike", **{f"Z{t['index']}": t["coefficient"]
+                                                 for t in stats["zernike_noll_nm"] if 2 <= t["index"] <= 15}}
+                         if res.noll else {})
+    removed = remove if isinstance(remove, str) else "+".join(remove)
+    if form is not None:
+        removed = "+".join(form.terms) or "none"
+    return SurfaceErrors(dh, ex, ey, removed, stats)

@@ -30,7 +30,8 @@ Rays that miss the monitor see black (L = 0) but keep their weight in sum f.
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+import uuid
+from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -39,167 +40,18 @@ from ..kernels import bundle as kb
 from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
-from ..kernels import primary as kprim
 from ..kernels.synth import shifted_images
+from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, phase_error,  # noqa: F401
+                      worst_phase_error)
+from .rows import (local_scheduler, reduce_subrays, scene_geometry_rows,  # noqa: F401
+                   vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
 
 
-def local_scheduler(name: str):
-    """Dask's in-process scheduler ``name`` ("threads" or "synchronous") as its ``get``
-    function, to pass as ``scheduler=``: a name makes Dask import ``distributed`` (when it
-    is installed) to look for an active client, 0.25 s of a run's start-up for nothing.
-    Other names are returned as they are."""
-    if name == "threads":
-        from dask.threaded import get
-
-        return get
-    if name == "synchronous":
-        from dask.local import get_sync
-
-        return get_sync
-    return name
-
-
-def scene_geometry_rows(scene: Scene, row0: int, row1: int, buffers=None):
-    """Compiled vision-ray trace of camera rows ``row0:row1``, one pinhole ray per pixel
-    centre (cameras with sub-pixels, a lens or distortion: :func:`vision_geometry_rows`).
-
-    Returns the bundle geometry rows ((row1-row0)*W, G_SIZE) and the exact monitor
-    coordinates of P ((row1-row0)*W, 2), NaN where P misses the monitor. ``buffers``:
-    optional (geo, spec) arrays of at least that many rows to write into (the returned
-    arrays are their leading rows), so that a tile loop reuses one allocation.
-    """
-    if not scene.camera.is_simple_pinhole:
-        rows, cols = np.mgrid[row0:row1, 0 : scene.camera.width]
-        o = np.broadcast_to(scene.camera.position, (rows.size, 3))
-        d = scene.camera.ray_directions(rows.ravel(), cols.ravel())
-        return _rays_geometry(scene, o, d)
-    n = (row1 - row0) * scene.camera.width
-    if buffers is not None and buffers[0].shape[0] >= n:
-        geo, spec = buffers[0][:n], buffers[1][:n]
-    else:
-        geo = np.empty((n, kb.G_SIZE))
-        spec = np.empty((n, 2))
-    kprim.geometry_tile(
-        scene.camera.kernel_params(), scene.surface.kernel_params(),
-        scene.anisotropy.kernel_params(), scene.monitor.kernel_params(),
-        row0, row1, scene.camera.width, geo, spec,
-    )
-    return geo, spec
-
-def _rays_geometry(scene: Scene, origins, dirs):
-    n = origins.shape[0]
-    geo = np.empty((n, kb.G_SIZE))
-    spec = np.empty((n, 2))
-    kprim.geometry_rays(
-        np.ascontiguousarray(origins, np.float64), np.ascontiguousarray(dirs, np.float64),
-        scene.surface.kernel_params(), scene.anisotropy.kernel_params(),
-        scene.monitor.kernel_params(), geo, spec,
-    )
-    return geo, spec
-
-
-def vision_geometry_rows(scene: Scene, row: int):
-    """Geometry rows (W * S, G_SIZE) and exact monitor hits (W * S, 2) of the S vision rays
-    (sub-pixels x aperture samples, :meth:`pmdsim.scene.Camera.vision_rays`) of every pixel
-    of camera row ``row``, pixel-major."""
-    cam = scene.camera
-    w = cam.width
-    chief, aperture, focus = cam.lens_inputs(np.full(w, row), np.arange(w))
-    n = w * cam.rays_per_pixel
-    geo = np.empty((n, kb.G_SIZE))
-    spec = np.empty((n, 2))
-    kprim.geometry_lens(
-        cam.position, np.ascontiguousarray(cam.rotation), chief, aperture, focus,
-        scene.surface.kernel_params(), scene.anisotropy.kernel_params(),
-        scene.monitor.kernel_params(), geo, spec,
-    )
-    return geo, spec
-
-
-def reduce_subrays(out: np.ndarray, estimator: str) -> np.ndarray:
-    """Pixel sums (P, C) from the kernel sums of their S vision rays (P, S, C).
-
-    A pixel integrates radiance over its footprint and the aperture: its value is the mean
-    over its S rays of each ray's estimate. The ``paper`` and ``radiometric`` estimators
-    share the factor 1/N, so the raw sums are averaged; ``weighted_mean`` normalises every
-    ray by its own sum of weights first (the pixel's ``OUT_FTOTAL`` becomes 1). Rays that
-    miss the surface (NaN) see a black background; a pixel none of whose rays hits is NaN.
-    """
-    s = out.shape[1]
-    ft = out[..., kb.OUT_FTOTAL]
-    hit = np.isfinite(ft)
-    if estimator == "weighted_mean":
-        hit &= ft > 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out = out / ft[..., None]
-    elif not hit.all():
-        out = out.copy()
-    out[~hit] = 0.0  # a ray that misses the surface sees black
-    summed = out.sum(axis=1) / s
-    if estimator == "weighted_mean":
-        summed[:, kb.OUT_FTOTAL] = 1.0
-    summed[~hit.any(axis=1)] = np.nan
-    return summed
-
-
 #: Harmonics used for analytic fringes on a continuous monitor with gamma != 1.
 GAMMA_HARMONICS = 16
-
-
-@dataclass(frozen=True)
-class FringeResult:
-    """Camera fringe images and the sums they come from.
-
-    Attributes
-    ----------
-    images : (n_directions, n_widths, K, H, W) float32
-        Camera values (estimator units); NaN where the vision ray misses the surface.
-    sums : (n_directions, n_widths, H, W) complex128 or None
-        Normalised ``sum_p f_p exp(i k c_p)`` (c = u or v, the fringe coordinate): its
-        argument is the phase a K >= 3 phase-shift decoder returns (gamma = 1 only).
-    f_total, f_hit : (H, W) float64
-        Normalised sum of all weights / of the weights of rays that hit the monitor.
-    """
-
-    directions: tuple[str, ...]
-    widths: tuple[float, ...]
-    shifts: np.ndarray
-    images: np.ndarray
-    sums: np.ndarray | None
-    f_total: np.ndarray
-    f_hit: np.ndarray
-
-    def image(self, direction: str, width: float, k: int) -> np.ndarray:
-        return self.images[self.directions.index(direction), self.widths.index(width), k]
-
-
-@dataclass(frozen=True)
-class Geometry:
-    """Per-pixel results of the vision rays alone.
-
-    ``surface_mask``: the vision ray hits the front of the surface. ``monitor_mask``: P hits
-    the monitor as well. ``specular_u``/``specular_v``: exact monitor coordinates (monitor
-    px) of P (NaN where it misses), ``specular_u_px``/``..._v_px`` the nearest monitor pixel.
-    ``points``: the surface points.
-    """
-
-    surface_mask: np.ndarray
-    monitor_mask: np.ndarray
-    specular_u: np.ndarray
-    specular_v: np.ndarray
-    #: (H, W, 3) surface point of each pixel's vision ray (mm; NaN off the surface)
-    points: np.ndarray
-
-    @property
-    def specular_u_px(self) -> np.ndarray:
-        return np.floor(self.specular_u + 0.5)
-
-    @property
-    def specular_v_px(self) -> np.ndarray:
-        return np.floor(self.specular_v + 0.5)
 
 
 class Simulation:
@@ -246,7 +98,10 @@ class Simulation:
         import dask
         from dask.callbacks import Callback
 
-        tasks = [dask.delayed(fn, pure=False)(r0, r1, dask_key_name=f"pmdsim-tile-{r0}") for r0, r1 in tiles]
+        # keys unique per call: a cluster may still hold the previous call's tiles
+        call = uuid.uuid4().hex[:12]
+        tasks = [dask.delayed(fn, pure=False)(r0, r1, dask_key_name=f"pmdsim-tile-{r0}-{call}")
+                 for r0, r1 in tiles]
         kwargs = {}
         if self.scheduler != "distributed":
             kwargs["scheduler"] = local_scheduler(self.scheduler)
@@ -270,12 +125,75 @@ class Simulation:
         """True when the radiometric estimator samples the BRDF lobe (not for the mirror)."""
         return self.scene.estimator == "radiometric" and not self.scene.brdf.is_delta
 
-    def _render(self, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
-                images=None, dots=None, progress=None):
-        scene = self.scene
+    def plan(self, smooth: bool = True) -> tuple:
+        """The sample sets (:class:`~pmdsim.scene.sampling.ConeSampling`) a render uses, the
+        rendered one first: in mode ``rule`` the rule and its embedded rule (none with
+        ``error_estimate = false``); in mode ``rqmc`` the R replicates; else one set.
+        ``smooth=False`` (a ``nearest`` monitor, dots, images, a tabulated slope density):
+        mode ``rule`` becomes ``rqmc`` (when ``n_rays`` >= 2 R), whose error estimate does
+        not need a smooth integrand."""
+        samp = self.scene.sampling
+        if self.scene.brdf.is_delta:
+            return (samp.as_mode("stratified"),)
+        if samp.mode == "rule" and not smooth and samp.n_rays >= 2 * samp.replicates:
+            samp = samp.as_mode("rqmc")
+        if samp.mode == "rule" and not samp.error_estimate:
+            return (samp,)
+        return samp.error_passes()
+
+    def fringes_smooth(self) -> bool:
+        """Whether the fringe integrand is smooth (a Gauss rule converges fast): a continuous
+        monitor and, for the radiometric estimator, a Gaussian slope density."""
+        return (self.scene.monitor.pixel_model == "continuous"
+                and (not self._lobe or self.scene.sampling.lobe_gaussian))
+
+    def _render(self, mode, ncols, smooth=True, progress=None, **kw):
+        """Pixel sums (H, W, C) and their numerical error (H, W, C) or None, over the sample
+        sets of :meth:`plan`: the rule and its difference to the embedded rule (signed), or
+        the mean of the rqmc replicates and its error ``t(0.975, R - 1) s / sqrt(R)``."""
+        from ..scene.quadrature import student_t975
+
+        passes = self.plan(smooth)
+        n = len(passes)
+
+        def prog(k):
+            if progress is None:
+                return None
+            return lambda done, total: progress(k * total + done, n * total)
+
+        out = self._render_set(passes[0], mode, ncols, progress=prog(0), **kw)
+        if n == 1:
+            return out, None
+        if passes[0].mode == "rule":
+            coarse = self._render_set(passes[1], mode, ncols, progress=prog(1), **kw)
+            return out, out - coarse
+        mean, m2 = out.copy(), np.zeros_like(out)
+        for k in range(1, n):  # Welford: one replicate in memory at a time
+            o = self._render_set(passes[k], mode, ncols, progress=prog(k), **kw)
+            d = o - mean
+            mean += d / (k + 1)
+            m2 += d * (o - mean)
+        return mean, student_t975(n - 1) * np.sqrt(m2 / ((n - 1) * n))
+
+    def _render_set(self, samp, mode, ncols, **kw):
+        """Pixel sums of the scene's BRDF with sample set ``samp``; a specular peak beside a
+        lobe is a second, mirror pass added by :func:`pmdsim.render.specular.add_specular`."""
+        from .specular import add_specular, check_estimator, specular_reflectance
+
+        scene = self.scene.replace(sampling=samp)
+        check_estimator(scene.brdf, scene.estimator)
+        out = self._render_brdf(scene, mode, ncols, **kw)
+        if specular_reflectance(scene.brdf) > 0:
+            kw.pop("progress", None)
+            mirror = self._render_brdf(scene.specular(), mode, ncols, **kw)
+            out = add_specular(out, mirror, scene.brdf, scene.estimator, scene.rays_per_pixel)
+        return out
+
+    def _render_brdf(self, scene, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
+                     images=None, dots=None, progress=None):
         delta = scene.brdf.is_delta
         samp = scene.sampling
-        lobe = self._lobe
+        lobe = scene.estimator == "radiometric" and not delta
         if delta:
             u1 = u2 = np.zeros(0)
         elif lobe:
@@ -283,6 +201,7 @@ class Simulation:
         else:
             u1, u2 = samp.unit_points()
         w_ray = np.ones(1) if delta else samp.ray_weights(lobe)  # the mirror: P alone
+        principal = True if delta else samp.include_principal
         brdf = scene.brdf.kernel_params()
         mshape = np.array(scene.monitor.shape, dtype=np.int64)
         e1 = np.zeros((0, 1))
@@ -317,7 +236,8 @@ class Simulation:
                 if lobe:
                     kb.render_tile_lobe(*args, mshape, mode, *tail)
                 else:
-                    kb.render_tile(*args, samp.scheme_id, samp.theta_max, True, mshape, mode, *tail)
+                    kb.render_tile(*args, samp.scheme_id, samp.theta_max, principal, mshape, mode,
+                                   *tail)
                 return out
             if lobe:
                 kb.render_tile_lobe(
@@ -327,7 +247,7 @@ class Simulation:
                 )
             else:
                 kb.render_tile(
-                    geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, True, mshape, mode,
+                    geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, principal, mshape, mode,
                     table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
                     w_ray=w_ray,
                 )
@@ -356,7 +276,7 @@ class Simulation:
             res = full[r0:r1] if full is not None else np.empty((r1 - r0, width, ncols))
             for r in range(r0, r1):
                 geo, _ = vision_geometry_rows(scene, r)
-                if delta or samp.mode == "stratified":
+                if delta or samp.mode != "random":
                     rot = np.zeros((0, 2))
                 else:
                     rot = np.random.default_rng([samp.seed, r]).random((geo.shape[0], 2))
@@ -374,6 +294,25 @@ class Simulation:
             return np.full(ftot.shape, 1.0 / self.scene.rays_per_pixel)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(ftot > 0, 1.0 / ftot, np.nan)
+
+    def describe_sampling(self, smooth: bool = True) -> dict:
+        """What a render with :meth:`plan` ``(smooth)`` uses (for reports): effective
+        ``mode``, ``rule`` (its name and order), ``nodes`` per pixel and pass, ``passes``,
+        ``error`` (``"embedded"``, ``"replicates"`` or None) and ``smooth``."""
+        passes = self.plan(smooth)
+        first = passes[0]
+        if self.scene.brdf.is_delta:
+            return {"mode": "mirror", "rule": "principal ray", "nodes": 1, "passes": 1,
+                    "error": None, "smooth": smooth}
+        rule = first.rule(self._lobe)
+        err = None
+        if len(passes) > 1:
+            err = "embedded" if first.mode == "rule" else "replicates"
+        d = {"mode": first.mode, "rule": rule.describe(), "nodes": rule.n,
+             "order": list(rule.order), "passes": len(passes), "error": err, "smooth": smooth}
+        if err == "embedded":
+            d["embedded_rule"] = passes[1].rule(self._lobe).describe()
+        return d
 
     # ------------------------------------------------------------------ public API
     def footprint_specular(self) -> tuple[np.ndarray, np.ndarray]:
@@ -428,8 +367,42 @@ class Simulation:
     ) -> FringeResult:
         """Camera images of X/Y fringes of the given widths (periods, monitor px), K shifts.
 
-        One pass over the scattered rays gives all widths, directions and shifts.
+        One pass over the scattered rays gives all widths, directions and shifts (plus the
+        passes of the error estimate, :meth:`plan`). With a ``target_error`` in the
+        scene's sampling (``sampling.target_error_mrad``) the number of nodes is doubled
+        until the stated phase error (P95 over the pixels whose fringe keeps a modulation
+        >= 0.05, worst fringe) is below the target or ``max_rays`` is reached (then a
+        ``RuntimeWarning`` with the figure); ``sampling`` of the result reports
+        ``target_error_mrad``, ``achieved_p95_mrad``, ``n_rays`` used and ``target_met``.
         """
+        samp = self.scene.sampling
+        if samp.target_error is None or self.scene.brdf.is_delta:
+            return self._fringes_once(widths, directions, shifts, progress)
+        import warnings
+
+        sim = self
+        while True:
+            fr = sim._fringes_once(widths, directions, shifts, progress)
+            worst = worst_phase_error(fr)
+            n = sim.scene.sampling.n_rays
+            met = worst is not None and worst <= samp.target_error
+            if met or worst is None or 2 * n > samp.max_rays:
+                break
+            sim = Simulation(self.scene.replace(sampling=replace(sim.scene.sampling, n_rays=2 * n)),
+                             self.tile_rows, self.scheduler, self.num_workers)
+        info = dict(fr.sampling or {}, target_error_mrad=samp.target_error * 1e3,
+                    achieved_p95_mrad=None if worst is None else worst * 1e3, n_rays=n,
+                    target_met=bool(met))
+        if not met:
+            warnings.warn(
+                f"sampling.target_error_mrad = {samp.target_error * 1e3:g}: the stated phase "
+                f"error is {'unknown' if worst is None else f'{worst * 1e3:.3g} mrad'} (P95, "
+                f"worst fringe) at n_rays = {n}, and doubling would pass sampling.max_rays = "
+                f"{samp.max_rays}: raise max_rays or accept the error", RuntimeWarning,
+                stacklevel=2)
+        return replace(fr, sampling=info)
+
+    def _fringes_once(self, widths, directions, shifts, progress) -> FringeResult:
         widths = tuple(float(w) for w in widths)
         directions = tuple(directions)
         if not widths or any(not np.isfinite(w) or w <= 0 for w in widths):
@@ -460,7 +433,8 @@ class Simulation:
             tu = np.array(per_dir["x"]).reshape(-1, mon.width)
             tv = np.array(per_dir["y"]).reshape(-1, mon.height)
             ncols = kb.OUT_FIRST + tu.shape[0] + tv.shape[0]
-            out = self._render(kb.MODE_TABLES, ncols, table_u=tu, table_v=tv, progress=progress)
+            out, err = self._render(kb.MODE_TABLES, ncols, smooth=self.fringes_smooth(),
+                                    table_u=tu, table_v=tv, progress=progress)
         else:
             harm = 1 if linear else GAMMA_HARMONICS
             for d in directions:
@@ -468,7 +442,8 @@ class Simulation:
                     per_dir[d] += [2 * np.pi * m / w for m in range(1, harm + 1)]
             ku, kv = np.array(per_dir["x"]), np.array(per_dir["y"])
             ncols = kb.OUT_FIRST + 2 * (ku.size + kv.size)
-            out = self._render(kb.MODE_HARMONIC, ncols, k_u=ku, k_v=kv, progress=progress)
+            out, err = self._render(kb.MODE_HARMONIC, ncols, smooth=self.fringes_smooth(),
+                                    k_u=ku, k_v=kv, progress=progress)
 
         norm = self._normalise(out)
         f_total = out[..., kb.OUT_FTOTAL] * norm
@@ -493,6 +468,13 @@ class Simulation:
                 np.cos(deltas), np.sin(deltas), black, white,
                 sums.reshape(nd * nw, h * w_), images.reshape(nd * nw, len(deltas), h * w_),
             )
+        sums_err = None
+        if linear and err is not None:  # the error of every normalised complex sum
+            sums_err = np.empty((nd, nw, h, w_), np.complex128)
+            for di, d in enumerate(directions):
+                for wi in range(nw):
+                    col = base[d] + wi * per_width
+                    sums_err[di, wi] = (err[..., col] + 1j * err[..., col + 1]) * np.abs(norm)
         for di, d in enumerate(directions if not linear else ()):
             for wi in range(nw):
                 col = base[d] + wi * per_width
@@ -506,8 +488,12 @@ class Simulation:
                         acc = coef[0] * f_hit
                         for m, z in enumerate(zs, start=1):
                             acc = acc + coef[m] * (z * np.exp(1j * m * delta)).real
-                        images[di, wi, k] = acc
-        return FringeResult(directions, widths, deltas, images, sums, f_total, f_hit)
+                        # the truncated series of a steep (quantised) response rings past
+                        # the display's range; a weighted mean of luminances cannot: clip
+                        # to [min, max] luminance x the weight on the monitor (never < 0)
+                        images[di, wi, k] = np.clip(acc, g.min() * f_hit, g.max() * f_hit)
+        return FringeResult(directions, widths, deltas, images, sums, f_total, f_hit, sums_err,
+                            self.describe_sampling(self.fringes_smooth()))
 
     def render_images(self, levels: np.ndarray, progress: ProgressFn | None = None) -> np.ndarray:
         """Camera images (Q, H, W) float32 of monitor images ``levels`` (Q, Hm, Wm) in [0, 1].
@@ -524,7 +510,8 @@ class Simulation:
                 f"levels: monitor images must be (Q, {mon.height}, {mon.width}), got {levels.shape}"
             )
         lum = np.ascontiguousarray(mon.luminance(levels), dtype=np.float32)
-        out = self._render(kb.MODE_IMAGES, kb.OUT_FIRST + lum.shape[0], images=lum, progress=progress)
+        out, _ = self._render(kb.MODE_IMAGES, kb.OUT_FIRST + lum.shape[0], smooth=False,
+                              images=lum, progress=progress)
         norm = self._normalise(out)
         return np.moveaxis(out[..., kb.OUT_FIRST:] * norm[..., None], -1, 0).astype(np.float32)
 
@@ -534,7 +521,8 @@ class Simulation:
             raise ValueError("dots: give at least one dot")
         rows = np.array([d.as_row() for d in dots])
         mon = self.scene.monitor
-        out = self._render(kb.MODE_DOTS, kb.OUT_FIRST + len(dots), dots=rows, progress=progress)
+        out, _ = self._render(kb.MODE_DOTS, kb.OUT_FIRST + len(dots), smooth=False, dots=rows,
+                              progress=progress)
         norm = self._normalise(out)
         hit = out[..., kb.OUT_FIRST:]
         lum = mon.black_level * out[..., kb.OUT_FHIT][..., None] + (mon.white_level - mon.black_level) * hit
@@ -574,7 +562,8 @@ class Simulation:
                 by_row = {r: samp.rotations(r, r + 1, scene.camera.width)
                           for r in np.unique(rows).tolist()}
                 rot = np.stack([by_row[int(r)][int(c)] for r, c in zip(rows, cols)])
-        n = u1.size if lobe else u1.size + 1
+        principal = scene.brdf.is_delta or samp.include_principal
+        n = u1.size + 1 if principal and not lobe else u1.size
         w_ray = np.ones(1) if scene.brdf.is_delta else samp.ray_weights(lobe)
         ou, ov, of = (np.empty((len(rows), n)) for _ in range(3))
         out = np.empty((len(rows), kb.OUT_FIRST))
@@ -589,7 +578,7 @@ class Simulation:
             kb.render_tile_lobe(geo, scene.brdf.kernel_params(), u1, u2, rot, *args, w_ray=w_ray)
         else:
             kb.render_tile(geo, scene.brdf.kernel_params(), u1, u2, rot, samp.scheme_id,
-                           samp.theta_max, True, *args, w_ray=w_ray)
+                           samp.theta_max, principal, *args, w_ray=w_ray)
         if not directions:
             return ou, ov, of, None, hits.point[0].copy()
         dirs = np.empty((len(rows), n, 3))

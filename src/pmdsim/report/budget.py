@@ -8,15 +8,50 @@ from pathlib import Path
 import numpy as np
 
 
-def budget_text(rows: list[dict], quantity: str = "urad") -> str:
-    """A fixed-width table: one line per (effect, direction), RMS and P95 in every unit."""
+def _g(v, scale=1.0) -> str:
+    return "nan" if v is None or not math.isfinite(v) else f"{v * scale:.3g}"
+
+
+def height_text(height_rows: list[dict], settings: dict | None = None) -> str:
+    """The metrologist's table: per effect, slope error X / Y (urad RMS, surface frame, from
+    the reconstruction) and height error after the removal (nm RMS / PV / P95)."""
+    if not height_rows:
+        return ""
+    head = (f"{'part':11s} {'effect':52s} {'slope X urad':>12s} {'slope Y urad':>12s} "
+            f"{'RMS nm':>9s} {'PV nm':>9s} {'P95 nm':>9s}")
+    lines = []
+    if settings:
+        lines.append(f"height error after: {settings.get('removed', '')}; estimator "
+                     f"{settings.get('estimator', '')}; slopes dz/dx, dz/dy RMS about zero")
+    lines += [head, "-" * len(head)]
+    for r in height_rows:
+        lines.append(f"{r['part']:11s} {r['label'][:52]:52s} {_g(r['slope_rms_x_urad']):>12s} "
+                     f"{_g(r['slope_rms_y_urad']):>12s} {_g(r['height_rms_nm']):>9s} "
+                     f"{_g(r['height_pv_nm']):>9s} {_g(r['height_p95_nm']):>9s}")
+    if any(r["part"] == "calibration" for r in height_rows):
+        lines.append("calibration rows: sensitivity x uncertainty (one reconstruction per "
+                     "component off by +1 sigma; components and rows in quadrature)")
+    for r in height_rows:
+        if r.get("sphere"):
+            sp = r["sphere"]
+            lines.append(f"best-fit sphere, {r['effect']}: radius {sp['radius_measured_mm']:.8g} mm "
+                         f"(reference {sp['radius_true_mm']:.8g} mm), curvature change "
+                         f"{sp['curvature_change_per_mm'] * 1e3:+.3g} 1/m")
+    return "\n".join(lines) + "\n"
+
+
+def budget_text(rows: list[dict], height_rows: list[dict] = (), settings: dict | None = None,
+                quantity: str = "urad") -> str:
+    """Fixed-width tables: the height rows (:func:`height_text`) and one line per (effect,
+    direction), RMS and P95 in every unit (slope: the 3-D conversion)."""
     head = (f"{'part':8s} {'effect':44s} {'dir':3s} {'RMS mrad':>9s} {'P95 mrad':>9s} "
             f"{'RMS px':>8s} {'P95 px':>8s} {'RMS um':>8s} {'P95 um':>8s} {'RMS urad':>9s} {'P95 urad':>9s}")
-    lines = [head, "-" * len(head)]
+    lines = [height_text(list(height_rows), settings)] if height_rows else []
+    lines += ["per fringe direction: decoded minus exact (system) or minus the mirror (surface)",
+              head, "-" * len(head)]
     for r in rows:
         def f(k, scale=1.0):
-            v = r[k]
-            return "nan" if v is None or not math.isfinite(v) else f"{v * scale:.3g}"
+            return _g(r[k], scale)
         lines.append(
             f"{r['part']:8s} {r['label'][:44]:44s} {r['direction'].upper():3s} {f('rms_mrad'):>9s} "
             f"{f('p95_mrad'):>9s} {f('rms_px'):>8s} {f('p95_px'):>8s} {f('rms_mm', 1e3):>8s} "
@@ -24,9 +59,38 @@ def budget_text(rows: list[dict], quantity: str = "urad") -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quantity: str = "urad") -> Path:
-    """Horizontal bars of RMS and P95 (slope, urad) per effect, one panel per direction;
-    system effects in blue, the surface in orange."""
+_COLOURS = {"system": "tab:blue", "surface": "tab:orange", "calibration": "tab:green"}
+
+
+def _bars(ax, labels, pairs, colours, xlabel, log=False):
+    """Two bars per row (``pairs``: (light, solid) arrays) with their values written."""
+    y = np.arange(len(labels))
+    (a_lab, a), (b_lab, b) = pairs
+    ax.barh(y - 0.2, a, 0.4, color=colours, alpha=0.45, label=a_lab)
+    ax.barh(y + 0.2, b, 0.4, color=colours, label=b_lab)
+    for yi, (va, vb) in enumerate(zip(a, b)):
+        for val, off in ((va, -0.2), (vb, 0.2)):
+            if math.isfinite(val):
+                ax.text(val, yi + off, f" {val:.3g}" if abs(val) >= 0.01 else " < 0.01",
+                        va="center", fontsize=7)
+    ax.set_xlabel(xlabel)
+    ax.grid(axis="x", alpha=0.3)
+    fin = np.r_[a, b][np.isfinite(np.r_[a, b]) & (np.r_[a, b] > 0)]
+    if log and fin.size:
+        ax.set_xscale("log")
+        ax.set_xlim(fin.min() / 2, fin.max() * 8)
+    else:
+        ax.set_xlim(0, (fin.max() if fin.size else 1e-12) * 1.25)
+    ax.set_yticks(y)
+    ax.invert_yaxis()
+
+
+def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quantity: str = "urad",
+                height_rows: list[dict] = (), settings: dict | None = None) -> Path:
+    """Horizontal bars of RMS and P95 per effect and fringe direction (slope, urad, the 3-D
+    conversion), and, with ``height_rows``, of the height error after removal (nm RMS and
+    PV, log scale) and the reconstruction's slope errors X / Y (urad RMS): system effects
+    blue, the surface orange, calibration errors green."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -39,33 +103,47 @@ def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quant
         if key not in labels:
             labels.append(key)
     n = len(labels)
-    fig, axes = plt.subplots(1, len(dirs), figsize=(6.5 * len(dirs), 0.45 * n + 1.8), sharey=True,
-                             squeeze=False)
-    unit = {"urad": "slope deviation, urad", "px": "monitor px", "mrad": "phase, mrad", "mm": "mm"}[quantity]
-    y = np.arange(n)
-    for ax, d in zip(axes[0], dirs):
+    nh = len(height_rows)
+    top = 0.45 * n + 1.2
+    bottom = 0.45 * nh + 1.2 if nh else 0.0
+    fig = plt.figure(figsize=(6.5 * max(len(dirs), 2), top + bottom + 0.8))
+    gs = fig.add_gridspec(2 if nh else 1, max(len(dirs), 2), height_ratios=[top, bottom] if nh else [1])
+    unit = {"urad": "slope deviation, urad (3-D conversion)", "px": "monitor px", "mrad": "phase, mrad",
+            "mm": "mm"}[quantity]
+    axes = [fig.add_subplot(gs[0, k]) for k in range(len(dirs))]
+    for ax, d in zip(axes, dirs):
         by = {(r["part"], r["label"]): r for r in rows if r["direction"] == d}
         rms = np.array([by[k][f"rms_{quantity}"] if k in by else np.nan for k in labels], float)
         p95 = np.array([by[k][f"p95_{quantity}"] if k in by else np.nan for k in labels], float)
-        colours = ["tab:orange" if k[0] == "surface" else "tab:blue" for k in labels]
-        ax.barh(y - 0.2, p95, 0.4, color=colours, alpha=0.45, label="P95 |dev|")
-        ax.barh(y + 0.2, rms, 0.4, color=colours, label="RMS")
-        for yi, (a, b) in enumerate(zip(rms, p95)):
-            for val, off in ((b, -0.2), (a, 0.2)):
-                if math.isfinite(val):
-                    ax.text(val, yi + off, f" {val:.3g}" if abs(val) >= 0.01 else " < 0.01",
-                            va="center", fontsize=7)
-        ax.set_xlabel(unit)
-        ax.set_title(f"{d.upper()} fringes")
-        ax.grid(axis="x", alpha=0.3)
-        ax.set_xlim(0, np.nanmax(np.r_[p95, rms, 1e-12]) * 1.25)
-    axes[0, 0].set_yticks(y)
-    axes[0, 0].set_yticklabels([f"{lab}  [{part}]" for part, lab in labels], fontsize=8)
-    axes[0, 0].invert_yaxis()
-    axes[0, 0].legend(loc="lower right", fontsize=8)
-    fig.suptitle(title + "  (solid: RMS, light: P95; blue: system on the ideal mirror, "
-                 "orange: surface minus mirror)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+        colours = [_COLOURS.get(k[0], "tab:gray") for k in labels]
+        _bars(ax, labels, (("P95 |dev|", p95), ("RMS", rms)), colours, unit)
+        ax.set_title(f"{d.upper()} fringes, per pixel (3-D slope conversion)", fontsize=9)
+        ax.set_yticklabels([f"{lab}  [{part}]" for part, lab in labels] if ax is axes[0] else [],
+                           fontsize=8)
+    axes[0].legend(loc="lower right", fontsize=8)
+    if nh:
+        hl = [f"{r['label']}  [{r['part']}]" for r in height_rows]
+        colours = [_COLOURS.get(r["part"], "tab:gray") for r in height_rows]
+        ax = fig.add_subplot(gs[1, 0])
+        pv = np.array([r["height_pv_nm"] for r in height_rows], float)
+        rms = np.array([r["height_rms_nm"] for r in height_rows], float)
+        _bars(ax, hl, (("PV", pv), ("RMS", rms)), colours, "height error, nm (log)", log=True)
+        ax.set_yticklabels(hl, fontsize=8)
+        ax.set_title("height error after: " + (settings or {}).get("removed", ""), fontsize=9)
+        ax.legend(loc="lower right", fontsize=8)
+        ax2 = fig.add_subplot(gs[1, 1])
+        sx = np.array([r["slope_rms_x_urad"] for r in height_rows], float)
+        sy = np.array([r["slope_rms_y_urad"] for r in height_rows], float)
+        _bars(ax2, hl, (("dz/dy RMS", sy), ("dz/dx RMS", sx)), colours,
+              "slope error of the reconstruction, urad RMS (log)", log=True)
+        ax2.set_yticklabels([])
+        ax2.set_title("reconstructed slopes (surface frame)", fontsize=9)
+        ax2.legend(loc="lower right", fontsize=8)
+    est = f"; estimator {settings['estimator']}" if settings and settings.get("estimator") else ""
+    fig.suptitle(title + est + "\nlight: P95 or PV; blue: system (mirror decoded minus the exact point), "
+                 "orange: surface minus the mirror, green: calibration (sensitivity x uncertainty)",
+                 fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.5 / fig.get_size_inches()[1]))
+    fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

@@ -19,9 +19,19 @@ def _limit(a):
 
 
 def plot_surface_errors(ds, name: str = "", description: str = ""):
-    """Figure: slope error x, slope error y (urad), height error (nm)."""
+    """Figure: slope error x, slope error y (urad), height error (nm), each on a symmetric
+    scale (P99.5 of |error|), framed to the grid nodes that hold a value."""
     x = ds["surface_x"].values
     y = ds["surface_y"].values
+    names = ("slope_error_x_urad", "slope_error_y_urad", "height_error_nm")
+    # frame: the bounding box of the reconstructed nodes (a part may fill a corner of its grid)
+    data = np.zeros((y.size, x.size), bool)
+    for var in names:
+        data |= np.isfinite(ds[var].values)
+    rows, cols = np.nonzero(data.any(axis=1))[0], np.nonzero(data.any(axis=0))[0]
+    keep = ((slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)) if rows.size >= 2
+            and cols.size >= 2 else (slice(None), slice(None)))
+    x, y = x[keep[1]], y[keep[0]]
     ext = (x[0] - (x[1] - x[0]) / 2, x[-1] + (x[1] - x[0]) / 2,
            y[0] - (y[1] - y[0]) / 2, y[-1] + (y[1] - y[0]) / 2)
     stats = json.loads(ds.attrs.get("statistics_json", "{}")).get("reconstruction", {})
@@ -41,7 +51,7 @@ def plot_surface_errors(ds, name: str = "", description: str = ""):
         ("height_error_nm", "height error", "nm", stats.get("height_error_nm")),
     )
     for ax, cax, (var, label, unit, st) in zip(axes, caxes, panels):
-        a = ds[var].values
+        a = ds[var].values[keep]
         lim = _limit(a) or 1.0
         im = ax.imshow(a, cmap=CMAP, vmin=-lim, vmax=lim, extent=ext, origin="lower",
                        interpolation="nearest")
@@ -53,7 +63,7 @@ def plot_surface_errors(ds, name: str = "", description: str = ""):
             rms = st.get("rms_about_zero", st["rms"])
             title += f"\nRMS {rms:.3g}  PV {st['pv']:.3g}  P95 {st['p95']:.3g} {unit}"
         ax.set_title(title, fontsize=10)
-        fig.colorbar(im, cax=cax, label=unit)
+        fig.colorbar(im, cax=cax, label=f"{unit}, scale +-{lim:.3g} (P99.5 of |error|)")
     removed = stats.get("removed", "")
     fig.suptitle(f"{name}: reconstructed minus true surface ({removed} removed from the height)"
                  + (f"\n{description}" if description else ""), fontsize=11,

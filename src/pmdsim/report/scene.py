@@ -83,6 +83,31 @@ def imshow(ax, image, **kw):
     return im
 
 
+def camera_axes(ax, fontsize: float = 8) -> None:
+    """Label a camera-image map: axes in camera pixels (column right, row down), a few
+    whole-pixel ticks with labels (each tick is ~3 ms of drawing)."""
+    ax.set_xlabel("camera column (px)", fontsize=fontsize)
+    ax.set_ylabel("camera row (px)", fontsize=fontsize)
+    ax.tick_params(labelsize=fontsize - 1)
+    ax.xaxis.set_major_locator(MaxNLocator(5, integer=True))
+    ax.yaxis.set_major_locator(MaxNLocator(4, integer=True))
+
+
+def zoom_to_data(ax, mask, pad: float = 0.04) -> None:
+    """Limit an image axes (drawn in pixel-index coordinates, row 0 at the top) to the
+    bounding box of ``mask`` (True = data) plus ``pad`` of its size, so that a part that
+    fills a corner of the camera fills the frame; nothing when ``mask`` is empty."""
+    mask = np.asarray(mask, bool)
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    if not rows.size:
+        return
+    h, w = mask.shape
+    pr = max(1.0, pad * (rows[-1] - rows[0] + 1))
+    pc = max(1.0, pad * (cols[-1] - cols[0] + 1))
+    ax.set_xlim(max(cols[0] - 0.5 - pc, -0.5), min(cols[-1] + 0.5 + pc, w - 0.5))
+    ax.set_ylim(min(rows[-1] + 0.5 + pr, h - 0.5), max(rows[0] - 0.5 - pr, -0.5))
+
+
 def _line(ax, a, b, **kw):
     a, b = np.asarray(a), np.asarray(b)
     ax.plot([a[0], b[0]], [a[1], b[1]], [a[2], b[2]], **kw)
@@ -184,7 +209,26 @@ def _draw_scene(ax, sim, bundle, vision, pixel, full: bool):
     return np.concatenate([np.asarray(p).reshape(-1, 3) for p in pts])
 
 
-def plot_setup(sim, path: str | Path, pixel: tuple[int, int] = (0, 0),
+def pixel_on_part(sim, grid: int = 33) -> tuple[int, int]:
+    """(row, col) whose bundle the set-up figure draws: (0, 0) (the paper's pixel (1, 1))
+    when its vision ray hits the surface, else, of a ``grid`` x ``grid`` lattice of pixels,
+    the one on the part nearest the image centre ((0, 0) when none is)."""
+    h, w = sim.shape
+    if trace_primary(sim.scene, 0, 1).valid[0, 0]:
+        return (0, 0)
+    best, dist = (0, 0), np.inf
+    cols = np.unique(np.linspace(0, w - 1, grid).round().astype(int))
+    for r in np.unique(np.linspace(0, h - 1, grid).round().astype(int)):
+        ok = trace_primary(sim.scene, int(r), int(r) + 1).valid[0, cols]
+        if ok.any():
+            d = (r - (h - 1) / 2) ** 2 + (cols[ok] - (w - 1) / 2) ** 2
+            k = int(np.argmin(d))
+            if d[k] < dist:
+                best, dist = (int(r), int(cols[ok][k])), d[k]
+    return best
+
+
+def plot_setup(sim, path: str | Path, pixel: tuple[int, int] | None = None,
                n_vision: int = 3) -> Path:
     """The set-up like the paper's Fig. 3a, with the scattered bundle of camera ``pixel``.
 
@@ -197,8 +241,10 @@ def plot_setup(sim, path: str | Path, pixel: tuple[int, int] = (0, 0),
     ----------
     sim : Simulation
     path : path of the PNG to write
-    pixel : (row, col), 0-based
-        Pixel whose bundle is drawn in red; (0, 0) is the paper's pixel (1, 1).
+    pixel : (row, col), 0-based, optional
+        Pixel whose bundle is drawn in red; (0, 0) is the paper's pixel (1, 1). Default
+        (:func:`pixel_on_part`): (0, 0) when it sees the surface, else a pixel on the part
+        near the image centre.
     n_vision : int
         Vision rays and their principal reflections are drawn for an
         ``n_vision x n_vision`` grid of pixels.
@@ -208,6 +254,8 @@ def plot_setup(sim, path: str | Path, pixel: tuple[int, int] = (0, 0),
     scene = sim.scene
     mon = scene.monitor
     h, w = sim.shape
+    if pixel is None:
+        pixel = pixel_on_part(sim)
 
     vision = []
     rows = np.unique(np.linspace(0, h - 1, n_vision).round().astype(int))
@@ -308,8 +356,7 @@ def plot_fringe_images(ds, path: str | Path, width: float | None = None, shift: 
         mod = np.nanmedian(_modulation(ds, d, width))
         ax.set_title(f"{d.upper()} fringes, width {width:g} monitor px, shift {delta:.2f} rad\n"
                      f"median modulation {mod:.2f}", fontsize=10)
-        ax.set_xlabel("camera column")
-        ax.set_ylabel("camera row")
+        camera_axes(ax, 10)
     est = ds.attrs.get("estimator", "paper")
     fig.colorbar(im, ax=list(axes), shrink=0.85,
                  label="camera value (" + ("(1/N) sum f L" if est == "paper" else
@@ -332,8 +379,7 @@ def plot_modulation(ds, path: str | Path) -> Path:
             im = imshow(ax, mod, cmap="viridis", vmin=0.0, vmax=1.0, interpolation="nearest")
             ax.set_title(f"{d.upper()}, width {wd:g} px: median {np.nanmedian(mod):.3f}",
                          fontsize=9)
-            ax.set_xticks([])
-            ax.set_yticks([])
+            camera_axes(ax)
     fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="modulation B/A")
     return _save(fig, path)
 
@@ -365,24 +411,11 @@ def plot_variant_fringes(datasets: dict, path: str | Path, descriptions: dict | 
             mod = np.nanmedian(_modulation(ds, d, width))
             ax.set_title(f"{name}: {d.upper()} fringes, width {width:g} px\n"
                          f"median modulation {mod:.2f}", fontsize=9)
-            ax.set_xticks([])
-            ax.set_yticks([])
+            camera_axes(ax)
         if descriptions.get(name):
             axes[i, 0].set_ylabel(textwrap.fill(descriptions[name], 40), fontsize=8)
         fig.colorbar(im, ax=list(axes[i]), shrink=0.85, label="camera value")
     return _save(fig, path)
 
 
-def run_figures(sim, ds, folder: str | Path) -> list[Path]:
-    """All figures of a run into ``folder``: setup.png, and with fringes fringes.png and
-    modulation.png."""
-    folder = Path(folder)
-    paths = [plot_setup(sim, folder / "setup.png")]
-    if "fringes" in ds:
-        paths.append(plot_fringe_images(ds, folder / "fringes.png"))
-        paths.append(plot_modulation(ds, folder / "modulation.png"))
-    return paths
-
-
-__all__ = ["plot_setup", "plot_fringe_images", "plot_modulation", "plot_variant_fringes",
-           "run_figures"]
+__all__ = ["plot_setup", "plot_fringe_images", "plot_modulation", "plot_variant_fringes"]

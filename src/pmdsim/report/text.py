@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import math
+
 import os
 
 
@@ -26,11 +28,16 @@ def summary_text(stats: dict, timings: dict | None = None) -> str:
     lines.append(head)
     lines.append("-" * len(head))
     for d, s in stats["directions"].items():
+        ne = s.get("numerical_error")
         for q, unit in stats["units"].items():
             r = s[q]
             label = q.rsplit("_", 1)[0] + f" ({unit})"
             lines.append(f"{d.upper():<4}{label:<20}" + "".join(
                 f"{_num(r[k]):>11}" for k in ("mean", "rms", "p95", "max")))
+            if ne and q in ne:  # the rendering's own numerical error of the same statistic
+                e = ne[q]
+                lines.append(f"{'':<4}{'  ± numerical':<20}{'':>11}" + "".join(
+                    f"{_num(e[k], 2):>11}" for k in ("rms", "p95", "max")))
         ex = s.get("coord_vs_exact_px")
         if ex:  # the same coordinate against the exact specular point P
             lines.append(f"{d.upper():<4}{'coord vs exact (px)':<20}" + "".join(
@@ -47,9 +54,28 @@ def summary_text(stats: dict, timings: dict | None = None) -> str:
         lines.append(f"    reference vs exact specular point: RMS {_num(rq['rms'])} px "
                      f"(monitor pixel quantisation of the reference)")
         lines.append("")
+    for w in numerical_warnings(stats):
+        lines.append("warning: " + w)
     if timings:
         lines.append("timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
     return "\n".join(lines).rstrip() + "\n"
+
+
+def numerical_warnings(stats: dict, share: float = 0.1) -> list[str]:
+    """Warnings where the numerical error (RMS or P95) of a deviation printed is more than
+    ``share`` of it (issue 18: a number whose error is not small is not yet the answer)."""
+    out = []
+    for d, s in stats.get("directions", {}).items():
+        ne = s.get("numerical_error") or {}
+        for q in ("phase_mrad", "slope_urad"):
+            for k in ("rms", "p95"):
+                v, e = (s.get(q) or {}).get(k), (ne.get(q) or {}).get(k)
+                if v is not None and e is not None and math.isfinite(e) and e > share * abs(v):
+                    out.append(f"{d} {q} {k} {v:.3g} ± {e:.2g}: the numerical error is more "
+                               f"than {100 * share:.0f} % of the deviation; raise "
+                               "sampling.n_rays or set sampling.target_error_mrad")
+                    break
+    return out
 
 
 def _fmt(x, spec: str = ".3g") -> str:
@@ -86,9 +112,9 @@ def diagnostics_text(name: str, d: dict) -> str:
         lines.append(f"effective sample size: median {_fmt(d['ess_median'], '.1f')}, "
                      f"min {_fmt(d['ess_min'], '.1f')} of {d['n_rays']} rays")
     if "phase_se_rad" in d:
-        how = ("spread over independent rotations of the sample set"
-               if d["phase_se_method"] == "seeds" else
-               "N independent rays, an upper bound for the lattice")
+        how = {"seeds": "spread over independent rotations of the sample set",
+               "rule": "the stated error of the rule rendered (embedded rule or replicates)",
+               }.get(d["phase_se_method"], "N independent rays, an upper bound for the lattice")
         lines.append(f"phase standard error ({d['phase_se_method']} method: {how}), mrad, "
                      "median / P95; fringe modulation:")
         for key, v in d["phase_se_rad"].items():
@@ -138,12 +164,28 @@ def reconstruction_text(name: str, rec: dict) -> str:
         f"  slope error x RMS {sx['rms_about_zero']:.3g} urad  PV {sx['pv']:.3g} urad;  "
         f"y RMS {sy['rms_about_zero']:.3g} urad  PV {sy['pv']:.3g} urad",
     ]
-    terms = rec.get("terms_nm") or {}
-    if terms:
-        names = [k for k in terms if k != "basis"]
-        big = sorted(names, key=lambda k: -abs(terms[k]))[:6]
-        lines.append(f"  largest {terms['basis']} terms of the height error (nm RMS each): "
-                     + ", ".join(f"{k} {terms[k]:+.3g}" for k in big))
+    if rec.get("sphere"):
+        sp = rec["sphere"]
+        lines.append(f"  best-fit sphere: radius {sp['radius_measured_mm']:.8g} mm reconstructed, "
+                     + (f"{sp['radius_true_mm']:.8g} mm true (change {sp['radius_change_mm']:+.3g} mm)"
+                        if math.isfinite(sp["radius_true_mm"]) else "the true surface is flat")
+                     + f"; curvature change {sp['curvature_change_per_mm'] * 1e3:+.3g} 1/m")
+    table = rec.get("zernike_noll_nm") or []
+    if table:
+        left = [t for t in table if not t["removed"] and t["index"] > 1]
+        big = sorted(left, key=lambda t: -abs(t["coefficient"]))[:6]
+        lines.append(f"  largest Zernike terms of the height error AFTER removal ({rec.get('removal', '')}; "
+                     "Noll, nm RMS each): " + ", ".join(f"Z{t['index']} {t['coefficient']:+.3g}" for t in big))
+        gone = [f"Z{t['index']}" for t in table if t["removed"]]
+        if gone:
+            lines.append(f"  removed terms (about 0 after removal): {', '.join(gone)}")
+    else:
+        terms = rec.get("terms_nm") or {}
+        if terms:
+            names = [k for k in terms if k != "basis"]
+            big = sorted(names, key=lambda k: -abs(terms[k]))[:6]
+            lines.append(f"  largest {terms['basis']} terms of the height error (nm RMS each): "
+                         + ", ".join(f"{k} {terms[k]:+.3g}" for k in big))
     if "reference_height_error_nm" in rec:
         r = rec["reference_height_error_nm"]
         lines.append(f"  specular reference (the chain's floor): height RMS {r['rms']:.3g} nm  PV {r['pv']:.3g} nm")

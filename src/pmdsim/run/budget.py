@@ -1,7 +1,9 @@
 """``pmdsim budget``: write the error budget of a configuration (table and figure).
 
-OUT/budget.csv, budget.json (rows and settings) and budget.png; the folder is created
-atomically (:func:`pmdsim.run.files.atomic_run_dir`, marker ``pmdsim-budget.json``).
+OUT/budget.csv (per effect and fringe direction), heights.csv (per effect: slope errors
+X/Y and height error after the removal, the calibration rows among them), zernike.csv (the
+Noll and Fringe tables of every height row, after removal), budget.json (all rows, the
+settings, the configuration) and budget.png; the folder is created atomically (:func:`pmdsim.run.files.atomic_run_dir`, marker ``pmdsim-budget.json``).
 """
 
 from __future__ import annotations
@@ -12,8 +14,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from ..config import RunConfig
-from ..studies.budget import TABLE_COLUMNS, budget
+from ..config import RunConfig, check_resources
+from ..scene import resolve_roi
+from ..studies.budget import HEIGHT_COLUMNS, TABLE_COLUMNS, budget
 from . import files as pio
 from .threads import single_blas
 
@@ -26,6 +29,26 @@ class BudgetResult:
     outdir: Path
     table: Path
     figure: Path | None
+    height_rows: list = ()
+    settings: dict | None = None
+
+
+def _csv(path: Path, rows, columns) -> None:
+    with open(path, "w", newline="") as fh:
+        wr = csv.DictWriter(fh, fieldnames=columns, extrasaction="ignore")
+        wr.writeheader()
+        for r in rows:
+            wr.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+
+
+def zernike_rows(height_rows) -> list[dict]:
+    """One CSV row per (height row, ordering, term): the tables after removal."""
+    out = []
+    for r in height_rows:
+        for order in ("noll", "fringe"):
+            for t in r.get(f"zernike_{order}_nm", ()):
+                out.append({"effect": r["effect"], "part": r["part"], "order": order, **t})
+    return out
 
 
 @single_blas
@@ -33,22 +56,31 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
                progress: Callable[[str], None] | None = None, truth: str = "centre") -> BudgetResult:
     """Compute :func:`pmdsim.studies.budget.budget` and write it into ``outdir``."""
     final = Path(outdir).absolute()
+    cfg = resolve_roi(cfg)  # camera.roi = "auto": the window that sees the part
+    check_resources(cfg)  # the budget's largest run, before anything is computed
     pio.check_output_dir(final, overwrite, MARKER)
-    rows = budget(cfg, progress, truth)
+    from ..scene import Scene
+    from ..scene.sanity import check_physics
+
+    check_physics(cfg, Scene.from_config(cfg))  # a sensor/display that leaves no signal
+    result = budget(cfg, progress, truth)
+    rows = result.rows
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
-        with open(tmp / "budget.csv", "w", newline="") as fh:
-            wr = csv.DictWriter(fh, fieldnames=TABLE_COLUMNS, extrasaction="ignore")
-            wr.writeheader()
-            for r in rows:
-                wr.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+        _csv(tmp / "budget.csv", rows, TABLE_COLUMNS)
+        if result.height_rows:
+            _csv(tmp / "heights.csv", result.height_rows, HEIGHT_COLUMNS)
+            _csv(tmp / "zernike.csv", zernike_rows(result.height_rows),
+                 ("effect", "part", "order", "index", "n", "m", "coefficient", "removed"))
         (tmp / "budget.json").write_text(json.dumps(
-            {"name": cfg.name, "truth": truth, "rows": rows, "config": cfg.model_dump(mode="json")},
+            {"name": cfg.name, "truth": truth, "settings": result.settings, "rows": rows,
+             "height_rows": result.height_rows, "config": cfg.model_dump(mode="json")},
             indent=2) + "\n")
         fig = None
         if figure:
             from ..report.budget import plot_budget
 
-            plot_budget(rows, tmp / "budget.png", title=f"{cfg.name}: error budget")
+            plot_budget(rows, tmp / "budget.png", title=f"{cfg.name}: error budget",
+                        height_rows=result.height_rows, settings=result.settings)
             fig = final / "budget.png"
         (tmp / MARKER).write_text(json.dumps({"name": cfg.name, "kind": "budget"}) + "\n")
-    return BudgetResult(rows, final, final / "budget.csv", fig)
+    return BudgetResult(rows, final, final / "budget.csv", fig, result.height_rows, result.settings)

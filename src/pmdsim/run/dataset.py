@@ -223,20 +223,14 @@ def write_dataset(ds, path: str | Path) -> Path:
 
     The camera-image variables are rounded and compressed one image at a time on Dask's
     threaded scheduler (NumPy and Blosc release the GIL), whatever scheduler is active
-    (a ``dask.distributed`` client would ship the run's arrays to its workers)."""
-    import warnings
-
-    import dask
-
-    from ..render import local_scheduler
+    (a ``dask.distributed`` client would ship the run's arrays to its workers). A run
+    writes its dataset in parts while it computes (:class:`pmdsim.run.writing.DatasetWriter`),
+    with the same bytes."""
+    from .writing import _write_part, finish_store
 
     path = Path(path)
-    with warnings.catch_warnings(), dask.config.set(scheduler=local_scheduler("threads")):
-        # zarr-python notes that consolidated metadata is not (yet) in the v3 spec; xarray
-        # and zarr-python read it, other readers ignore it and list the store instead
-        warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
-        storage_form(ds, lazy=True).to_zarr(path, mode="w-", consolidated=True,
-                                            encoding=_encoding(ds), zarr_format=3)
+    _write_part(ds, path, create=True)
+    finish_store(path, dict(ds.attrs))
     return path
 
 
@@ -397,6 +391,16 @@ def dataset_variables(chain: ChainResult) -> dict:
     v["surface_to_monitor_mm"] = (("row", "col"), chain.distance_mm, {
         "units": "mm", "description": "distance from the surface point to the monitor point of "
                                       "the principal reflection P"})
+    if all(dc.numerical is not None for dc in dcs):
+        for q, name, units in (("phase_mrad", "phase_deviation_error", "rad"),
+                               ("coord_px", "coord_deviation_px_error", "monitor px"),
+                               ("coord_mm", "coord_deviation_mm_error", "mm"),
+                               ("slope_urad", "slope_deviation_urad_error", "urad")):
+            scale = 1e-3 if q == "phase_mrad" else None
+            v[name] = (D, per(lambda dc, q=q: dc.numerical[q], np.float32, scale), {
+                "units": units, "description": f"numerical (quadrature) error of "
+                f"{name[:-6]}: the render's stated error of the finest width's sums, "
+                "propagated (pmdsim.measure.numerical); NaN where not valid"})
     qs = list(QUANTITIES)
     table = np.array([[[float("nan") if (x := direction_quantity_stats(dc)[q][s]) is None
                         else x for s in STATISTICS] for q in qs] for dc in dcs])

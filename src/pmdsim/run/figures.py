@@ -74,17 +74,6 @@ def figure_names(ds, which="summary") -> list[str]:
     return [n for n in names if _has(ds, FIGURES[n][1])]
 
 
-def figure_plan(ds, which, decoded: bool) -> list[str]:
-    """The figures of ``which`` that the run will draw once its chain is done (``decoded``):
-    :func:`figure_names` of the finished dataset, known before the chain runs."""
-    if which == "summary":
-        which = list(SUMMARY_DECODED if decoded else SUMMARY)
-    elif which == "all":
-        which = list(FIGURES)
-    names = figure_names(ds, which)  # checks the names
-    return [n for n in names if FIGURES[n][1] in (None, "fringes") or decoded]
-
-
 def _simulation(ds):
     from ..config import RunConfig
     from ..render import Simulation
@@ -395,11 +384,69 @@ def start_drawings(names, folder: Path, run_name: str, description: str, ds, sim
     return [Drawing(g, folder, run_name, description, ds, sim) for g in groups if g]
 
 
-def early_names(names) -> list[str]:
-    """The figures of ``names`` that need no measurement chain (set-up, fringe images,
-    modulation): drawn as soon as the images exist."""
-    return [n for n in names if FIGURES[n][1] in (None, "fringes")]
+def planned_names(which, decoding: bool) -> list[str]:
+    """The figures of ``which`` (``"summary"``, ``"all"`` or a list of names) that a run
+    that decodes (``decoding``) or not may draw: each is drawn once its dataset holds what
+    it needs (:class:`FigureSchedule`)."""
+    if which == "summary":
+        return list(SUMMARY_DECODED if decoding else SUMMARY)
+    if which == "all":
+        return list(FIGURES)
+    names = list(which)
+    unknown = [n for n in names if n not in FIGURES]
+    if unknown:
+        raise ValueError(f"unknown figure(s) {unknown}; choose from {list(FIGURES)}")
+    return names
+
+
+class FigureSchedule:
+    """When a run's figures start: the one mechanism for all of them.
+
+    The run calls :meth:`offer` with its dataset after every step; each planned figure
+    (:func:`planned_names`) starts (:func:`start_drawings`, forked processes) at the first
+    offer whose dataset holds what it needs (:data:`FIGURES`): the set-up and fringe
+    figures once the images exist, the chain's once the deviation exists, the
+    reconstruction's once the surface is reconstructed. ``before_fork`` is called before
+    the first start (the run waits there for the reference's reconstruction thread).
+    :meth:`paths` waits for them; :meth:`close` ends them (an error or an interrupt)."""
+
+    def __init__(self, which, decoding: bool, folder: Path, run_name: str,
+                 description: str, sim, workers: int | None = None, before_fork=None):
+        self.planned = planned_names(which, decoding)
+        self.folder, self.run_name, self.description = Path(folder), run_name, description
+        self.sim, self.workers, self.before_fork = sim, workers, before_fork
+        self.started: list[str] = []
+        self.drawings: list[Drawing] = []
+
+    def offer(self, ds) -> list[str]:
+        """Start the planned figures that ``ds`` can give and that have not started;
+        returns their names."""
+        names = [n for n in self.planned
+                 if n not in self.started and _has(ds, FIGURES[n][1])]
+        if not names:
+            return []
+        if self.before_fork is not None:
+            self.before_fork()
+            self.before_fork = None
+        self.started += names
+        self.drawings += start_drawings(names, self.folder, self.run_name, self.description,
+                                        ds, self.sim, self.workers)
+        return names
+
+    def paths(self, notes: list) -> list[Path]:
+        """Wait for every started figure; their paths in the order of :data:`FIGURES` (a
+        figure that could not be drawn is a note)."""
+        out: list[Path] = []
+        for d in self.drawings:
+            out += d.paths(notes)
+        order = {n: i for i, n in enumerate(FIGURES)}
+        return sorted(out, key=lambda p: order.get(p.stem, len(order)))
+
+    def close(self) -> None:
+        for d in self.drawings:
+            d.close()
 
 
 __all__ = ["FIGURES", "figure_names", "draw_figures", "draw_one", "default_workers",
-           "Drawing", "start_drawings", "early_names", "can_fork", "import_in_background"]
+           "Drawing", "start_drawings", "can_fork", "import_in_background",
+           "planned_names", "FigureSchedule"]

@@ -84,11 +84,6 @@ def to_integer_image(values: np.ndarray, exposure: float, bit_depth: int = 16) -
 
 
 # ----------------------------------------------------------------------------- image files
-def read_png(path: str | Path) -> np.ndarray:
-    """Read a grey 8/16-bit PNG (Pillow, via :func:`pmdsim.imagefile.read_image_file`)."""
-    return read_image(path)
-
-
 def write_image(path: str | Path, image: np.ndarray, image_format: str = "tiff",
                 metadata: dict | None = None) -> Path:
     """Write one (H, W) uint8/uint16 image as TIFF or PNG; returns the path.

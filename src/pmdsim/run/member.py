@@ -1,216 +1,349 @@
-"""One member of a run (the run itself, or one variant): render, write images and
-dataset, measure, diagnose, draw."""
+"""One member of a run (the run itself, or one variant), as a list of named steps.
+
+:func:`run_member` runs :data:`STEPS` in order over one state object (:class:`Member`):
+
+``render``       the configured patterns through the scattered bundles
+``capture``      what the camera writes (the EMVA sensor, when enabled)
+``dataset``      the run's dataset; the image files start being written (a thread)
+``decode``       the fringes to phases and monitor coordinates
+``compare``      against the ideal specular reference: deviations, masks, statistics
+``reconstruct``  the surface's heights and slopes from both directions
+``dots``         the dots' second moments (``dots.csv``)
+``diagnose``     how converged the sampling is (``diag_*``)
+``write``        wait for the dataset and the images; config, statistics, summary
+``draw``         wait for the figures (the dots' figures of a standalone run drawn here)
+
+After every step the dataset is offered to the two things that run behind the steps: the
+dataset writer (:class:`pmdsim.run.writing.DatasetWriter`, which writes into ``run.zarr``
+whatever the store does not hold yet) and the figure schedule
+(:class:`pmdsim.run.figures.FigureSchedule`, which starts every figure whose data exist).
+Nothing waits for them until ``write`` and ``draw``; the run ends when the last ends.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import json
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from dataclasses import replace
-
 from ..config import RunConfig
-from ..scene.sensor import Sensor, capture_dn
 from ..measure import chain
 from ..render import Geometry, Simulation
+from ..report.text import description, summary_text_of
+from ..scene.sensor import Sensor, capture_dn
 from ..studies import coverage
 from . import files as pio
-from .dataset import CONFIG_NAME, DATASET_NAME, build_dataset, write_dataset
-from ..report.text import description, summary_text_of
-from .dataset import assign_to_dataset, dot_dataset_variables
+from .dataset import (CONFIG_NAME, DATASET_NAME, assign_to_dataset, build_dataset,
+                      dot_dataset_variables)
 from .diagnostics import diagnose_run
-from .figures import (FIGURES, early_names, figure_names, figure_plan, import_in_background,
-                      start_drawings)
+from .figures import FigureSchedule, import_in_background
 from .result import RunResult, _Steps, draw_safely
+from .writing import DatasetWriter
 
 
-def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
-                steps: _Steps, figures: bool, inputs, reference=None,
-                standalone: bool = True, diagnostics: bool = True) -> tuple[RunResult, object]:
-    """Render one configuration (no variants) and write its images, dataset, config and
-    figures into ``folder`` (no manifest). Returns its result and its in-memory dataset.
+@dataclass(eq=False)
+class Member:
+    """The state of one member's run, passed from step to step: what it was given (first
+    block) and what the steps make of it (the rest, None until made)."""
+
+    cfg: RunConfig
+    sim: Simulation
+    geometry: Geometry
+    folder: Path
+    steps: _Steps
+    inputs: tuple                  # (dots, image files, monitor image levels, tiles)
+    reference: object = None       # pmdsim.run.reference.Reference, when decoding
+    standalone: bool = True
+    diagnostics: bool = True
+    figures: FigureSchedule | None = None
+    writer: DatasetWriter | None = None
+    images_writer: ThreadPoolExecutor | None = None
+
+    fringes: object = None         # FringeResult
+    dot_images: object = None
+    images: object = None
+    off_monitor: object = None
+    phase_error: dict | None = None  # direction -> (H, W) numerical phase error, finest width
+    sensor: Sensor | None = None
+    exposure: float = float("nan")
+    ds: object = None              # the xarray Dataset, replaced (never changed) by steps
+    decoded: dict | None = None
+    measured: object = None        # chain.ChainResult
+    stats: dict = field(default_factory=dict)        # the chain's (and reconstruction's)
+    statistics: dict = field(default_factory=dict)   # statistics.json
+    dot_table: list = field(default_factory=list)
+    diagnosed: object = None
+    images_written: Future | None = None
+    image_paths: list = field(default_factory=list)
+    figure_paths: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def dots(self):
+        return self.inputs[0]
+
+    @property
+    def decoding(self) -> bool:
+        return self.reference is not None and self.fringes is not None
+
+
+# ----------------------------------------------------------------------------- the steps
+def render(m: Member) -> None:
+    """Render the configured fringes, dots and monitor images (one pass each); check that
+    something was seen and flag the bundles that miss the monitor."""
+    cfg, sim, steps = m.cfg, m.sim, m.steps
+    dots, _, levels, n_tiles = m.inputs
+    fr_cfg = cfg.patterns.fringes
+    if fr_cfg is not None:
+        base = steps.done
+        m.fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
+                                       progress=steps.tiles())
+        steps.finish_render(base, n_tiles)
+    if dots:
+        base = steps.done
+        m.dot_images = sim.render_dots(dots, progress=steps.tiles())
+        steps.finish_render(base, n_tiles)
+    if levels is not None:
+        base = steps.done
+        m.images = sim.render_images(levels, progress=steps.tiles())
+        steps.finish_render(base, n_tiles)
+    # nothing empty is written as if it were a result; bundles off the monitor are flagged
+    coverage.check_rendered(None if m.fringes is None else m.fringes.images, m.dot_images)
+    m.off_monitor = None if m.fringes is None else coverage.off_monitor_mask(
+        m.fringes.f_total, m.fringes.f_hit, m.geometry.surface_mask,
+        cfg.diagnostics.max_off_monitor_fraction)
+
+
+def capture(m: Member) -> None:
+    """What the camera writes: digital numbers of the EMVA sensor model (docs/system.md),
+    one noise stream per kind of image; nothing without ``[sensor]``."""
+    m.sensor = sensor = Sensor.from_config(m.cfg.sensor)
+    if not sensor.enabled:
+        return
+    if m.fringes is not None:
+        m.fringes = replace(m.fringes, images=capture_dn(sensor, m.fringes.images, 0))
+    if m.dot_images is not None:
+        m.dot_images = capture_dn(sensor, m.dot_images, 2)
+    if m.images is not None:
+        m.images = capture_dn(sensor, m.images, 3)
+
+
+def describe_error(sampling: dict | None) -> str:
+    """How a render's numerical error was estimated, in words."""
+    s = sampling or {}
+    if s.get("error") == "embedded":
+        return (f"{s.get('rule')} against the embedded {s.get('embedded_rule')}: the phase "
+                "difference of the two rules plus 0.1 |dS|/|S| (a bound)")
+    if s.get("error") == "replicates":
+        return (f"t(0.975) standard error of the mean of {s.get('passes')} scrambled Sobol "
+                f"replicates of {s.get('nodes')} points (95 % per pixel)")
+    return "none"
+
+
+def dataset(m: Member) -> None:
+    """The run's dataset from the rendered arrays (the writer starts on it after this
+    step), and the image files, written by a thread while the chain runs."""
+    cfg, out, sensor = m.cfg, m.cfg.output, m.sensor
+    _, image_files, _, _ = m.inputs
+    stacks = [a for a in (None if m.fringes is None else m.fringes.images, m.dot_images,
+                          m.images) if a is not None]
+    m.exposure = (pio.exposure_factor(stacks, out.bit_depth) if not sensor.enabled
+                  else 2.0 ** min(0, out.bit_depth - sensor.bit_depth))
+    ds = build_dataset(cfg, m.geometry, m.fringes, m.dots, m.dot_images, image_files,
+                       m.images, m.exposure, m.sim.scene.rays_per_pixel)
+    if m.off_monitor is not None:
+        ds["lobe_off_monitor"] = (("row", "col"), m.off_monitor, {
+            "units": "bool", "description": "surface pixels whose bundle puts more than "
+            f"diagnostics.max_off_monitor_fraction = {cfg.diagnostics.max_off_monitor_fraction:g}"
+            " of its weight off the monitor (never valid; counted)"})
+    m.phase_error = None
+    if m.fringes is not None and m.fringes.phase_error() is not None:
+        from ..measure.numerical import finest_phase_error
+
+        pe = m.fringes.phase_error()
+        ds["fringe_phase_error"] = (("direction", "width", "row", "col"), pe.astype("float32"), {
+            "units": "rad", "description": "numerical (quadrature) error of the phase each "
+            "fringe sum decodes to, per direction and width: "
+            + describe_error(m.fringes.sampling)})
+        m.phase_error = {d: finest_phase_error(m.fringes, d) for d in m.fringes.directions}
+    m.ds = ds
+    if m.fringes is not None and m.fringes.sums is not None:
+        # the dataset holds the sums' real and imaginary parts: free the complex copy
+        # (2 directions x 3 widths x 16 bytes per pixel, 480 MB at 5 MP)
+        m.fringes = replace(m.fringes, sums=None)
+    if out.write_images:  # zlib and NumPy release the GIL
+        m.images_written = m.images_writer.submit(
+            pio.write_images, m.folder, cfg, m.fringes, m.dots, m.dot_images, image_files,
+            m.images, m.exposure, workers=1)
+    m.steps.advance()
+
+
+def decode(m: Member) -> None:
+    """Decode the surface's fringes (phase shifting, unwrapping, flags)."""
+    if not m.decoding:
+        return
+    sensor = m.sensor
+    m.decoded = chain.decode_fringes(m.fringes, m.cfg.monitor.resolution, m.cfg.decode,
+                                     sensor.saturation_dn if sensor.enabled else None)
+
+
+def compare(m: Member) -> None:
+    """Compare the decoded surface with the decoded specular reference: deviations, masks
+    and statistics (with the render's numerical error, when it states one) into the
+    dataset."""
+    if m.decoded is None:
+        return
+    cfg, geometry, reference = m.cfg, m.geometry, m.reference
+    m.measured = chain.compare(
+        m.decoded, reference.decoded, geometry, reference.distance_mm,
+        cfg.monitor.pixel_pitch_mm, cfg.decode, len(m.fringes.shifts),
+        slope_geometry=chain.SlopeGeometry(geometry.points, m.sim.scene.camera.position,
+                                           m.sim.scene.monitor),
+        off_monitor=m.off_monitor, phase_error=m.phase_error)
+    m.decoded = None
+    m.stats = chain.statistics(m.measured, cfg.name)
+    m.ds = assign_to_dataset(m.ds, m.measured, m.stats)
+
+
+def reconstruct(m: Member) -> None:
+    """Reconstruct the surface from both decoded directions (``[reconstruct]``)."""
+    measured, m.measured = m.measured, None  # the dataset holds views of what it needs
+    if measured is None:
+        return
+    from . import reconstruction as recon
+
+    if not recon.wanted(m.cfg, measured.directions):
+        return
+    rvars, rstats = recon.from_chain(m.cfg, m.sim.scene, measured,
+                                     m.reference.reconstruction)
+    m.stats.update(rstats)
+    coords = {}
+    for name in ("surface_x_mm", "surface_y_mm"):
+        if name in rvars:
+            dims, data, attrs = rvars.pop(name)
+            coords[dims[0]] = (dims, data, attrs)
+    m.ds = m.ds.assign_coords(coords).assign(rvars).assign_attrs(
+        statistics_json=json.dumps(m.stats))
+
+
+def dots(m: Member) -> None:
+    """The dot images' second moments: ``dot_*`` variables and ``dots.csv``."""
+    if m.dot_images is None:
+        return
+    m.dot_table = chain.dot_table(m.dot_images, m.dots, m.cfg.name)
+    m.ds = m.ds.assign(dot_dataset_variables(m.dot_table))
+    pio.write_dot_csv(m.folder / "dots.csv", m.dot_table)
+
+
+def diagnose(m: Member) -> None:
+    """The run diagnostics (with a lobe): maps, summary and warnings."""
+    m.statistics = dict(m.stats)  # statistics.json: the chain's (when decoded) + diagnostics
+    if not m.diagnostics:
+        return
+    m.diagnosed = diagnose_run(m.cfg, m.sim, m.geometry, exclude=m.off_monitor)
+    if m.diagnosed is None:
+        return
+    m.statistics.setdefault("name", m.cfg.name)
+    m.statistics["diagnostics"] = m.diagnosed.summary
+    m.ds = m.ds.assign_coords(m.diagnosed.coords).assign(m.diagnosed.variables).assign_attrs(
+        statistics_json=json.dumps(m.statistics))
+    m.steps.advance()
+
+
+def write(m: Member) -> None:
+    """Wait for the dataset (its last parts, attributes and consolidated metadata) and the
+    image files; write config.json, statistics.json and summary.txt."""
+    m.writer.finish(m.ds)
+    (m.folder / CONFIG_NAME).write_text(m.cfg.model_dump_json(indent=2) + "\n")
+    if m.statistics:
+        (m.folder / "statistics.json").write_text(json.dumps(m.statistics, indent=2) + "\n")
+        (m.folder / "summary.txt").write_text(summary_text_of(m.statistics))
+    m.image_paths = m.images_written.result() if m.images_written is not None else []
+    m.steps.advance()
+
+
+def draw(m: Member) -> None:
+    """Wait for what the drawing processes have left to do; a standalone run draws its dot
+    figures here (a run with variants draws them for all variants together)."""
+    if m.figures is None:
+        return
+    m.figure_paths = m.figures.paths(m.notes)
+    if m.dot_table and m.standalone:
+        from ..report import chain as plot_chain
+
+        m.figure_paths += draw_safely(m.notes, "of the dots", plot_chain.dot_figures,
+                                      m.folder / "figures", {m.cfg.name: m.dot_images},
+                                      {m.cfg.name: m.dot_table}, m.sim, {})
+    m.steps.advance()
+
+
+#: The steps of a member, in order, with the timing (``RunResult.timings``) each adds to.
+STEPS = ((render, "render"), (capture, "render"), (dataset, "write"), (decode, "decode"),
+         (compare, "decode"), (reconstruct, "decode"), (dots, "decode"),
+         (diagnose, "diagnostics"), (write, "write"), (draw, "figures"))
+
+
+# ----------------------------------------------------------------------------- the run
+def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
+               reference=None, standalone: bool = True) -> tuple[RunResult, object]:
+    """Render one configuration ``cfg`` (no variants; one member of the
+    :class:`~pmdsim.run.simulate.RunPlan` ``plan``, which gives the inputs, the progress
+    steps and whether to draw and diagnose) and write its images, dataset, config and
+    figures into ``folder`` (no manifest): :data:`STEPS`. Returns its result and its
+    in-memory dataset.
 
     With a ``reference`` the fringes are decoded and compared with it (statistics.json,
     summary.txt, chain variables and figures). Dots get their moments (dots.csv); their
     figures are drawn here only for a ``standalone`` run (a run with variants draws them
     for all variants together). With ``diagnostics`` (and a lobe) the run diagnostics go
     into the dataset, statistics.json and summary.txt, and their warnings into the result."""
-    dots, image_files, levels, n_tiles = inputs
     folder.mkdir(parents=True, exist_ok=True)
-    if figures:
-        import_in_background()  # matplotlib, while the render runs without the GIL
-    timings: dict[str, float] = {}
-    fr_cfg = cfg.patterns.fringes
-    n_calls = (fr_cfg is not None) + bool(dots) + (levels is not None)
-
-    t = time.perf_counter()
-    fringes = dot_images = images = None
-    if fr_cfg is not None:
-        base = steps.done
-        fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
-                                     progress=steps.tiles())
-        steps.finish_render(base, n_tiles)
-    if dots:
-        base = steps.done
-        dot_images = sim.render_dots(dots, progress=steps.tiles())
-        steps.finish_render(base, n_tiles)
-    if levels is not None:
-        base = steps.done
-        images = sim.render_images(levels, progress=steps.tiles())
-        steps.finish_render(base, n_tiles)
-    timings["render"] = time.perf_counter() - t
-    # nothing empty is written as if it were a result; bundles off the monitor are flagged
-    coverage.check_rendered(None if fringes is None else fringes.images, dot_images)
-    off_monitor = None if fringes is None else coverage.off_monitor_mask(
-        fringes.f_total, fringes.f_hit, geometry.surface_mask,
-        cfg.diagnostics.max_off_monitor_fraction)
-    sensor = Sensor.from_config(cfg.sensor)
-    if sensor.enabled:  # what the camera writes: digital numbers (docs/system.md)
-        if fringes is not None:
-            fringes = replace(fringes, images=capture_dn(sensor, fringes.images, 0))
-        if dot_images is not None:
-            dot_images = capture_dn(sensor, dot_images, 2)
-        if images is not None:
-            images = capture_dn(sensor, images, 3)
-
-    t = time.perf_counter()
-    out = cfg.output
-    stacks = [a for a in (None if fringes is None else fringes.images, dot_images, images)
-              if a is not None]
-    exposure = (pio.exposure_factor(stacks, out.bit_depth) if not sensor.enabled
-                else 2.0 ** min(0, out.bit_depth - sensor.bit_depth))
+    m = Member(cfg, sim, geometry, folder, plan.steps, plan.inputs, reference, standalone,
+               plan.diagnostics)
+    m.timings = {"render": 0.0, "write": 0.0, "decode": 0.0, "diagnostics": 0.0,
+                 "figures": 0.0}
     with contextlib.ExitStack() as stack:
-        # the image files are written by a thread while the chain runs (zlib and NumPy
-        # release the GIL); on an error the with-block waits for it before unwinding
-        writer = stack.enter_context(ThreadPoolExecutor(1, thread_name_prefix="pmdsim-images"))
-        ds = build_dataset(cfg, geometry, fringes, dots, dot_images, image_files, images,
-                           exposure, sim.scene.rays_per_pixel)
-        if off_monitor is not None:
-            ds["lobe_off_monitor"] = (("row", "col"), off_monitor, {
-                "units": "bool", "description": "surface pixels whose bundle puts more than "
-                f"diagnostics.max_off_monitor_fraction = {cfg.diagnostics.max_off_monitor_fraction:g}"
-                " of its weight off the monitor (never valid; counted)"})
-        if fringes is not None and fringes.sums is not None:
-            # the dataset holds the sums' real and imaginary parts: free the complex copy
-            # (2 directions x 3 widths x 16 bytes per pixel, 480 MB at 5 MP)
-            fringes = replace(fringes, sums=None)
-        images_written = writer.submit(pio.write_images, folder, cfg, fringes, dots,
-                                       dot_images, image_files, images, exposure,
-                                       workers=1) if out.write_images else None
-        steps.advance()
-        timings["write"] = time.perf_counter() - t
+        # on an error: the image thread finishes its file, the dataset writer its part,
+        # the drawing processes end (last registered, first undone)
+        m.images_writer = stack.enter_context(
+            ThreadPoolExecutor(1, thread_name_prefix="pmdsim-images"))
+        m.writer = DatasetWriter(folder / DATASET_NAME)
+        stack.callback(m.writer.close)
+        if plan.figures:
+            import_in_background()  # matplotlib, while the render runs without the GIL
+            m.figures = FigureSchedule(
+                cfg.output.figure_set, reference is not None and cfg.patterns.fringes is not None,
+                folder / "figures", cfg.name, description(cfg), sim, cfg.output.figure_workers,
+                # no fork while the reference's reconstruction thread runs
+                before_fork=None if reference is None else reference.settle)
+            stack.callback(m.figures.close)
+        offered = None
+        for step, timing in STEPS:
+            t = time.perf_counter()
+            step(m)
+            m.timings[timing] += time.perf_counter() - t
+            if m.ds is not offered and step is not write:  # something new to write or draw
+                offered = m.ds
+                m.writer.offer(m.ds)
+                if m.figures is not None:
+                    m.figures.offer(m.ds)
+    return result(m), m.ds
 
-        drawings = []
-        stack.callback(lambda: [d.close() for d in drawings])  # an error ends them
-        started: list[str] = []
 
-        def draw(names, ds):
-            """Fork the drawing processes of the figures ``names`` not started yet."""
-            names = [n for n in names if n not in started]
-            started.extend(names)
-            drawings.extend(start_drawings(names, folder / "figures", cfg.name,
-                                           description(cfg), ds, sim, out.figure_workers))
-
-        decoding = reference is not None and fringes is not None
-        if figures:
-            if reference is not None:
-                reference.settle()  # no fork while its reconstruction's thread runs
-            # the set-up and fringe figures need nothing of the chain: drawn meanwhile
-            draw(early_names(figure_plan(ds, out.figure_set, decoding)), ds)
-
-        t = time.perf_counter()
-        stats: dict = {}
-        if decoding:
-            measured = chain.compare(
-                chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
-                                     sensor.saturation_dn if sensor.enabled else None),
-                reference.decoded, geometry, reference.distance_mm, cfg.monitor.pixel_pitch_mm,
-                cfg.decode, len(fringes.shifts),
-                slope_geometry=chain.SlopeGeometry(
-                    geometry.points, sim.scene.camera.position, sim.scene.monitor),
-                off_monitor=off_monitor)
-            stats = chain.statistics(measured, cfg.name)
-            ds = assign_to_dataset(ds, measured, stats)
-            if figures:
-                # the chain's figures (overview, deviation maps, ...) need neither the
-                # reconstruction nor the diagnostics: drawn while those run
-                draw([n for n in figure_names(ds, out.figure_set)
-                      if FIGURES[n][1] == "chain"], ds)
-            from . import reconstruction as recon
-
-            if recon.wanted(cfg, measured.directions):
-                rvars, rstats = recon.from_chain(cfg, sim.scene, measured,
-                                                 reference.reconstruction)
-                stats.update(rstats)
-                for name in ("surface_x_mm", "surface_y_mm"):
-                    if name in rvars:
-                        dims, data, attrs = rvars.pop(name)
-                        ds = ds.assign_coords({dims[0]: (dims, data, attrs)})
-                for name, var in rvars.items():
-                    ds[name] = var
-                ds.attrs["statistics_json"] = json.dumps(stats)
-            del measured
-        dot_table = []
-        if dot_images is not None:
-            dot_table = chain.dot_table(dot_images, dots, cfg.name)
-            for name, var in dot_dataset_variables(dot_table).items():
-                ds[name] = var
-            pio.write_dot_csv(folder / "dots.csv", dot_table)
-        timings["decode"] = time.perf_counter() - t
-
-        t = time.perf_counter()
-        statistics = dict(stats)  # statistics.json: the chain's (when decoded) + diagnostics
-        diagnosed = diagnose_run(cfg, sim, geometry, exclude=off_monitor) if diagnostics else None
-        if diagnosed is not None:
-            ds = ds.assign_coords(diagnosed.coords)
-            for name, var in diagnosed.variables.items():
-                ds[name] = var
-            statistics.setdefault("name", cfg.name)
-            statistics["diagnostics"] = diagnosed.summary
-            ds.attrs["statistics_json"] = json.dumps(statistics)
-            steps.advance()
-        timings["diagnostics"] = time.perf_counter() - t
-
-        if figures:  # the reconstruction's figures are drawn while the dataset is written
-            draw(figure_names(ds, out.figure_set), ds)
-        t = time.perf_counter()
-        write_dataset(ds, folder / DATASET_NAME)
-        (folder / CONFIG_NAME).write_text(cfg.model_dump_json(indent=2) + "\n")
-        if statistics:
-            (folder / "statistics.json").write_text(json.dumps(statistics, indent=2) + "\n")
-            (folder / "summary.txt").write_text(summary_text_of(statistics))
-        image_paths = images_written.result() if images_written is not None else []
-        steps.advance()
-        timings["write"] += time.perf_counter() - t
-
-        figure_paths: list[Path] = []
-        notes: list[str] = []
-        t = time.perf_counter()
-        if figures:
-            # the run waits only for what the drawing processes have left to do
-            for d in drawings:
-                figure_paths += d.paths(notes)
-            order = {n: i for i, n in enumerate(FIGURES)}
-            figure_paths.sort(key=lambda p: order.get(p.stem, len(order)))
-            if dot_table and standalone:
-                from ..report import chain as plot_chain
-
-                figure_paths += draw_safely(notes, "of the dots", plot_chain.dot_figures,
-                                            folder / "figures", {cfg.name: dot_images},
-                                            {cfg.name: dot_table}, sim, {})
-            steps.advance()
-        timings["figures"] = time.perf_counter() - t
-
-    surface_pixels = int(geometry.surface_mask.sum())
-    result = RunResult(
-        outdir=folder, dataset_path=folder / DATASET_NAME, image_paths=tuple(image_paths),
-        figure_paths=tuple(figure_paths), exposure=exposure, shape=sim.shape,
-        surface_pixels=surface_pixels,
-        rays_per_pixel=sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel,
-        rays_traced=surface_pixels * sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel
-        * n_calls, timings=timings,
-        config=cfg, statistics=statistics, notes=tuple(notes),
-        warnings=() if diagnosed is None else diagnosed.warnings)
-    return result, ds
+def result(m: Member) -> RunResult:
+    """The :class:`RunResult` of a finished member."""
+    sim = m.sim
+    n_calls = (m.cfg.patterns.fringes is not None) + bool(m.dots) + (m.inputs[2] is not None)
+    rays = sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel
+    surface_pixels = int(m.geometry.surface_mask.sum())
+    return RunResult(
+        outdir=m.folder, dataset_path=m.folder / DATASET_NAME,
+        image_paths=tuple(m.image_paths), figure_paths=tuple(m.figure_paths),
+        exposure=m.exposure, shape=sim.shape, surface_pixels=surface_pixels,
+        rays_per_pixel=rays, rays_traced=surface_pixels * rays * n_calls,
+        timings=m.timings, config=m.cfg, statistics=m.statistics, notes=tuple(m.notes),
+        warnings=() if m.diagnosed is None else m.diagnosed.warnings)

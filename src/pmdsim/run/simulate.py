@@ -57,9 +57,11 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..config import RESERVED_VARIANT_NAMES, ConfigError, RunConfig, check_resources
+from ..scene.sanity import check_physics
 from ..studies import coverage
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
+from ..scene import resolve_roi
 from . import files as pio
 from .manifest import write_run_manifest, write_variants_manifest
 from .member import run_member
@@ -95,7 +97,8 @@ class RunPlan:
 @single_blas
 def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | None = None,
                    *, overwrite: bool = False, figures: bool | None = None,
-                   decode: bool | None = None, diagnostics: bool = True) -> RunResult:
+                   decode: bool | None = None, diagnostics: bool = True,
+                   client=None) -> RunResult:
     """Simulate ``cfg`` and write a complete run folder ``outdir``.
 
     With ``cfg.variants`` every variant (:meth:`RunConfig.expand`) becomes a complete run
@@ -127,6 +130,12 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         standard error (``[diagnostics] phase_method``) on the ``[diagnostics]`` grid; maps ``diag_*`` in the
         dataset, summary and warnings in statistics.json, summary.txt, the manifest and
         ``RunResult.warnings`` (bounds from ``[diagnostics]``).
+    client : dask.distributed.Client, optional
+        Render the run's tiles (geometry, reference, patterns, diagnostics) on this
+        client's cluster instead of ``compute.scheduler``; the results are byte for byte
+        those of a local run (the stored configuration is unchanged). Everything else (the
+        chain, writing, figures) runs here. See docs/performance.md, "One run across a
+        cluster".
 
     Returns
     -------
@@ -143,8 +152,11 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         fringe widths do not allow it (the message names ``patterns.fringes.widths_px``).
     """
     t_start = time.perf_counter()
+    cfg = resolve_roi(cfg)  # camera.roi = "auto": the window that sees the part, stored as such
     plan = plan_run(cfg, progress, figures, decode, diagnostics)
-    with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp:
+    if client is not None:
+        on_cluster(plan, client)
+    with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp, _current(client):
         t = time.perf_counter()
         # The vision rays and the ideal specular reference do not depend on what a variant
         # may change (BRDF, anisotropy frame, sampling): one of each for all.
@@ -167,14 +179,14 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
             if cfg.variants:
                 result = run_variants(plan, geometry, reference, tmp, shared)
             else:
-                result, _ = run_member(cfg, plan.sim, geometry, tmp, plan.steps, plan.figures,
-                                       plan.inputs, reference=reference, standalone=True,
-                                       diagnostics=plan.diagnostics)
+                result, _ = run_member(plan, cfg, plan.sim, geometry, tmp,
+                                       reference=reference, standalone=True)
                 result = replace(result, notes=tuple(plan.notes) + result.notes,
                                  timings=dict(result.timings, **shared))
         finally:
             if reference is not None:  # a failed or interrupted run leaves no thread behind
                 reference.settle()
+        result = replace(result, notes=result.notes + _check_valid(cfg, result))
         timings = dict(result.timings, total=time.perf_counter() - t_start)
         result = replace(result, timings=timings)
         # the folder's size, measured now that everything but the manifest is written
@@ -189,6 +201,20 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         else:
             write_run_manifest(tmp, cfg, result, timings)
     return moved(result, tmp, Path(outdir).absolute())
+
+
+def _check_valid(cfg: RunConfig, result: RunResult) -> tuple[str, ...]:
+    """Refuse (before the folder is kept) a decoded run with a fringe direction without a
+    valid pixel, naming the stage that removed them (:mod:`pmdsim.studies.valid_pixels`);
+    notes when ``diagnostics.allow_no_valid_pixels`` keeps it."""
+    from ..studies.valid_pixels import check_valid
+
+    h, w = result.shape
+    notes: list[str] = []
+    for sub in result.variants or (result,):
+        notes += check_valid(sub.statistics or {}, h * w, cfg.diagnostics.allow_no_valid_pixels,
+                             sub.config.name if result.variants else "")
+    return tuple(notes)
 
 
 def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
@@ -206,6 +232,8 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
     dots = resolve_dots(cfg)
     image_files, levels = resolve_images(cfg)
     decoding, notes = chain_mode(cfg, decode)
+    for _, c, s in members:  # sensor, display and BRDF that leave no signal: refused here
+        notes += [n for n in check_physics(c, s.scene) if n not in notes]
     n_calls = (cfg.patterns.fringes is not None) + bool(dots) + (levels is not None)
     sim = members[0][2]
     n_tiles = math.ceil(sim.shape[0] / sim.tile_rows)
@@ -216,6 +244,23 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
                    + int(top_figures) + (n_tiles if decoding else 0) + n_diagnosed)
     return RunPlan(cfg, members, (dots, image_files, levels, n_tiles), decoding, notes,
                    figures, diagnostics, steps)
+
+
+def on_cluster(plan: RunPlan, client) -> None:
+    """Render the tiles of every member of ``plan`` on ``client``'s cluster (the
+    simulations' scheduler becomes ``"distributed"``; the configuration is unchanged)."""
+    if "Client" not in type(client).__name__ or not hasattr(client, "get"):
+        raise TypeError(f"client: expected a dask.distributed.Client, got {client!r}")
+    for _, _, sim in plan.members:
+        sim.scheduler = "distributed"
+
+
+def _current(client):
+    """``client`` as the current Dask client of this thread (the tiles' ``dask.compute``
+    finds it), or nothing."""
+    import contextlib
+
+    return client.as_current() if client is not None else contextlib.nullcontext()
 
 
 def moved(result: RunResult, tmp: Path, final: Path, **changes) -> RunResult:
@@ -230,4 +275,4 @@ def moved(result: RunResult, tmp: Path, final: Path, **changes) -> RunResult:
         variants=tuple(moved(r, tmp, final) for r in result.variants), **changes)
 
 
-__all__ = ["RunResult", "RunPlan", "run_simulation", "plan_run"]
+__all__ = ["RunResult", "RunPlan", "run_simulation", "plan_run", "on_cluster"]

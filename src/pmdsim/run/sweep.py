@@ -32,6 +32,7 @@ cluster). The results do not depend on the scheduler.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import json
 import os
@@ -45,7 +46,7 @@ import numpy as np
 
 from ..config import ConfigError, RunConfig, load_config
 from ..studies.sweep import (MAP_VARIABLES, POINT_VARIABLES, SweepPlan, measure_point,
-                             plan_sweep, reference_key)
+                             geometry_key, plan_sweep, reference_key)
 from .threads import single_blas
 
 STORE_NAME = "sweep.zarr"
@@ -176,8 +177,12 @@ def _open_or_create(plan: SweepPlan, outdir: Path, overwrite: bool) -> Path:
     tmp = outdir / f".{STORE_NAME}.tmp-{os.getpid()}"
     if tmp.exists():
         shutil.rmtree(tmp)
-    _create_store(plan, tmp)
-    tmp.rename(store)
+    try:
+        _create_store(plan, tmp)
+        tmp.rename(store)
+    except BaseException:  # interrupted or failed: no half-made store left behind
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     (outdir / CONFIG_NAME).write_text(plan.base.model_dump_json(indent=2) + "\n")
     return store
 
@@ -187,6 +192,74 @@ def done_mask(store: str | Path) -> np.ndarray:
     import zarr
 
     return np.asarray(zarr.open_group(Path(store), mode="r")["done"][...], bool)
+
+
+# ----------------------------------------------------------------------------- claim
+@contextlib.contextmanager
+def claim_sweep(outdir: str | Path):
+    """Hold the sweep folder ``outdir`` for the ``with`` block, as ``simulate`` holds its
+    run folder (:func:`pmdsim.run.claim.claim_output`: a lock on ``<outdir>.lock``, released
+    by the operating system however the process ends). A second sweep on the same folder
+    fails at once with :class:`~pmdsim.run.claim.OutputBusy`; under the claim, temporary
+    stores (``.sweep.zarr.tmp-<pid>``) of processes that no longer exist are removed."""
+    from .claim import claim_output
+
+    outdir = Path(outdir)
+    with claim_output(outdir) as lock:
+        remove_stale_stores(outdir)
+        yield lock
+
+
+def remove_stale_stores(outdir: str | Path) -> list[Path]:
+    """Remove the ``.sweep.zarr.tmp-<pid>`` folders in ``outdir`` of processes that no
+    longer run (or of this one); returns them."""
+    from .claim import _pid_alive, remove_tree
+
+    outdir = Path(outdir)
+    removed = []
+    if not outdir.is_dir():
+        return removed
+    prefix = f".{STORE_NAME}.tmp-"
+    for p in outdir.iterdir():
+        pid = p.name[len(prefix):] if p.name.startswith(prefix) else ""
+        if pid.isdigit() and (int(pid) == os.getpid() or not _pid_alive(int(pid))):
+            remove_tree(p, drain=False, settle_s=0.0)
+            removed.append(p)
+    return removed
+
+
+def check_sweep_resources(plan: SweepPlan, scheduler: str, num_workers: int | None,
+                          local: bool = True):
+    """Refuse, before anything is created, a sweep whose largest point does not fit this
+    machine's memory with the points that run at once (``local`` schedulers: the workers),
+    or whose points together exceed ``compute.max_cpu_hours``; the message names
+    ``sweep.parameters``, the point and the setting (:func:`pmdsim.config.resources.check_study`)."""
+    from ..config.resources import check_study
+
+    at_once = 1 if scheduler == "synchronous" or not local else (num_workers or os.cpu_count() or 1)
+    labels = [f"point {p.index} (" + ", ".join(f"{k} = {v!r}" for k, v in p.values.items()) + ")"
+              for p in plan.points]
+    return check_study([p.config for p in plan.points], "sweep.parameters", concurrent=at_once,
+                       labels=labels, available_bytes=None if local else 2**62)
+
+
+def connect_scheduler(address: str, timeout_s: float = 5.0):
+    """A ``dask.distributed.Client`` of the scheduler at ``address``; an
+    :class:`~pmdsim.config.InputError` naming ``--scheduler`` within ``timeout_s`` when
+    nothing answers there (or dask.distributed is not installed)."""
+    from ..config import InputError
+
+    try:
+        from distributed import Client
+    except ImportError:
+        raise InputError(f"--scheduler {address}: a scheduler address needs dask.distributed "
+                         "(pip install 'dask[distributed]')") from None
+    try:
+        return Client(address, timeout=f"{timeout_s}s")
+    except (OSError, TimeoutError) as err:
+        raise InputError(f"--scheduler {address}: no Dask scheduler answers there within "
+                         f"{timeout_s:g} s ({type(err).__name__}); start one (dask scheduler) "
+                         "or use --scheduler threads/processes") from None
 
 
 # ----------------------------------------------------------------------------- one point
@@ -292,17 +365,34 @@ def run_sweep(cfg: RunConfig | str | Path, outdir: str | Path, *, scheduler: str
         raise ConfigError(f"scheduler: {scheduler!r} is not 'threads', 'synchronous', "
                           "'processes' or a scheduler address such as tcp://host:8786")
     outdir = Path(outdir)
+    check_sweep_resources(plan, scheduler, num_workers, local=client is None and not is_address)
+    remote = connect_scheduler(scheduler) if client is None and is_address else None
+    try:
+        with claim_sweep(outdir):
+            return _run_claimed(plan, outdir, overwrite, client or remote, scheduler,
+                                num_workers, progress, figures, t0)
+    finally:
+        if remote is not None:
+            remote.close()
+
+
+def _run_claimed(plan: SweepPlan, outdir: Path, overwrite: bool, client, scheduler: str,
+                 num_workers, progress, figures: bool, t0: float) -> SweepResult:
+    """:func:`run_sweep` under the claim on ``outdir``."""
     store = _open_or_create(plan, outdir, overwrite)
     done = done_mask(store)
-    # Points that share a specular reference run next to each other (each process keeps
-    # the last two references it decoded).
+    # Points that share a geometry and a specular reference run next to each other (each
+    # process keeps the last two of each: pmdsim.studies.sweep.GEOMETRIES, REFERENCES).
     todo = sorted((p for p in plan.points if not done[p.position]),
-                  key=lambda p: (reference_key(p.config), p.index))
+                  key=lambda p: (geometry_key(p.config), reference_key(p.config), p.index))
     skipped = tuple(p.index for p in plan.points if done[p.position])
     import dask
 
     dec = plan.sweep.decimation
-    keys = [f"pmdsim-sweep-point-{p.index}" for p in todo]
+    # Dask runs independent tasks in the order of their keys (dask.order breaks ties by
+    # key; the local schedulers take them last first): the rank in ``todo`` keeps the
+    # points that share a geometry and a reference together
+    keys = [f"pmdsim-sweep-point-{rank:06d}-{p.index}" for rank, p in enumerate(todo)]
     tasks = [dask.delayed(compute_point, pure=False)(
         str(store), p.position, p.config.model_dump_json(), dec, p.index, dask_key_name=k)
         for p, k in zip(todo, keys)]
@@ -312,11 +402,6 @@ def run_sweep(cfg: RunConfig | str | Path, outdir: str | Path, *, scheduler: str
         computed = []
     elif client is not None:
         computed = _distributed(tasks, client, progress)
-    elif is_address:
-        from distributed import Client
-
-        with Client(scheduler) as c:
-            computed = _distributed(tasks, c, progress)
     elif scheduler == "processes":
         from distributed import Client, LocalCluster
 
@@ -388,5 +473,5 @@ def write_points_csv(ds, path: str | Path) -> Path:
     return path
 
 
-__all__ = ["run_sweep", "SweepResult", "compute_point", "load_sweep", "done_mask",
+__all__ = ["run_sweep", "claim_sweep", "remove_stale_stores", "connect_scheduler", "SweepResult", "compute_point", "load_sweep", "done_mask",
            "points_table", "write_points_csv", "STORE_NAME"]

@@ -16,11 +16,10 @@ not touched and every camera model (pinhole, lens, sub-pixels) gets its own poin
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from ..config import BrdfVariationConfig, ConfigError
+from ..config import BrdfVariationConfig, ConfigError, files
 from ..kernels import bundle as kb
 
 QUANTITIES = ("alpha_tangential", "alpha_radial", "rho_s_scale")
@@ -30,45 +29,10 @@ SUPPORTED_MODELS = (kb.MODEL_WARD, kb.MODEL_BECKMANN)
 
 def load_variation_map(path, quantity: str | None) -> dict[str, np.ndarray]:
     """{quantity: (H, W) float64 grid} from a .npz (arrays named after the quantities) or a
-    .npy/.csv/.txt holding ``quantity``. Raises ConfigError naming ``brdf.variation.file``."""
-    path = Path(path)
-    where = "brdf.variation.file"
-    if not path.is_file():
-        raise ConfigError(f"{where}: BRDF parameter map not found: {path} (check the path)")
-    suffix = path.suffix.lower()
-    try:
-        if suffix == ".npz":
-            with np.load(path, allow_pickle=False) as z:
-                grids = {k: np.asarray(z[k], np.float64) for k in QUANTITIES if k in z.files}
-                if not grids:
-                    raise ConfigError(f"{where}: {path} holds none of the arrays {list(QUANTITIES)} "
-                                      f"(it has {list(z.files)})")
-        elif suffix == ".npy":
-            grids = {quantity: np.asarray(np.load(path, allow_pickle=False), np.float64)}
-        elif suffix in (".csv", ".txt"):
-            text = path.read_text()
-            grids = {quantity: np.loadtxt(path, delimiter="," if "," in text else None, ndmin=2)}
-        else:
-            raise ConfigError(f"{where}: unknown map format {suffix!r} (use .npz, .npy or .csv)")
-    except (OSError, ValueError) as err:
-        if isinstance(err, ConfigError):
-            raise
-        raise ConfigError(f"{where}: cannot read {path} ({err})") from None
-    shape = None
-    for k, g in grids.items():
-        if g.ndim != 2 or min(g.shape) < 2:
-            raise ConfigError(f"{where}: {k} in {path} must be a 2-D grid of at least 2 x 2 "
-                              f"values, got shape {g.shape}")
-        if shape is not None and g.shape != shape:
-            raise ConfigError(f"{where}: the arrays in {path} differ in shape ({shape} and {g.shape})")
-        shape = g.shape
-        if not np.isfinite(g).all():
-            raise ConfigError(f"{where}: {k} in {path} has non-finite values; fill them first")
-        if k == "rho_s_scale" and (g < 0).any():
-            raise ConfigError(f"{where}: rho_s_scale in {path} must be >= 0")
-        if k != "rho_s_scale" and not ((g > 0) & (g <= 2)).all():
-            raise ConfigError(f"{where}: {k} in {path} must lie in (0, 2]")
-    return grids
+    .npy/.csv/.txt holding ``quantity``. Raises a ConfigError
+    (:class:`~pmdsim.config.files.FileInputError`) naming ``brdf.variation.file``
+    (:func:`pmdsim.config.files.read_variation_map`)."""
+    return files.read_variation_map(path, quantity, "brdf.variation.file")
 
 
 @dataclass(frozen=True, eq=False)

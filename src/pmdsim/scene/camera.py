@@ -72,6 +72,10 @@ class Camera:
 
     @classmethod
     def from_config(cls, cfg: CameraConfig) -> "Camera":
+        """The camera of ``cfg``; with a window ``roi`` (a tuple) that window as its sensor
+        (:meth:`CameraConfig.cropped`); ``roi = "auto"`` is resolved by the scene
+        (:func:`pmdsim.scene.auto_roi`)."""
+        cfg = cfg.cropped()
         w, h = cfg.resolution
         if cfg.camera_matrix is not None:
             k = np.asarray(cfg.camera_matrix, np.float64)
@@ -282,9 +286,12 @@ class Camera:
         d = self.ray_directions(np.array([r]), np.array([c]))
         _, p, _, hit = surface.intersect(self.position[None], d)
         if not bool(hit[0]):
-            raise ValueError(
-                "camera.focus_distance_mm: the image centre does not see the surface, so the "
-                "default focus is undefined; give camera.focus_distance_mm"
+            from ..config import ConfigError
+
+            raise ConfigError(
+                "invalid set-up:\n  camera.focus_distance_mm: the image centre does not see "
+                "the surface, so the default focus is undefined; aim the camera at the part "
+                "(camera.look_at_mm, position_mm) or give camera.focus_distance_mm"
             )
         z = float((p[0] - self.position) @ self.rotation[:, 2])
         return replace(self, focus_distance_mm=z)

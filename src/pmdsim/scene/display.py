@@ -20,52 +20,27 @@ stays the nominal-plane hit (what a calibration without a display model assumes)
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..config import files
+
 
 def read_response_lut(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """(drive, relative luminance) of a CSV file of ``drive, luminance`` rows (a header row
-    is skipped); drive scaled to [0, 1] by its maximum, luminance to r(0) = 0, r(1) = 1."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"monitor.response_lut: no such file: {path}")
-    rows = []
-    with path.open() as fh:
-        for row in csv.reader(fh):
-            if not row or row[0].strip().startswith("#"):
-                continue
-            try:
-                rows.append((float(row[0]), float(row[1])))
-            except (ValueError, IndexError):
-                if rows:
-                    raise ValueError(f"monitor.response_lut: {path}: bad row {row}") from None
-    a = np.array(rows, np.float64)
-    if a.shape[0] < 2 or np.any(np.diff(a[:, 0]) <= 0) or np.any(np.diff(a[:, 1]) < 0):
-        raise ValueError(
-            f"monitor.response_lut: {path} needs >= 2 rows with increasing drive and "
-            "non-decreasing luminance"
-        )
-    d = a[:, 0] / a[-1, 0]
-    lum = (a[:, 1] - a[0, 1]) / (a[-1, 1] - a[0, 1])
-    return d, lum
+    is skipped); drive scaled to [0, 1] by its maximum, luminance to r(0) = 0, r(1) = 1.
+    Every problem is a :class:`~pmdsim.config.files.FileInputError` naming
+    ``monitor.response_lut`` (:func:`pmdsim.config.files.read_response_lut`)."""
+    return files.read_response_lut(path, "monitor.response_lut")
 
 
 def read_height_map(path: str | Path) -> np.ndarray:
-    """(rows, cols) heights (mm) of a ``.npy`` file or a CSV of rows; the grid spans the
-    monitor from the centre of pixel (0, 0) to that of pixel (W-1, H-1)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"monitor.flatness_map: no such file: {path}")
-    a = np.load(path) if path.suffix.lower() == ".npy" else np.loadtxt(path, delimiter=",", ndmin=2)
-    a = np.asarray(a, np.float64)
-    if a.ndim != 2 or min(a.shape) < 2 or not np.all(np.isfinite(a)):
-        raise ValueError(f"monitor.flatness_map: {path} must hold a finite 2-D grid of at least "
-                         f"2 x 2 heights (mm), got shape {a.shape}")
-    return a
+    """(rows, cols) heights (mm) of a ``.npy`` file, a CSV of rows or a float TIFF; the grid
+    spans the monitor from the centre of pixel (0, 0) to that of pixel (W-1, H-1). Errors
+    name ``monitor.flatness_map`` (:func:`pmdsim.config.files.read_flatness_map`)."""
+    return files.read_flatness_map(path, "monitor.flatness_map")
 
 
 @dataclass(frozen=True)

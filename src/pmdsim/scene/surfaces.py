@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
 from ..config import ConfigError, FlatSurfaceConfig
 from ..geometry import normalize
+from ..topofile import is_instrument_file, read_topography
 
 
 class Surface(Protocol):
@@ -96,7 +96,6 @@ def surface_from_config(cfg) -> Surface:
 
 # ------------------------------------------------------------------------ sag surfaces
 SAG_TYPES = ("sphere", "conic", "asphere", "xy_polynomial", "zernike", "height_map")
-_HEIGHT_UNITS = {"mm": 1.0, "um": 1e-3, "nm": 1e-6}
 
 
 def zernike_noll(j: int) -> tuple[int, int]:
@@ -139,32 +138,17 @@ def zernike_monomials(j: int) -> np.ndarray:
     return norm * out
 
 
-def load_height_map(path) -> np.ndarray:
-    """A (H, W) float64 height grid from .npy, .csv/.txt (comma or whitespace separated) or
-    a 32/64-bit float .tif/.tiff. Raises ConfigError naming ``surface.file``."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"surface.file: height map not found: {path} (check the path)")
-    suffix = path.suffix.lower()
-    if suffix == ".npy":
-        z = np.load(path, allow_pickle=False)
-    elif suffix in (".csv", ".txt"):
-        text = path.read_text()
-        z = np.loadtxt(path, delimiter="," if "," in text else None, ndmin=2)
-    elif suffix in (".tif", ".tiff"):
-        import tifffile
-
-        z = tifffile.imread(path)
-        if z.dtype.kind != "f":
-            raise ConfigError(f"surface.file: {path} holds {z.dtype} data; store heights as a 32-bit float TIFF")
-    else:
-        raise ConfigError(f"surface.file: unknown height-map format {suffix!r} (use .npy, .csv or a 32-bit float .tif)")
-    z = np.asarray(z, np.float64)
-    if z.ndim != 2 or min(z.shape) < 4:
-        raise ConfigError(f"surface.file: {path} must hold a 2-D grid of at least 4 x 4 heights, got shape {z.shape}")
-    if not np.isfinite(z).all():
-        raise ConfigError(f"surface.file: {path} has {int((~np.isfinite(z)).sum())} non-finite heights; fill them first")
-    return z
+def load_height_map(path, field: str = "surface.file", spacing_mm=(1.0, 1.0), height_unit="mm",
+                    **options):
+    """A (H, W) float64 height grid in mm and its spacing (dx, dy) in mm from an instrument
+    file (X3P, .sur, .plu, ...: units and spacing from the file) or a plain array (.npy,
+    .csv/.txt, 32/64-bit float .tif/.tiff: ``spacing_mm``, ``height_unit``;
+    :func:`pmdsim.config.files.read_height_map`) through
+    :func:`pmdsim.topofile.read_topography` (``options``: ``level``, ``fill``,
+    ``outlier_sigma``). Raises :class:`~pmdsim.config.files.FileInputError` (a
+    ConfigError) naming ``field``."""
+    t = read_topography(path, field, spacing_mm=spacing_mm, height_unit=height_unit, **options)
+    return t.heights, (t.dx, t.dy)
 
 
 def bspline_coefficients(z: np.ndarray) -> np.ndarray:
@@ -232,8 +216,12 @@ class SagSurface:
                 poly[: mono.shape[0], : mono.shape[1]] += c * mono
             kw.update(poly=poly, poly_norm=float(cfg.norm_radius_mm))
         elif cfg.type == "height_map":
-            z = load_height_map(cfg.file) * _HEIGHT_UNITS[cfg.height_unit]
-            dx, dy = (float(v) for v in cfg.spacing_mm)
+            if cfg.spacing_mm is None and not is_instrument_file(cfg.file):
+                raise ConfigError(f"surface.spacing_mm: {cfg.file} holds no sample spacing; "
+                                  "give spacing_mm = [dx, dy] (mm)")
+            z, (dx, dy) = load_height_map(cfg.file, "surface.file", cfg.spacing_mm, cfg.height_unit,
+                                          level=cfg.level,
+                                          fill=cfg.fill, outlier_sigma=cfg.outlier_sigma)
             h, w = z.shape
             origin = (-(w - 1) / 2 * dx, -(h - 1) / 2 * dy) if cfg.origin_mm is None else tuple(cfg.origin_mm)
             kw.update(height_map=z, map_origin=origin, map_spacing=(dx, dy))

@@ -16,24 +16,40 @@ falloff, noise-free), then with all the configuration's effects together:
   the same system (all effects on; and with the ideal system, the scattering alone).
 
 Deviations per fringe direction in phase of the finest width (mrad), monitor coordinate
-(monitor px and mm) and surface slope (urad, ``d_mm / (2 d)``, d the surface-to-monitor
-distance of the pixel). Statistics over pixels valid in every decoding involved: RMS and
-P95 of the absolute value.
+(monitor px and mm) and surface slope (urad: the exact 3-D conversion of
+:func:`pmdsim.measure.chain.slope_deviation_urad`, the same as ``simulate``'s: the tilt
+that moves the exact reflection point by the deviation along the direction's monitor
+axis). Statistics over pixels valid in every decoding involved: RMS and P95 of the
+absolute value.
+
+With fringes in x and y every decoding is also reconstructed as ``simulate`` does
+(:mod:`pmdsim.measure.reconstruct`, ``[reconstruct]`` settings, the camera and monitor of the
+ideal system) and gives a **height row** (:func:`height_row`): slope errors dz/dx, dz/dy
+(urad, surface frame) and the height error (nm RMS/PV/P95) after the removal of
+``[budget]`` (:mod:`pmdsim.measure.form`), with the Zernike tables of what is left. System
+rows: reconstruction minus the true surface; surface rows: the surface's reconstruction
+minus the mirror's through the same system. The calibration rows
+(:mod:`pmdsim.studies.calibration`) reconstruct the ideal mirror's decoding with a
+perturbed calibration.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
 
 from ..config import MirrorConfig, RunConfig
-from ..measure.chain import decode_fringes, surface_to_monitor_mm
-from ..measure.deviation import deviation_stats, slope_deviation
+from ..measure.chain import SlopeGeometry, decode_fringes, slope_deviation_urad, surface_to_monitor_mm
+from ..measure.deviation import deviation_stats
+from ..measure.form import FormSpec, remove_form
+from ..measure.integrate import height_stats
+from ..measure.reconstruct import Reconstruction, reconstruct
 from ..render import Simulation
+from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
 
 QUANTITIES = ("mrad", "px", "mm", "urad")
@@ -145,15 +161,18 @@ def decode_config(cfg: RunConfig, stream: int = 0) -> Decoded:
     return Decoded(coord, valid, time.perf_counter() - t0)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Truth:
-    """Exact monitor coordinates (px) of the chief rays' principal reflections and the
-    surface-to-monitor distance (mm) per pixel."""
+    """Exact monitor coordinates (px) of the chief rays' principal reflections, the
+    surface-to-monitor distance (mm) per pixel and what the 3-D slope conversion needs
+    (the chief rays' geometry and the surface points, camera centre and monitor)."""
 
     coord: dict
     distance_mm: np.ndarray
     pitch_mm: float
     finest_width_px: float
+    geometry: object = None
+    slope_geometry: SlopeGeometry | None = None
 
 
 TRUTHS = ("centre", "footprint")
@@ -173,17 +192,21 @@ def ground_truth(cfg: RunConfig, truth: str = "centre") -> Truth:
         u, v = Simulation.from_config(mirror(cfg)).footprint_specular()
         coord = {"x": u, "y": v}
     return Truth(coord, dist, float(cfg.monitor.pixel_pitch_mm),
-                 float(min(cfg.patterns.fringes.widths_px)))
+                 float(min(cfg.patterns.fringes.widths_px)), geo,
+                 SlopeGeometry(geo.points, sim.scene.camera.position, sim.scene.monitor))
 
 
 def _row(effect: str, label: str, part: str, direction: str, dev_px: np.ndarray, valid: np.ndarray,
          truth: Truth, seconds: float) -> dict:
     row = {"effect": effect, "label": label, "part": part, "direction": direction}
+    with np.errstate(invalid="ignore"):
+        urad = slope_deviation_urad(direction, dev_px, truth.geometry, truth.slope_geometry,
+                                    truth.distance_mm, truth.pitch_mm)
     scales = {
         "mrad": dev_px * (2 * math.pi / truth.finest_width_px) * 1e3,
         "px": dev_px,
         "mm": dev_px * truth.pitch_mm,
-        "urad": slope_deviation(dev_px * truth.pitch_mm, truth.distance_mm) * 1e6,
+        "urad": urad,
     }
     for q, m in scales.items():
         s = deviation_stats(m, valid)
@@ -195,18 +218,177 @@ def _row(effect: str, label: str, part: str, direction: str, dev_px: np.ndarray,
     return row
 
 
+# ------------------------------------------------------------------- height rows
+def form_spec(cfg: RunConfig) -> FormSpec:
+    """The removal of ``[budget]`` (``remove`` None: ``reconstruct.remove``)."""
+    b = cfg.budget
+    return FormSpec.of(cfg.reconstruct.remove if b.remove is None else b.remove, b.remove_zernike,
+                       b.rim_exclusion_mm, b.rim_exclusion_percent, b.zernike_terms)
+
+
+def wants_heights(cfg: RunConfig) -> bool:
+    """Height rows? ``budget.reconstruct``, or (None) whenever fringes run in x and y."""
+    both = {"x", "y"} <= set(cfg.patterns.fringes.directions)
+    if cfg.budget.reconstruct is True and not both:
+        raise ValueError("budget.reconstruct = true needs fringes in both directions: "
+                         "set patterns.fringes.directions = ['x', 'y']")
+    return both if cfg.budget.reconstruct is None else bool(cfg.budget.reconstruct) and both
+
+
+def prior_of(cfg: RunConfig, scene: Scene):
+    """The nominal shape of the reconstruction: ``reconstruct.prior`` or the surface."""
+    if cfg.reconstruct.prior is None:
+        return scene.surface
+    from ..scene.surfaces import surface_from_config
+
+    return surface_from_config(cfg.reconstruct.prior)
+
+
+def reconstruct_decoded(cfg: RunConfig, scene: Scene, dec: "Decoded", camera=None, monitor=None,
+                        prior=None) -> Reconstruction:
+    """Reconstruct a decoding as ``simulate`` does (``[reconstruct]``), with the scene's (or
+    the given, e.g. perturbed) camera, monitor and prior."""
+    rc = cfg.reconstruct
+    u = np.where(dec.valid["x"], dec.coord["x"], np.nan)
+    v = np.where(dec.valid["y"], dec.coord["y"], np.nan)
+    return reconstruct(u, v, camera or scene.camera, monitor or scene.monitor,
+                       prior if prior is not None else prior_of(cfg, scene),
+                       valid=np.isfinite(u) & np.isfinite(v), spacing_mm=rc.spacing_mm,
+                       anchor=rc.anchor, order=rc.order)
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceMaps:
+    """Height (mm) and slopes on a reconstruction grid: a reconstruction's or the true
+    surface's; ``mask``: where defined."""
+
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    height_mm: np.ndarray
+    slope_x: np.ndarray
+    slope_y: np.ndarray
+    mask: np.ndarray
+
+    @classmethod
+    def of(cls, rec: Reconstruction) -> "SurfaceMaps":
+        return cls(rec.x_mm, rec.y_mm, rec.height_mm, rec.slope_x, rec.slope_y, rec.mask)
+
+
+def true_maps(rec: Reconstruction, surface) -> SurfaceMaps:
+    """The true surface's sag and slopes on ``rec``'s grid (its local frame)."""
+    x, y = np.meshgrid(rec.x_mm, rec.y_mm)
+    if hasattr(surface, "sag"):
+        z, gx, gy, _ = surface.sag(x, y)
+        ok = np.asarray(surface.in_aperture(x, y), bool) & np.isfinite(z)
+    else:  # flat rectangle
+        z = np.zeros_like(x)
+        gx = gy = z
+        ok = np.ones(x.shape, bool)
+    return SurfaceMaps(rec.x_mm, rec.y_mm, np.asarray(z, np.float64), np.asarray(gx, np.float64),
+                       np.asarray(gy, np.float64), ok)
+
+
+@dataclass(frozen=True, eq=False)
+class HeightError:
+    """A height row's maps: slope errors (urad) and the height error after removal (nm)."""
+
+    slope_x_urad: np.ndarray
+    slope_y_urad: np.ndarray
+    height_nm: np.ndarray
+    form: object
+
+
+def height_error(meas: SurfaceMaps, base: SurfaceMaps, spec: FormSpec, disc=(None, None),
+                 shift_mm: float = 0.0) -> HeightError:
+    """``meas`` minus ``base`` on the same grid: slope errors and the height error after
+    ``spec`` (``shift_mm`` added to ``meas``'s height: its frame's offset along z)."""
+    m = meas.mask & base.mask & np.isfinite(meas.height_mm) & np.isfinite(base.height_mm)
+    x, y = np.meshgrid(meas.x_mm, meas.y_mm)
+    e = np.where(m, meas.height_mm + shift_mm - base.height_mm, np.nan)
+    form = remove_form(e, m, x, y, spec, true_height=np.where(m, base.height_mm, 0.0), disc=disc)
+    keep = form.mask
+    ex = np.where(keep, meas.slope_x - base.slope_x, np.nan) * 1e6
+    ey = np.where(keep, meas.slope_y - base.slope_y, np.nan) * 1e6
+    return HeightError(ex, ey, form.residual * 1e6, form)
+
+
+def _zernike_disc(surface):
+    ap = getattr(surface, "aperture", None)
+    if isinstance(ap, tuple) and ap[0] in ("circular", "annular"):
+        return (ap[1], ap[2]), ap[3]
+    return None, None
+
+
+def _about_zero(a) -> tuple[float, float]:
+    f = np.abs(a[np.isfinite(a)])
+    if not f.size:
+        return float("nan"), float("nan")
+    return float(np.sqrt(np.mean(f * f))), float(np.percentile(f, 95))
+
+
+def height_row(effect: str, label: str, part: str, err: HeightError, seconds: float = 0.0,
+               how: str = "") -> dict:
+    """Slope errors X/Y (urad RMS and P95 about zero) and height error after removal (nm
+    RMS about the mean, PV, P95) of one effect; Zernike tables and sphere radii alongside."""
+    row = {"effect": effect, "label": label, "part": part}
+    for k, a in (("x", err.slope_x_urad), ("y", err.slope_y_urad)):
+        row[f"slope_rms_{k}_urad"], row[f"slope_p95_{k}_urad"] = _about_zero(a)
+    hs = height_stats(err.height_nm)
+    row.update(height_rms_nm=hs.rms, height_pv_nm=hs.pv, height_p95_nm=hs.p95, n_nodes=hs.n,
+               removed=err.form.removed, rim_excluded=err.form.excluded_rim,
+               seconds=round(seconds, 2), how=how)
+    if err.form.sphere is not None:
+        row["sphere"] = err.form.sphere
+    row["zernike_noll_nm"] = [dict(t, coefficient=t["coefficient"] * 1e6) for t in err.form.noll]
+    row["zernike_fringe_nm"] = [dict(t, coefficient=t["coefficient"] * 1e6) for t in err.form.fringe]
+    return row
+
+
+# ------------------------------------------------------------------------ budget
+@dataclass(frozen=True, eq=False)
+class Budget:
+    """Result of :func:`budget`: ``rows`` per (effect, direction) in every unit of
+    ``QUANTITIES``; ``height_rows`` per effect (:func:`height_row`; empty without x and y
+    fringes), calibration rows among them (``part == "calibration"``); ``settings`` (truth,
+    estimator, removal, calibration uncertainties)."""
+
+    rows: list
+    height_rows: list = field(default_factory=list)
+    settings: dict = field(default_factory=dict)
+
+
 def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
-           truth: str = "centre") -> list[dict]:
-    """The error budget of ``cfg`` (module docstring): a list of table rows, one per
-    (effect or part, direction); every row has ``rms_*`` and ``p95_*`` in ``QUANTITIES``.
-    ``truth``: the ground truth of the system rows, ``centre`` (the chief ray through the
-    pixel centre) or ``footprint`` (averaged over the pixel's vision rays)."""
+           truth: str = "centre") -> Budget:
+    """The error budget of ``cfg`` (module docstring). ``truth``: the ground truth of the
+    system rows, ``centre`` (the chief ray through the pixel centre) or ``footprint``
+    (averaged over the pixel's vision rays)."""
     if cfg.patterns.fringes is None:
         raise ValueError("patterns.fringes: the budget decodes fringes; configure some")
     say = progress or (lambda msg: None)
-    truth = ground_truth(cfg, truth)
+    heights = wants_heights(cfg)
+    spec = form_spec(cfg)
+    kind = truth
+    truth = ground_truth(cfg, kind)
     rows: list[dict] = []
+    hrows: list[dict] = []
     dirs = cfg.patterns.fringes.directions
+    ideal = ideal_config(cfg)
+    scene = Scene.from_config(mirror(ideal))
+    disc = _zernike_disc(scene.surface)
+    recs: dict = {}
+    true_cache: dict = {}
+
+    def rec_of(name, dec):
+        t0 = time.perf_counter()
+        rec = reconstruct_decoded(cfg, scene, dec)
+        recs[name] = rec
+        return rec, time.perf_counter() - t0
+
+    def truth_of(rec):
+        key = (rec.x_mm.size, rec.y_mm.size, float(rec.x_mm[0]), float(rec.y_mm[0]))
+        if key not in true_cache:
+            true_cache[key] = true_maps(rec, scene.surface)
+        return true_cache[key]
 
     def system(name, label, c):
         say(f"system: {label}")
@@ -214,31 +396,50 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
         for d in dirs:
             ok = dec.valid[d] & np.isfinite(truth.coord[d])
             rows.append(_row(name, label, "system", d, dec.coord[d] - truth.coord[d], ok, truth, dec.seconds))
+        if heights:
+            rec, sec = rec_of(name, dec)
+            hrows.append(height_row(name, label, "system",
+                                    height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc),
+                                    dec.seconds + sec, "reconstruction minus the true surface"))
         return dec
 
-    system("ideal", "ideal system (reference)", ideal_config(cfg))
+    ideal_dec = system("ideal", "ideal system (reference)", ideal)
     present = [e for e in EFFECTS if e.present(cfg)]
     for e in present:
         system(e.name, e.label, with_effects(cfg, [e.name]))
     full = with_effects(cfg, [e.name for e in present])
     ref_full = system("all_system", "all system effects together", full)
 
-    def surface(name, label, c, ref):
+    def surface(name, label, c, ref, ref_name):
         say(f"surface: {label}")
         dec = decode_config(c, stream=1)
         for d in dirs:
             ok = dec.valid[d] & ref.valid[d]
             rows.append(_row(name, label, "surface", d, dec.coord[d] - ref.coord[d], ok, truth,
                              dec.seconds))
+        if heights:
+            rec, sec = rec_of(name, dec)
+            hrows.append(height_row(name, label, "surface",
+                                    height_error(SurfaceMaps.of(rec), SurfaceMaps.of(recs[ref_name]),
+                                                 spec, disc),
+                                    dec.seconds + sec, "surface's reconstruction minus the mirror's"))
 
     if not cfg.brdf.model == "mirror":
-        ideal = ideal_config(cfg)
-        say("system: ideal mirror (reference for the surface)")
-        ref_ideal = decode_config(mirror(ideal))
-        surface("surface_ideal", "surface scattering, ideal system", ideal, ref_ideal)
-        surface("surface", "surface scattering, through the full system", full, ref_full)
-    return rows
+        surface("surface_ideal", "surface scattering, ideal system", ideal, ideal_dec, "ideal")
+        surface("surface", "surface scattering, through the full system", full, ref_full, "all_system")
+    settings = {"truth": kind, "estimator": cfg.sampling.estimator,
+                "brdf": cfg.brdf.model, "removed": spec.describe()}
+    if heights and cfg.budget.calibration_rows:
+        from .calibration import calibration_rows
+
+        say("calibration rows")
+        hrows += calibration_rows(cfg, scene, ideal_dec, recs["ideal"], spec, disc)
+        settings["calibration"] = cfg.budget.calibration.model_dump()
+    return Budget(rows, hrows, settings)
 
 
 TABLE_COLUMNS = ("effect", "part", "direction", "rms_mrad", "p95_mrad", "rms_px", "p95_px",
                  "rms_mm", "p95_mm", "rms_urad", "p95_urad", "mean_px", "n_valid", "seconds", "label")
+HEIGHT_COLUMNS = ("effect", "part", "slope_rms_x_urad", "slope_rms_y_urad", "slope_p95_x_urad",
+                  "slope_p95_y_urad", "height_rms_nm", "height_pv_nm", "height_p95_nm", "n_nodes",
+                  "rim_excluded", "removed", "seconds", "label", "how")

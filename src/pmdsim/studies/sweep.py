@@ -39,6 +39,7 @@ import numpy as np
 
 from ..measure.chain import QUANTITIES, STATISTICS, decode_problem
 from ..config import ConfigError, RunConfig, SweepConfig, SweepRange, parse_config
+from ..config.resources import check_sweep_size
 
 #: Variables of a point: name -> (dimensions after the sweep's own, dtype, attributes).
 #: ``width`` is the index into ``patterns.fringes.widths_px`` (as given), ``row``/``col``
@@ -208,6 +209,7 @@ def plan_sweep(cfg: RunConfig, sweep: SweepConfig | None = None) -> SweepPlan:
         raise ConfigError("no [sweep] table in the configuration: add one naming the fields "
                           "to sweep (see docs/sweeps.md)")
     base = cfg.model_copy(update={"sweep": sweep})
+    check_sweep_size(base)  # before planning (validating) every point
     dump = cfg.model_dump(mode="json", exclude={"sweep"})
     for path in sweep.parameters:
         if path.split(".")[0] in ("sweep", "variants", "name", "compute", "output"):
@@ -277,35 +279,82 @@ def plan_sweep(cfg: RunConfig, sweep: SweepConfig | None = None) -> SweepPlan:
 
 
 # ----------------------------------------------------------------------------- one point
-_REFERENCES: "OrderedDict[str, tuple]" = OrderedDict()
-_REFERENCES_LOCK = threading.Lock()
-#: Decoded specular references kept per process (they depend only on the camera, monitor,
-#: surface, fringes and decoding, so a sweep over BRDF parameters renders one).
-REFERENCE_CACHE_SIZE = 2
+#: Sections of a configuration that the vision-ray geometry (:meth:`Simulation.geometry`:
+#: surface and monitor masks, exact specular points, surface points) does not depend on.
+#: Every other section (camera, monitor, surface, and any section added later) is part of
+#: :func:`geometry_key`: a new section is never wrongly shared, at worst shared less.
+NOT_GEOMETRY = frozenset({"name", "brdf", "anisotropy", "sampling", "patterns", "decode",
+                          "reconstruct", "sensor", "diagnostics", "compute", "output",
+                          "variants", "sweep"})
+#: Sections the decoded ideal specular reference does not depend on (it is the mirror,
+#: one ray per pixel: no BRDF, frame or sampling).
+NOT_REFERENCE = frozenset({"name", "brdf", "anisotropy", "sampling", "diagnostics",
+                           "compute", "output", "variants", "sweep"})
+
+
+def _key(cfg: RunConfig, exclude: frozenset) -> str:
+    import hashlib
+
+    text = json.dumps(cfg.model_dump(mode="json", exclude=set(exclude)), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def geometry_key(cfg: RunConfig) -> str:
+    """The hash (SHA-256 of the JSON) of the configuration sections the vision-ray geometry
+    depends on: points with the same key share one :class:`~pmdsim.render.Geometry`."""
+    return _key(cfg, NOT_GEOMETRY)
 
 
 def reference_key(cfg: RunConfig) -> str:
-    """What the ideal specular reference of a point depends on (everything but the BRDF, its
-    frame, the sampling and the diagnostics), as text: points with the same key share it."""
-    return json.dumps(cfg.model_dump(mode="json", exclude={
-        "name", "brdf", "anisotropy", "sampling", "diagnostics", "compute", "output",
-        "variants", "sweep"}), sort_keys=True)
+    """The hash of the configuration sections the decoded ideal specular reference depends
+    on (everything but the BRDF, its frame, the sampling and what only says how to run):
+    points with the same key share it."""
+    return _key(cfg, NOT_REFERENCE)
 
 
-def _reference(cfg: RunConfig, sim, geometry):
-    from ..measure import chain
+class KeyedCache:
+    """The last ``size`` values by key, each made once per process (threads that ask for a
+    key being made wait for it), with counts of what was made and what was reused."""
 
-    key = reference_key(cfg)
-    with _REFERENCES_LOCK:
-        if key in _REFERENCES:
-            _REFERENCES.move_to_end(key)
-            return _REFERENCES[key]
-    value = chain.decode_specular_reference(cfg, sim, geometry)
-    with _REFERENCES_LOCK:
-        _REFERENCES[key] = value
-        while len(_REFERENCES) > REFERENCE_CACHE_SIZE:
-            _REFERENCES.popitem(last=False)
-    return value
+    def __init__(self, size: int):
+        self.size = size
+        self._items: "OrderedDict[str, object]" = OrderedDict()
+        self._lock = threading.Lock()
+        self._making: dict[str, threading.Lock] = {}
+        self.made = self.reused = 0
+
+    def get(self, key: str, make):
+        with self._lock:
+            if key in self._items:
+                self._items.move_to_end(key)
+                self.reused += 1
+                return self._items[key]
+            making = self._making.setdefault(key, threading.Lock())
+        with making:
+            with self._lock:
+                if key in self._items:
+                    self.reused += 1
+                    return self._items[key]
+            value = make()
+            with self._lock:
+                self._items[key] = value
+                self.made += 1
+                self._making.pop(key, None)
+                while len(self._items) > self.size:
+                    self._items.popitem(last=False)
+        return value
+
+    def clear(self) -> None:
+        with self._lock:
+            self._items.clear()
+            self.made = self.reused = 0
+
+
+#: Per process (a sweep worker keeps them from point to point): the vision-ray geometries
+#: and the decoded specular references of the last two distinct set-ups. Points sharing
+#: them are scheduled next to each other (:mod:`pmdsim.run.sweep`).
+GEOMETRIES = KeyedCache(2)
+REFERENCES = KeyedCache(2)
 
 
 def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchronous") -> dict:
@@ -339,8 +388,9 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
 
     sim = Simulation.from_config(cfg)
     sim = Simulation(sim.scene, sim.tile_rows, scheduler, None)
-    geometry = sim.geometry()
-    ref_decoded, distance = _reference(cfg, sim, geometry)
+    geometry = GEOMETRIES.get(geometry_key(cfg), sim.geometry)
+    ref_decoded, distance = REFERENCES.get(
+        reference_key(cfg), lambda: chain.decode_specular_reference(cfg, sim, geometry))
     fr_cfg = cfg.patterns.fringes
     fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts)
     sensor = Sensor.from_config(cfg.sensor)
@@ -381,4 +431,5 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
 
 
 __all__ = ["SweepPoint", "SweepPlan", "plan_sweep", "point_seed", "measure_point", "reference_key",
+           "geometry_key", "KeyedCache", "GEOMETRIES", "REFERENCES",
            "POINT_VARIABLES", "MAP_VARIABLES", "QUANTITIES", "STATISTICS"]

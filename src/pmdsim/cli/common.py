@@ -1,0 +1,121 @@
+"""What every command shares: the Typer app, the exit codes, the console, bad input as
+one red line (exit 2) and interrupts (exit 130/143)."""
+
+from __future__ import annotations
+
+import contextlib
+
+import typer
+from rich.console import Console
+
+app = typer.Typer(
+    name="pmdsim",
+    help="Simulate Phase Measuring Deflectometry (PMD) of scattering surfaces by reverse "
+    "ray tracing with a BRDF-weighted ray bundle per camera pixel.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode="markdown",  # docstring lines join into paragraphs
+)
+
+#: Exit code for bad input (configuration, files, output folder).
+EXIT_BAD_INPUT = 2
+#: Exit codes of a run stopped by SIGINT (Ctrl-C) / SIGTERM (128 + signal number).
+EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143
+
+
+def _bad_input() -> tuple[type[BaseException], ...]:
+    """The exceptions that mean bad input (exit code 2): everything else is a bug."""
+    from ..config import ConfigError, InputError
+
+    return (ConfigError, InputError, FileExistsError, PermissionError, NotADirectoryError,
+            IsADirectoryError)
+
+
+@contextlib.contextmanager
+def _guard():
+    """Bad input -> one red line, exit 2; SIGINT/SIGTERM -> a note, exit 130/143 (the run's
+    temporary folder is already removed); anything else propagates (traceback, exit 1)."""
+    from ..run.claim import Terminated
+
+    try:
+        yield
+    except _bad_input() as err:
+        _fail(str(err))
+    except KeyboardInterrupt as err:
+        term = isinstance(err, Terminated)
+        _console(stderr=True).print(
+            f"{'terminated' if term else 'interrupted'}: stopped; nothing was written "
+            "(the temporary folder was removed)", style="bold red", markup=False)
+        raise typer.Exit(EXIT_TERMINATED if term else EXIT_INTERRUPTED) from None
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        from .._version import __version__
+
+        _console().print(f"pmdsim {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", callback=_version_callback,
+                                 is_eager=True, help="Print the pmdsim version and exit."),
+) -> None:
+    """Simulate Phase Measuring Deflectometry (PMD) of scattering surfaces by reverse ray
+    tracing with a BRDF-weighted ray bundle per camera pixel."""
+
+
+def _console(stderr: bool = False) -> Console:
+    return Console(stderr=stderr, soft_wrap=True, highlight=False)
+
+
+def _fail(message: str) -> None:
+    _console(stderr=True).print(f"error: {message}", style="bold red", markup=False)
+    raise typer.Exit(EXIT_BAD_INPUT)
+
+
+def _si(x: float) -> str:
+    for unit, scale in (("G", 1e9), ("M", 1e6), ("k", 1e3)):
+        if abs(x) >= scale:
+            return f"{x / scale:.2f} {unit}"
+    return f"{x:.0f}"
+
+
+def _numbers(text: str | None, name: str, kind=float) -> list | None:
+    if text is None:
+        return None
+    import math
+
+    from ..config import InputError
+
+    try:
+        values = [kind(x) for x in text.replace(" ", "").split(",") if x]
+    except ValueError:
+        raise InputError(f"{name} must be comma-separated numbers, got {text!r}") from None
+    bad = [v for v in values if not math.isfinite(v) or v <= 0]
+    if bad:
+        raise InputError(f"{name} must be positive finite numbers, got {bad[0]!r} in {text!r}")
+    return values
+
+
+def _output_folder(path, option: str = "-o") -> None:
+    """Refuse, before any computation, an output folder that cannot be one: an existing
+    file (or a path below one), or a folder that cannot be created or written."""
+    import os
+    from pathlib import Path
+
+    if path is None:
+        return
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        _fail(f"{option} {path}: exists and is a file, not a folder; choose another {option}")
+    parent = path if path.exists() else next((p for p in path.absolute().parents if p.exists()),
+                                             None)
+    if parent is not None and not parent.is_dir():
+        _fail(f"{option} {path}: {parent} is a file, so no folder can be made below it; "
+              f"choose another {option}")
+    if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
+        _fail(f"{option} {path}: {parent} is not writable; choose another {option}")

@@ -1,0 +1,114 @@
+"""The whole configuration (:class:`RunConfig`) composed of the sections, and the checks
+across sections."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from pydantic import Field, model_validator
+
+from .base import _Model
+from .camera import CameraConfig
+from .monitor import MonitorConfig
+from .surface import SurfaceConfig
+from .anisotropy import AnisotropyConfig
+from .brdf import BeckmannConfig, BrdfConfig, SlopeDensityConfig, WardConfig
+from .sampling import SamplingConfig
+from .patterns import PatternsConfig
+from .diagnostics import DiagnosticsConfig
+from .compute import ComputeConfig
+from .output import OutputConfig
+from .reconstruct import ReconstructConfig
+from .decode import DecodeConfig
+from .sensor import SensorConfig
+from .budget import BudgetConfig
+from .sweep import SweepConfig
+from .variants import VariantConfig
+
+
+class RunConfig(_Model):
+    """Everything a simulation needs.
+
+    With ``variants`` the run simulates each variant (same camera, monitor, surface shape
+    and patterns; its own BRDF/anisotropy/sampling); :meth:`expand` lists them.
+    """
+
+    name: Annotated[str, Field(max_length=200)] = "pmdsim-run"
+    camera: CameraConfig
+    monitor: MonitorConfig
+    surface: SurfaceConfig
+    anisotropy: AnisotropyConfig = AnisotropyConfig()
+    brdf: BrdfConfig
+    sampling: SamplingConfig = SamplingConfig()
+    patterns: PatternsConfig = PatternsConfig()
+    compute: ComputeConfig = ComputeConfig()
+    output: OutputConfig = OutputConfig()
+    decode: DecodeConfig = DecodeConfig()
+    reconstruct: ReconstructConfig = ReconstructConfig()
+    diagnostics: DiagnosticsConfig = DiagnosticsConfig()
+    sensor: SensorConfig = SensorConfig()
+    budget: BudgetConfig = BudgetConfig()
+    variants: Annotated[tuple[VariantConfig, ...], Field(max_length=64)] = ()
+    sweep: SweepConfig | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_surface_type(cls, data):
+        # ``surface.type`` defaults to "flat" (as documented); the tagged union needs the tag.
+        if isinstance(data, dict) and isinstance(data.get("surface"), dict) and "type" not in data["surface"]:
+            data = dict(data, surface=dict(data["surface"], type="flat"))
+        return data
+
+    @model_validator(mode="before")
+    @classmethod
+    def _variation_models(cls, data):
+        # brdf.variation exists for Ward and Beckmann only: name the field, not the union
+        if isinstance(data, dict):
+            _check_variation_model(data.get("brdf"), "brdf")
+            if isinstance(data.get("variants"), (list, tuple)):
+                for k, v in enumerate(data["variants"]):
+                    if isinstance(v, dict):
+                        _check_variation_model(v.get("brdf"), f"variants.{k}.brdf")
+        return data
+
+    @model_validator(mode="after")
+    def _check(self) -> "RunConfig":
+        _check_alpha_frame(self.brdf, self.anisotropy, "brdf")
+        names = [v.name for v in self.variants]
+        if len(set(names)) != len(names):
+            raise ValueError(f"variants: names must be unique, got {names}")
+        for k, v in enumerate(self.variants):
+            _check_alpha_frame(v.brdf or self.brdf, v.anisotropy or self.anisotropy,
+                               f"variants.{k}.brdf")
+        return self
+
+    def expand(self) -> list[tuple[str, "RunConfig"]]:
+        """(name, config) of every variant with its sections applied; the run itself when
+        there are no variants."""
+        if not self.variants:
+            return [(self.name, self)]
+        out = []
+        for v in self.variants:
+            changes = {k: getattr(v, k) for k in ("brdf", "anisotropy", "sampling")
+                       if getattr(v, k) is not None}
+            out.append((v.name, self.model_copy(update=dict(changes, variants=(), name=v.name))))
+        return out
+
+
+def _check_variation_model(brdf, where: str) -> None:
+    if isinstance(brdf, dict) and "variation" in brdf and brdf.get("model") not in ("ward", "beckmann"):
+        raise ValueError(
+            f"{where}.variation: spatially varying BRDF parameters are supported for "
+            f"model 'ward' and 'beckmann' only, got {where}.model = {brdf.get('model')!r}; "
+            f"remove {where}.variation or change the model")
+
+
+def _check_alpha_frame(brdf, anisotropy, where: str) -> None:
+    if (isinstance(brdf, (WardConfig, BeckmannConfig, SlopeDensityConfig))
+            and brdf.alpha_tangential is not None):
+        if anisotropy.frame != "rotational":
+            raise ValueError(
+                f"{where}.alpha_tangential/alpha_radial need anisotropy.frame = 'rotational'; "
+                "with a fixed frame use "
+                + ("alpha_u/alpha_v" if isinstance(brdf, BeckmannConfig) else "alpha_x/alpha_y")
+            )

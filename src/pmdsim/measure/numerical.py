@@ -1,0 +1,83 @@
+"""The numerical error of a simulated measurement, propagated from the rendered sums.
+
+A render in mode ``rule`` or ``rqmc`` states the numerical error of every fringe sum
+(:attr:`pmdsim.render.FringeResult.sums_err`) and of the phase each sum decodes to
+(:meth:`~pmdsim.render.FringeResult.phase_error`, rad). The decoded deviation is taken at
+the finest fringe width (coarser widths only pick the fringe order, which a numerical error
+far below pi does not change), and the specular reference is exact (one ray), so the
+deviation's numerical error is the finest width's phase error carried through the same
+linear maps as the deviation itself:
+
+- phase: ``delta phi`` (rad; reported in mrad);
+- monitor coordinate: ``delta c = delta phi w / (2 pi)`` (monitor px; times the pitch in mm);
+- slope: the slope change for a coordinate change ``delta c`` at the pixel's deviation,
+  ``|s(c + delta c) - s(c)|`` with the chain's own slope conversion (3-D or small angle).
+
+Everything here works on plain arrays; :func:`propagate` is what the chain, the budget and
+the fit use.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: Quantities of the numerical error (same names and units as the deviation's).
+QUANTITIES = ("phase_mrad", "coord_px", "coord_mm", "slope_urad")
+
+
+def finest_phase_error(fringes, direction: str) -> np.ndarray | None:
+    """(H, W) rad: the phase error of the finest width of one direction of a
+    :class:`~pmdsim.render.FringeResult`; None when the render states none."""
+    pe = fringes.phase_error()
+    if pe is None or direction not in fringes.directions:
+        return None
+    wi = int(np.argmin(fringes.widths))
+    return pe[fringes.directions.index(direction), wi]
+
+
+def propagate(phase_err: np.ndarray, width_px: float, pitch_mm: float,
+              slope_of_coord=None, coord_px: np.ndarray | None = None) -> dict:
+    """Numerical error maps {quantity: (H, W)} from a phase error (rad) of fringes of
+    period ``width_px``. ``slope_of_coord``: the chain's conversion coord deviation (px) ->
+    slope deviation (urad), evaluated at ``coord_px`` and ``coord_px + delta c``."""
+    phase_err = np.asarray(phase_err, np.float64)
+    dc = phase_err * width_px / (2 * math.pi)
+    out = {"phase_mrad": phase_err * 1e3, "coord_px": dc, "coord_mm": dc * pitch_mm}
+    if slope_of_coord is not None:
+        c0 = np.zeros_like(dc) if coord_px is None else np.where(np.isfinite(coord_px), coord_px, 0.0)
+        out["slope_urad"] = np.abs(slope_of_coord(c0 + dc) - slope_of_coord(c0))
+    return out
+
+
+def summary(error_maps: dict, valid: np.ndarray) -> dict:
+    """{quantity: {"rms", "p95", "max"}} of the numerical error over the valid pixels (None
+    where there are none)."""
+    out = {}
+    v = np.asarray(valid, bool)
+    for k, m in error_maps.items():
+        a = np.asarray(m, np.float64)[v]
+        a = a[np.isfinite(a)]
+        if a.size == 0:
+            out[k] = {"rms": None, "p95": None, "max": None}
+            continue
+        out[k] = {"rms": float(np.sqrt(np.mean(a * a))), "p95": float(np.percentile(a, 95)),
+                  "max": float(a.max())}
+    return out
+
+
+def exceeds(value: float | None, error: float | None, share: float = 0.1) -> bool:
+    """Whether a numerical error is more than ``share`` of the value it belongs to."""
+    if value is None or error is None or not (math.isfinite(value) and math.isfinite(error)):
+        return False
+    return error > share * abs(value)
+
+
+def format_pm(value: float | None, error: float | None, fmt: str = ".3g") -> str:
+    """``"value ± error"`` (the value alone without an error)."""
+    if value is None or not math.isfinite(value):
+        return "-"
+    if error is None or not math.isfinite(error):
+        return format(value, fmt)
+    return f"{format(value, fmt)} ± {error:.2g}"

@@ -1,0 +1,109 @@
+"""``pmdsim fit``: fit a BRDF's alphas to fringe images and write the result to a folder.
+
+OUT/fit.json (every number, ``success`` and ``reason``), fit.txt (the table), fit.png
+(modulation against width) and the marker ``pmdsim-fit.json``. The folder is checked before
+anything is read or computed (an existing file or folder is refused unless ``overwrite``
+and it is a fit folder) and created atomically (:func:`pmdsim.run.files.atomic_run_dir`).
+A fit that *failed* (:attr:`pmdsim.studies.fit.FitResult.success` false: not converged,
+an alpha at its bound, or a reduced chi-square above ``max_chi2``) is written all the same,
+marked failed in fit.json, fit.txt and the figure's title; the caller decides the exit code.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..config import ConfigError, InputError, RunConfig
+from ..studies.fit import (MAX_CHI2, MAX_RAYS, FitResult, NoiseModel, check_fit_resources,
+                           fit_fringe_images, format_fit)
+from . import files as pio
+from .threads import single_blas
+
+MARKER = "pmdsim-fit.json"
+
+
+@dataclass(frozen=True)
+class FitRun:
+    result: FitResult
+    text: str
+    json: Path
+    figure: Path | None
+    outdir: Path
+    saturated: int = 0
+
+
+def check_fit_output(outdir, overwrite: bool = False) -> Path:
+    """Refuse, before any work, an output that may not become a fit folder."""
+    final = Path(outdir).absolute()
+    if final.exists() and not final.is_dir():
+        raise FileExistsError(f"output {final} is an existing file, not a folder: name a new "
+                              "folder for fit.json, fit.txt and fit.png")
+    pio.check_output_dir(final, overwrite, MARKER)
+    return final
+
+
+def load_fit_images(cfg: RunConfig, image_paths) -> tuple[np.ndarray, NoiseModel | None, int]:
+    """The images as (directions, widths, K, H, W) signal values (the sensor's dark level
+    subtracted, saturated values NaN), the sensor's noise model (None without an enabled
+    ``[sensor]``) and the count of saturated values."""
+    from ..measure.images import load_image_stack
+
+    fr = cfg.patterns.fringes
+    if fr is None:
+        raise ConfigError("fit: the configuration needs [patterns.fringes] (widths_px, shifts, "
+                          "directions) describing the images")
+    paths = [Path(p) for p in image_paths]
+    nd, nw, k = len(fr.directions), len(fr.widths_px), fr.shifts
+    stack = load_image_stack(paths).astype(np.float64)
+    if stack.shape[0] != nd * nw * k:
+        raise InputError(f"fit: {stack.shape[0]} frames in {len(paths)} files, but "
+                         f"patterns.fringes describes {nd} directions x {nw} widths x {k} "
+                         f"shifts = {nd * nw * k} (order: direction, width, shift)")
+    images = stack.reshape(nd, nw, k, *stack.shape[-2:])
+    noise = None
+    saturated = 0
+    sensor = getattr(cfg, "sensor", None)
+    if sensor is not None and sensor.enabled:
+        from ..scene.sensor import Sensor
+
+        s = Sensor.from_config(sensor)
+        noise = NoiseModel.from_sensor(s)
+        sat = images >= s.saturation_dn
+        saturated = int(sat.sum())
+        images = np.where(sat, np.nan, noise.signal(images))
+    return images, noise, saturated
+
+
+@single_blas
+def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwrite: bool = False,
+            max_chi2: float = MAX_CHI2, max_rays: int = MAX_RAYS) -> FitRun:
+    """Fit the configured model's alphas to fringe images (files in the order direction,
+    width, shift of ``patterns.fringes``), write fit.json, fit.txt, fit.png to ``outdir``.
+    Returns also when the fit failed (``result.success`` false; the files say so)."""
+    final = check_fit_output(outdir, overwrite)
+    check_fit_resources(cfg, max_rays)  # memory and time, before the images are read
+    fr = cfg.patterns.fringes
+    images, noise, saturated = load_fit_images(cfg, image_paths)
+    res = fit_fringe_images(cfg, images, fr.widths_px, fr.directions, noise, max_chi2=max_chi2,
+                            max_rays=max_rays)
+    text = format_fit(res, cfg.anisotropy.frame)
+    if saturated:
+        text += f"\n{saturated} saturated values left out"
+    fig = None
+    with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
+        (tmp / "fit.json").write_text(json.dumps(
+            res.as_dict() | {"model_name": cfg.brdf.model, "frame": cfg.anisotropy.frame,
+                             "saturated_values": saturated}, indent=2) + "\n")
+        (tmp / "fit.txt").write_text(text + "\n")
+        if figure:
+            from ..report.texture import plot_fit
+
+            plot_fit(res, tmp / "fit.png", cfg.anisotropy.frame)
+            fig = final / "fit.png"
+        (tmp / MARKER).write_text(json.dumps({"name": cfg.name, "kind": "fit",
+                                              "success": res.success}) + "\n")
+    return FitRun(res, text, final / "fit.json", fig, final, saturated)

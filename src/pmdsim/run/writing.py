@@ -1,0 +1,115 @@
+"""Writing a run's dataset behind its chain (:class:`DatasetWriter`).
+
+The rendered arrays are final when they are rendered, the chain's when they are computed:
+nothing needs to wait for the end of the run to be written. A run hands its dataset to the
+writer after every step (:meth:`DatasetWriter.offer`); one background thread writes the
+variables the store does not hold yet into ``run.zarr`` (the first time creating it, then
+adding to it), while the run decodes, compares, reconstructs and diagnoses. At the end
+(:meth:`DatasetWriter.finish`) the run waits for what is left, and the group's attributes
+and the consolidated metadata are written last: a store that has them is complete, and the
+run's manifest is written only after that.
+
+What is written is byte for byte what :func:`pmdsim.run.dataset.write_dataset` writes for
+the whole dataset at once (same variables, encodings, rounding and attributes): the
+store is only written in parts. Any variable added to the dataset (by any step) is
+written: the writer knows no names.
+"""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+
+
+def _write_part(ds, path: Path, create: bool) -> None:
+    """Write ``ds`` (a part of a run dataset) into the store ``path``: create it, or add
+    the part's variables to it. No consolidated metadata (see :func:`finish_store`). The
+    chunks are rounded and compressed on Dask's threaded scheduler, passed explicitly
+    (not through ``dask.config``, which is global: the run's other threads use their own)."""
+    from ..render import local_scheduler
+    from .dataset import _encoding, storage_form
+
+    delayed = storage_form(ds, lazy=True).to_zarr(
+        path, mode="w-" if create else "a", consolidated=False, compute=False,
+        encoding=_encoding(ds), zarr_format=3)
+    delayed.compute(scheduler=local_scheduler("threads"))
+
+
+def finish_store(path: Path, attrs: dict) -> None:
+    """Write the group attributes ``attrs`` and the consolidated metadata of the store
+    ``path`` (so that a plain ``xarray.open_zarr(path)`` opens it without a warning)."""
+    import warnings
+
+    import xarray as xr
+    import zarr
+
+    with warnings.catch_warnings():
+        # zarr-python notes that consolidated metadata is not (yet) in the v3 spec; xarray
+        # and zarr-python read it, other readers ignore it and list the store instead
+        warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
+        xr.Dataset(attrs=attrs).to_zarr(path, mode="a", consolidated=False, zarr_format=3)
+        zarr.consolidate_metadata(str(path), zarr_format=3)
+
+
+class DatasetWriter:
+    """Writes a run dataset into ``path`` in the background, part by part.
+
+    :meth:`offer` (after each step of the run) queues the variables and coordinates of the
+    dataset that are not written yet; a single thread writes them in order (offers that
+    find nothing new cost nothing). :meth:`finish` waits for every part and writes the
+    attributes and the consolidated metadata. :meth:`close` (on an error or an interrupt)
+    drops what is queued and waits for the part being written, so that no thread writes
+    into a folder being removed."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="pmdsim-dataset")
+        self._latest = None
+        self._written: set = set()
+        self._futures: list[Future] = []
+        self._lock = threading.Lock()
+
+    def offer(self, ds) -> None:
+        """Queue the variables of ``ds`` that the store does not hold yet. ``ds`` is
+        copied (shallow): the run may go on changing its own."""
+        with self._lock:
+            self._latest = ds.copy(deep=False)
+        self._futures.append(self._pool.submit(self._write_new))
+
+    def _write_new(self) -> None:
+        with self._lock:
+            ds = self._latest
+        new = [n for n in ds.data_vars if n not in self._written]
+        coords = [c for c in ds.coords if c not in self._written]
+        if not new and not coords:
+            return
+        part = ds[new]
+        # coordinates that came without a variable of their own (e.g. assigned alone)
+        part = part.assign_coords({c: ds.coords[c] for c in coords if c not in part.coords})
+        # index coordinates already in the store need not be written again (a variable
+        # names its dimensions, not them); other coordinates are written with the
+        # variables that list them
+        part = part.drop_vars([c for c in part.coords
+                               if c in self._written and c in part.indexes])
+        _write_part(part, self.path, create=not self._written)
+        self._written.update(part.variables)
+
+    def finish(self, ds) -> Path:
+        """Write what ``ds`` adds, wait for every part, then write the attributes of ``ds``
+        and the consolidated metadata. Raises the first error of a part."""
+        self.offer(ds)
+        try:
+            for f in self._futures:
+                f.result()
+        finally:
+            self._pool.shutdown(wait=True)
+        finish_store(self.path, dict(ds.attrs))
+        return self.path
+
+    def close(self) -> None:
+        """Cancel what is queued and wait for the part being written (after an error)."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+__all__ = ["DatasetWriter", "finish_store"]

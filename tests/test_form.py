@@ -1,0 +1,177 @@
+"""Form removal (measure/form.py) against independent values: a sphere of known radius, a
+direct least-squares fit of the residual, the published Fringe Zernike table."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pmdsim.measure.form import (
+    FormSpec,
+    best_fit_sphere,
+    fringe_index,
+    remove_form,
+    rim_mask,
+    zernike_columns,
+)
+
+# The first 37 Fringe (University of Arizona) Zernike polynomials as published (Wyant and
+# Creath, "Basic wavefront aberration theory for optical metrology", Applied Optics and
+# Optical Engineering XI, 1992, Table 2), unnormalised, in (rho, theta).
+C, S = np.cos, np.sin
+FRINGE_TABLE = [
+    lambda r, t: np.ones_like(r),
+    lambda r, t: r * C(t),
+    lambda r, t: r * S(t),
+    lambda r, t: 2 * r**2 - 1,
+    lambda r, t: r**2 * C(2 * t),
+    lambda r, t: r**2 * S(2 * t),
+    lambda r, t: (3 * r**3 - 2 * r) * C(t),
+    lambda r, t: (3 * r**3 - 2 * r) * S(t),
+    lambda r, t: 6 * r**4 - 6 * r**2 + 1,
+    lambda r, t: r**3 * C(3 * t),
+    lambda r, t: r**3 * S(3 * t),
+    lambda r, t: (4 * r**4 - 3 * r**2) * C(2 * t),
+    lambda r, t: (4 * r**4 - 3 * r**2) * S(2 * t),
+    lambda r, t: (10 * r**5 - 12 * r**3 + 3 * r) * C(t),
+    lambda r, t: (10 * r**5 - 12 * r**3 + 3 * r) * S(t),
+    lambda r, t: 20 * r**6 - 30 * r**4 + 12 * r**2 - 1,
+    lambda r, t: r**4 * C(4 * t),
+    lambda r, t: r**4 * S(4 * t),
+    lambda r, t: (5 * r**5 - 4 * r**3) * C(3 * t),
+    lambda r, t: (5 * r**5 - 4 * r**3) * S(3 * t),
+    lambda r, t: (15 * r**6 - 20 * r**4 + 6 * r**2) * C(2 * t),
+    lambda r, t: (15 * r**6 - 20 * r**4 + 6 * r**2) * S(2 * t),
+    lambda r, t: (35 * r**7 - 60 * r**5 + 30 * r**3 - 4 * r) * C(t),
+    lambda r, t: (35 * r**7 - 60 * r**5 + 30 * r**3 - 4 * r) * S(t),
+    lambda r, t: 70 * r**8 - 140 * r**6 + 90 * r**4 - 20 * r**2 + 1,
+    lambda r, t: r**5 * C(5 * t),
+    lambda r, t: r**5 * S(5 * t),
+    lambda r, t: (6 * r**6 - 5 * r**4) * C(4 * t),
+    lambda r, t: (6 * r**6 - 5 * r**4) * S(4 * t),
+    lambda r, t: (21 * r**7 - 30 * r**5 + 10 * r**3) * C(3 * t),
+    lambda r, t: (21 * r**7 - 30 * r**5 + 10 * r**3) * S(3 * t),
+    lambda r, t: (56 * r**8 - 105 * r**6 + 60 * r**4 - 10 * r**2) * C(2 * t),
+    lambda r, t: (56 * r**8 - 105 * r**6 + 60 * r**4 - 10 * r**2) * S(2 * t),
+    lambda r, t: (126 * r**9 - 280 * r**7 + 210 * r**5 - 60 * r**3 + 5 * r) * C(t),
+    lambda r, t: (126 * r**9 - 280 * r**7 + 210 * r**5 - 60 * r**3 + 5 * r) * S(t),
+    lambda r, t: 252 * r**10 - 630 * r**8 + 560 * r**6 - 210 * r**4 + 30 * r**2 - 1,
+    lambda r, t: (924 * r**12 - 2772 * r**10 + 3150 * r**8 - 1680 * r**6 + 420 * r**4
+                  - 42 * r**2 + 1),
+]
+
+# Noll's first 11 terms (Noll 1976, Table 1), normalised to unit RMS over the disc
+NOLL_TABLE = [
+    lambda r, t: np.ones_like(r),
+    lambda r, t: 2 * r * C(t),
+    lambda r, t: 2 * r * S(t),
+    lambda r, t: math.sqrt(3) * (2 * r**2 - 1),
+    lambda r, t: math.sqrt(6) * r**2 * S(2 * t),
+    lambda r, t: math.sqrt(6) * r**2 * C(2 * t),
+    lambda r, t: math.sqrt(8) * (3 * r**3 - 2 * r) * S(t),
+    lambda r, t: math.sqrt(8) * (3 * r**3 - 2 * r) * C(t),
+    lambda r, t: math.sqrt(8) * r**3 * S(3 * t),
+    lambda r, t: math.sqrt(8) * r**3 * C(3 * t),
+    lambda r, t: math.sqrt(5) * (6 * r**4 - 6 * r**2 + 1),
+]
+
+
+def _grid(dx=0.4, dy=0.3, radius=22.0, centre=(0.3, -0.2)):
+    xs = np.arange(-23.0, 23.01, dx)
+    ys = np.arange(-23.0, 23.01, dy) + 0.1
+    x, y = np.meshgrid(xs, ys)
+    return x, y, np.hypot(x - centre[0], y - centre[1]) <= radius
+
+
+def test_fringe_order_matches_the_published_table():
+    rng = np.random.default_rng(3)
+    r = np.sqrt(rng.uniform(0, 1, 500))
+    t = rng.uniform(-np.pi, np.pi, 500)
+    u, v = r * np.cos(t), r * np.sin(t)
+    idx, cols = zernike_columns("fringe", 37, u, v)
+    assert [j for j, _, _ in idx] == list(range(1, 38))
+    for j, f in enumerate(FRINGE_TABLE, start=1):
+        np.testing.assert_allclose(cols[:, j - 1], f(r, t), atol=1e-11, err_msg=f"Fringe Z{j}")
+    assert fringe_index(37) == (12, 0) and fringe_index(9) == (4, 0)
+    idx, cols = zernike_columns("noll", 11, u, v)
+    for j, f in enumerate(NOLL_TABLE, start=1):
+        np.testing.assert_allclose(cols[:, j - 1], f(r, t), atol=1e-12, err_msg=f"Noll Z{j}")
+
+
+def test_best_fit_sphere_recovers_a_radius_change():
+    x, y, m = _grid()
+    radius, change = 800.0, 0.8
+
+    def sphere(rad, a=0.0, b=0.0, z0=0.0):
+        return z0 + rad - np.sqrt(rad * rad - (x - a) ** 2 - (y - b) ** 2)
+
+    true = sphere(radius)
+    measured = sphere(radius + change, a=1.3, b=-0.7, z0=0.01)  # decentred, offset: tilt + piston
+    res = remove_form(measured - true, m, x, y, FormSpec.of("sphere"), true_height=true)
+    assert res.sphere["radius_true_mm"] == pytest.approx(radius, rel=1e-9)
+    assert res.sphere["radius_change_mm"] == pytest.approx(change, rel=1e-6)
+    assert np.nanmax(np.abs(res.residual)) < 1e-9  # mm: a sphere leaves nothing
+    # a plane has no curvature; a convex sphere a negative radius
+    assert abs(best_fit_sphere(x, y, 1e-3 * x - 2e-3 * y, m).curvature) < 1e-15  # 1/mm
+    assert best_fit_sphere(x, y, -sphere(500.0), m).radius_mm == pytest.approx(-500.0, rel=1e-9)
+
+
+@pytest.mark.parametrize("terms", ["tilt", "power", ("piston", "tilt", "astigmatism")])
+def test_zernike_tables_after_removal_equal_a_direct_fit_of_the_residual(terms):
+    x, y, m = _grid()
+    rng = np.random.default_rng(7)
+    c, rad = (0.3, -0.2), 22.0
+    u, v = (x - c[0]) / rad, (y - c[1]) / rad
+    r, t = np.hypot(u, v), np.arctan2(v, u)
+    coef = rng.normal(0, 1e-5, 37)
+    err = sum(k * f(r, t) for k, f in zip(coef, FRINGE_TABLE)) + 1e-6 * np.sin(3 * x) * np.cos(y)
+    spec = FormSpec.of(terms, zernike=(9,), n_zernike=37)
+    res = remove_form(err, m, x, y, spec, disc=(c, rad))
+    keep = res.mask
+    assert keep.sum() == m.sum()
+    resid = res.residual[keep]
+    # the residual is orthogonal to what was removed (least squares)
+    removed_cols = [np.ones(keep.sum()), x[keep], y[keep]]
+    if terms == "power":
+        removed_cols.append(x[keep] ** 2 + y[keep] ** 2)
+    for col in removed_cols:
+        assert abs(col @ resid) < 1e-9 * np.linalg.norm(col) * np.linalg.norm(err[keep])
+    # tables: a direct least-squares fit of the residual onto the published polynomials
+    a_fringe = np.stack([f(r[keep], t[keep]) for f in FRINGE_TABLE], axis=1)
+    direct = np.linalg.lstsq(a_fringe, resid, rcond=None)[0]
+    got = np.array([row["coefficient"] for row in res.fringe])
+    np.testing.assert_allclose(got, direct, atol=1e-10 * np.abs(coef).max())
+    a_noll = np.stack([f(r[keep], t[keep]) for f in NOLL_TABLE], axis=1)
+    _, full = zernike_columns("noll", 37, u[keep], v[keep])
+    np.testing.assert_allclose(full[:, :11], a_noll, atol=1e-12)
+    direct = np.linalg.lstsq(full, resid, rcond=None)[0]
+    np.testing.assert_allclose([row["coefficient"] for row in res.noll], direct,
+                               atol=1e-10 * np.abs(coef).max())
+    # removed column: Z9 (Noll: spherical 4,0) and the named terms
+    gone = {row["index"] for row in res.noll if row["removed"]}
+    expect = {1, 2, 3, 9} | ({4} if terms == "power" else set()) | (
+        {5, 6} if "astigmatism" in terms else set())
+    assert gone == expect
+    # Fringe Z16 is (6, 0), not removed; Fringe Z9 is (4, 0) = Noll Z11, not Noll Z9 (3, -3)
+    fr = {row["index"]: row for row in res.fringe}
+    assert not fr[9]["removed"] and fr[11]["removed"]  # Fringe Z11 = (3, -3) = Noll Z9
+    assert abs(fr[11]["coefficient"]) < 0.01 * np.abs(coef).max()  # removed: (almost) nothing left
+
+
+def test_rim_exclusion_with_unequal_spacing():
+    x, y, m = _grid(dx=0.4, dy=0.25, radius=20.0, centre=(0.0, 0.1))
+    r = np.hypot(x, y - 0.1)
+    kept = rim_mask(m, (0.4, 0.25), rim_mm=2.0)
+    assert kept.sum() < m.sum()
+    # nothing within 2 mm of the rim, everything farther in kept (to half a step, 0.2 mm)
+    assert r[kept].max() < 18.0 + 0.2 + 1e-9
+    assert kept[m & (r < 18.0 - 0.2)].all()
+    pct = rim_mask(m, (0.4, 0.25), rim_percent=10.0)  # 10 % of the 20 mm radius
+    assert r[pct].max() < 18.0 + 0.2 + 1e-9 and pct[m & (r < 18.0 - 0.2 - 0.25)].all()
+    spec = FormSpec.of("piston", rim_mm=2.0)
+    res = remove_form(np.where(m, x * 1e-6, np.nan), m, x, y, spec)
+    assert res.excluded_rim == int(m.sum() - kept.sum())
+    assert np.isnan(res.residual[m & ~kept]).all()
+    assert "rim band 2 mm" in res.removed
