@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/bench_render.py [--baseline 4c74c4d] [--config examples/paper_fig3.toml]
-                                      [--repeat 5] [--workers 2] [--no-compile]
+                                      [--repeat 5] [--workers 2] [--no-compile] [--rounds 1]
 
 The baseline commit (default ``4c74c4d``, the tree before issue 13's kernel work) is checked
 out with ``git worktree`` into a temporary folder. Both trees are measured by the same code
@@ -20,6 +20,10 @@ in fresh subprocesses, alternately, with the same settings:
   size: wall (best of ``--repeat``) and rays per CPU-second;
 - **agreement**: the largest difference between the two trees' Fig. 3 images, relative to
   their largest value (both compute the same estimator; the kernels differ in rounding).
+
+With ``--rounds R`` the cached-kernel measurements alternate between the trees R times
+(baseline, this tree, baseline, ...) and each figure is the median over the rounds, so
+that a change of the machine's load during the run hits both trees alike.
 
 It prints both columns, their ratio, the issue's aims (>= 200 M rays per CPU-second at
 N = 100; the Fig. 3 sequence in <= 0.3 s wall on 2 cores) and the load average before and
@@ -89,6 +93,8 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--workers", type=int, default=os.cpu_count())
     ap.add_argument("--no-compile", action="store_true", help="skip the empty-cache compile runs")
+    ap.add_argument("--rounds", type=int, default=1,
+                    help="alternate the cached-kernel runs of the two trees this many times")
     args = ap.parse_args()
 
     print(f"load average before: {os.getloadavg()}  ({os.cpu_count()} cores)", flush=True)
@@ -99,16 +105,28 @@ def main():
     trees = {"baseline": base_src / "src", "this tree": ROOT / "src"}
     try:
         res = {}
-        for name, src in trees.items():
-            cache = tmp / f"cache-{name.replace(' ', '-')}"
-            common = [args.config, str(args.repeat), str(args.workers)]
+        cold = {}
+        common = [args.config, str(args.repeat), str(args.workers)]
+        cache = {name: tmp / f"cache-{name.replace(' ', '-')}" for name in trees}
+        for i, (name, src) in enumerate(trees.items()):
             if not args.no_compile:  # empty cache: the first call compiles the kernels
                 print(f"[{name}] empty NUMBA_CACHE_DIR ...", flush=True)
-                cold = _run(src, cache, common + [str(tmp / f"cold-{len(res)}.npy")])
-            print(f"[{name}] cached kernels ...", flush=True)
-            warm = _run(src, cache, common + [str(tmp / f"img-{len(res)}.npy")])
-            warm["compile"] = None if args.no_compile else cold["first_cpu"] - warm["first_cpu"]
+                cold[name] = _run(src, cache[name], common + [str(tmp / f"cold-{i}.npy")])
+        runs = {name: [] for name in trees}
+        for r in range(max(args.rounds, 1)):
+            for i, (name, src) in enumerate(trees.items()):
+                print(f"[{name}] cached kernels, round {r + 1} ...", flush=True)
+                runs[name].append(_run(src, cache[name], common + [str(tmp / f"img-{i}.npy")]))
+        for name in trees:
+            warm = {k: float(np.median([run[k] for run in runs[name]])) for k in runs[name][0]}
+            warm["compile"] = (None if args.no_compile
+                               else cold[name]["first_cpu"] - warm["first_cpu"])
             res[name] = warm
+        if args.rounds > 1:
+            ratios = [b["seq_cpu"] / a["seq_cpu"]
+                      for a, b in zip(runs["baseline"], runs["this tree"])]
+            print("Fig. 3 sequence CPU-s, this tree / baseline, per round: "
+                  + ", ".join(f"{x:.3f}" for x in ratios))
         a = np.load(tmp / "img-0.npy")
         b = np.load(tmp / "img-1.npy")
         m = np.isfinite(a) & np.isfinite(b)

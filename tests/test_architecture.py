@@ -125,3 +125,26 @@ def test_a_wrong_import_is_found(module, source):
 ])
 def test_a_right_import_passes(module, source):
     assert violations(source, module) == []
+
+
+#: Longest module, outside ``kernels/``, that needs no stated reason (docs/architecture.md).
+MAX_LINES = 600
+
+
+def long_modules_stated() -> set[str]:
+    """The modules docs/architecture.md's "Module size" table says may stay longer."""
+    import re
+
+    text = (PACKAGE.parents[1] / "docs" / "architecture.md").read_text(encoding="utf-8")
+    section = text.split("## Module size", 1)[1].split("\n## ", 1)[0]
+    return set(re.findall(r"^\| `([\w/]+\.py)` \|", section, flags=re.M))
+
+
+def test_no_module_is_longer_than_its_job_without_a_stated_reason():
+    stated = long_modules_stated()
+    assert all((PACKAGE / m).is_file() for m in stated), f"stated modules that are gone: {stated}"
+    long = {str(p.relative_to(PACKAGE)): len(p.read_text(encoding="utf-8").splitlines())
+            for p in all_modules() if p.relative_to(PACKAGE).parts[0] != "kernels"}
+    over = {m: n for m, n in long.items() if n > MAX_LINES and m not in stated}
+    assert not over, (f"modules over {MAX_LINES} lines without a reason in docs/architecture.md "
+                      f"(split them, or state why in its Module size table): {over}")

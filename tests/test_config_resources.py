@@ -42,7 +42,7 @@ def test_a_huge_camera_is_refused_naming_its_resolution():
 
 
 def test_too_many_rays_are_refused_naming_n_rays():
-    cfg = make_config(sampling={"n_rays": 10_000_000})
+    cfg = make_config(sampling={"n_rays": 10_000_000, "max_rays": 10_000_000})
     with pytest.raises(ConfigError) as info:
         check_resources(cfg, available_bytes=16 * GB)
     assert _first_field(str(info.value)) == "sampling.n_rays"
@@ -57,12 +57,12 @@ def test_too_many_dots_are_refused_naming_the_dots():
 
 
 def test_cpu_time_over_the_limit_is_refused_and_the_limit_can_be_raised():
-    cfg = make_config(camera={"resolution": [2000, 2000]}, sampling={"n_rays": 1_000_000})
+    cfg = make_config(camera={"resolution": [2000, 2000]}, sampling={"n_rays": 1_000_000, "max_rays": 1_000_000})
     with pytest.raises(ConfigError) as info:
         check_resources(cfg, available_bytes=10**15)
     assert _first_field(str(info.value)) == "sampling.n_rays"
     assert "compute.max_cpu_hours" in str(info.value)
-    raised = make_config(camera={"resolution": [2000, 2000]}, sampling={"n_rays": 1_000_000},
+    raised = make_config(camera={"resolution": [2000, 2000]}, sampling={"n_rays": 1_000_000, "max_rays": 1_000_000},
                          compute={"max_cpu_hours": 1e6})
     check_resources(raised, available_bytes=10**15)
 
@@ -101,40 +101,58 @@ def _traced_run(cfg, tmp_path):
     return peak
 
 
-def _vision_rays_rendered(cfg) -> int:
-    """Vision rays (bundle geometry rows) one fringe pass of the renderer traces, counted
-    as its geometry functions hand them to the kernel."""
+def _rays_rendered(cfg) -> tuple[int, int]:
+    """(vision rays of the first pass, scattered rays of all passes) of one fringe render,
+    counted as the renderer hands the vision rays (bundle geometry rows) to the kernel, each
+    with the bundle size of the pass's sample set."""
     import pmdsim.render.simulation as rs
     from pmdsim.render import Simulation
 
-    count = [0]
+    rows, rays, bundle = [], [0], [0]
     originals = {k: getattr(rs, k) for k in ("scene_geometry_rows", "vision_geometry_rows")}
+    render_brdf = Simulation._render_brdf
 
     def counting(fn):
         def wrapped(*args, **kwargs):
             geo, spec = fn(*args, **kwargs)
-            count[0] += geo.shape[0]
+            if bundle[0]:
+                rows[-1] += geo.shape[0]
+                rays[0] += geo.shape[0] * bundle[0]
             return geo, spec
         return wrapped
+
+    def one_pass(self, scene, *args, **kwargs):
+        # the rays the kernel runs per vision ray: the pass's own set (one rqmc replicate,
+        # the rule or its embedded rule), as many as its per-ray weights
+        bundle[0] = (1 if scene.brdf.is_delta else
+                     scene.sampling.ray_weights(scene.estimator == "radiometric").size)
+        rows.append(0)
+        try:
+            return render_brdf(self, scene, *args, **kwargs)
+        finally:
+            bundle[0] = 0
 
     sim = Simulation.from_config(cfg)
     try:
         for k, fn in originals.items():
             setattr(rs, k, counting(fn))
+        Simulation._render_brdf = one_pass
         sim.render_fringes()
     finally:
         for k, fn in originals.items():
             setattr(rs, k, fn)
-    return count[0]
+        Simulation._render_brdf = render_brdf
+    return rows[0], rays[0]
 
 
 @pytest.mark.parametrize("name", list(FACTORS))
 def test_the_estimate_covers_the_arrays_and_counts_the_rays_of_real_runs(tmp_path, name):
     """Each factor of the estimate against a direct count on a real tiny run: the peak of
     the arrays the run allocates (tracemalloc) lies under the estimate (without the
-    interpreter's base) and not far below it; the rays are the vision rays the renderer
-    traces (counted as they reach the kernel) times the bundle size, per pass, plus the
-    one-ray specular reference."""
+    interpreter's base) and not far below it; the rays bound those the renderer traces
+    (the vision rays counted as they reach the kernel, times the bundle size of each pass:
+    the rule and its embedded rule, or the rqmc replicates), plus the one-ray specular
+    reference."""
     from pmdsim.config import BASE_MEMORY_BYTES
 
     cfg = make_config(**FACTORS[name])
@@ -144,9 +162,11 @@ def test_the_estimate_covers_the_arrays_and_counts_the_rays_of_real_runs(tmp_pat
     assert peak <= budget, (name, peak, est.parts)
     assert budget < 30 * peak, (name, peak, est.parts)  # not absurdly high
     w, h = cfg.camera.resolution
-    vision_rays = _vision_rays_rendered(cfg)
-    assert est.rays == pytest.approx(vision_rays * (cfg.sampling.n_rays + 1))
+    vision_rays, rays = _rays_rendered(cfg)
     vision = vision_rays / (w * h)
+    # an upper bound (the rule's node count and the embedded rule are bounded, not
+    # exact), never below the count, at most 2x above it; + the one-ray reference
+    assert rays + w * h * vision <= est.rays <= 2 * rays + w * h * vision
     assert vision == {"subpixels": 4, "thin_lens": 3}.get(name, 1)
     if vision > 1:
         field = "camera.subpixels" if name == "subpixels" else "camera.aperture_samples"
@@ -170,7 +190,8 @@ def test_the_cpu_limit_names_the_factor_that_multiplies_the_rays():
         check_resources(cfg, available_bytes=10**15, max_cpu_hours=1e-4)
     assert _first_field(str(info.value)) == "camera.aperture_samples"
     with pytest.raises(ConfigError) as info:
-        check_resources(make_config(sampling={"n_rays": 100_000}), available_bytes=10**15,
+        check_resources(make_config(sampling={"n_rays": 100_000, "max_rays": 100_000}),
+                        available_bytes=10**15,
                         max_cpu_hours=1e-4)
     assert _first_field(str(info.value)) == "sampling.n_rays"
     # the limit scales the refusal: the same run is accepted with a limit above its time
@@ -201,7 +222,7 @@ def test_the_reconstruction_grid_is_counted_node_by_node(tmp_path, monkeypatch):
         return rec
 
     monkeypatch.setattr(rr, "reconstruct", counted)
-    cfg = make_config(reconstruct={"spacing_mm": 0.7}, sampling={"n_rays": 8},
+    cfg = make_config(reconstruct={"spacing_mm": 0.7}, sampling={"n_rays": 48, "mode": "stratified"},
                       patterns={"fringes": {"widths_px": [10.0, 40.0, 200.0]}})
     run_simulation(cfg, tmp_path / "run", figures=False, diagnostics=False)
     assert reconstruction_nodes(cfg) == seen["nodes"]
@@ -231,7 +252,8 @@ def test_sweeps_are_sized_per_point_and_in_total():
     assert _first_field(str(info.value)) == "sweep.parameters" and "1,000,000" in str(info.value)
     assert check_sweep_size(make_config(sweep={"parameters": {"brdf.alpha_x": [0.01, 0.02]}})) == 2
     assert MAX_SWEEP_POINTS >= 10_000
-    points = [make_config(sampling={"n_rays": n}) for n in (48, 10_000_000, 64)]
+    points = [make_config(sampling={"n_rays": n, "max_rays": max(n, 65536)})
+              for n in (48, 10_000_000, 64)]
     with pytest.raises(ConfigError) as info:
         check_study(points, "sweep.parameters", labels=["a", "b", "c"],
                     available_bytes=16 * GB)

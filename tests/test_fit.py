@@ -47,8 +47,11 @@ def test_fit_defaults_to_the_radiometric_estimator_unless_set():
 
     cfg = fit_config(parse_config(d))
     assert (cfg.sampling.estimator, cfg.sampling.mode) == ("radiometric", "stratified")
-    own = fit_config(parse_config(d | {"sampling": {"estimator": "paper", "mode": "random"}}))
+    assert cfg.sampling.error_estimate is False  # the fit refines instead
+    own = fit_config(parse_config(d | {"sampling": {"estimator": "paper", "mode": "random",
+                                                    "error_estimate": True}}))
     assert (own.sampling.estimator, own.sampling.mode) == ("paper", "random")
+    assert own.sampling.error_estimate is True
 
 
 @pytest.mark.slow  # six fits, ~1 min
@@ -96,3 +99,66 @@ def test_a_noise_model_too_small_fails_the_fit():
     wrong = NoiseModel(s.gain / 10, s.dark_noise_electrons / 10)
     res = fit_fringe_images(cfg, images, fc.WIDTHS, ("x", "y"), wrong, max_rays=100)
     assert not res.success and "chi-square" in res.reason and res.chi2_reduced > 5
+
+
+def test_coverage_folder_json_and_figure(tmp_path, monkeypatch):
+    """The study's folder (results stubbed: the fits are tested above): coverage.json
+    counts the covered cases, coverage.png is drawn, the marker makes it replaceable."""
+    import json
+
+    from pmdsim.run import fit_coverage as run_cov
+
+    cases = fc.coverage_cases(3, seed=4)
+    fake = [fc.CoverageResult(c, (c.alpha_x * (1 + e), c.alpha_y, 1.0), (c.alpha_x * 0.01,
+                              c.alpha_y * 0.01, 0.1), (0.0, 0.0, 0.0), 1.0, True, "",
+                              abs(e) <= 0.02) for c, e in zip(cases, (0.005, -0.03, 0.0))]
+    monkeypatch.setattr(run_cov, "fit_coverage", lambda n, seed, progress=None: fake[:n])
+    results, out = run_cov.run_fit_coverage(tmp_path / "cov", n=3, seed=4)
+    data = json.loads((out / "coverage.json").read_text())
+    assert data["covered_k2"] == 2 and len(data["cases"]) == 3
+    assert data["cases"][1]["normalised_errors"][0] == pytest.approx(-3.0)
+    assert (out / "coverage.png").stat().st_size > 10_000
+    run_cov.run_fit_coverage(tmp_path / "cov", n=3, seed=4, overwrite=True)  # replaceable
+
+
+def test_three_shifts_without_a_sensor_model_fit_but_say_the_test_was_not_made():
+    """K = 3 and no noise model: no degree of freedom is left for a noise estimate, so the
+    chi-square is not tested (NaN, a note), and the fit is still made."""
+    from pmdsim.config import parse_config
+
+    case = fc.coverage_cases(20)[4]
+    d = fc.case_dict(case)
+    d.pop("sensor")
+    truth = parse_config(d | {"brdf": {"model": "ward", "alpha_x": case.alpha_x,
+                                       "alpha_y": case.alpha_y, "rho_s": 0.4},
+                              "sampling": {"estimator": "radiometric", "n_rays": 1024}})
+    values = Simulation.from_config(truth).render_fringes(fc.WIDTHS, ("x", "y"), 3).images
+    res = fit_fringe_images(parse_config(d), values * 1000.0, fc.WIDTHS, ("x", "y"),
+                            max_rays=400)
+    assert res.success and np.isnan(res.chi2_reduced) and "not made" in res.noise["note"]
+    assert res.as_dict()["chi2_reduced"] is None
+    assert np.all(np.abs(res.values[:2] / (case.alpha_x, case.alpha_y) - 1) < 0.02)
+
+
+def test_a_fit_that_cannot_fit_the_machine_is_refused_before_the_images_are_read(tmp_path):
+    from typer.testing import CliRunner
+
+    from pmdsim.cli import app
+    from pmdsim.config import ConfigError, parse_config
+    from pmdsim.studies.fit import check_fit_resources, fit_levels
+    from test_budget import _write_toml
+
+    d = fc.case_dict(fc.coverage_cases(1)[0])
+    assert fit_levels(parse_config(d)) == [100, 400, 1600, 6400]
+    assert fit_levels(parse_config(d), 1000) == [100, 400]
+    slow = d | {"compute": d["compute"] | {"max_cpu_hours": 1e-5}}
+    with pytest.raises(ConfigError, match=r"sampling\.n_rays: the fit .*max_cpu_hours"):
+        check_fit_resources(parse_config(slow))
+    huge = d | {"camera": d["camera"] | {"resolution": [40000, 30000]}}
+    with pytest.raises(ConfigError, match=r"camera\.resolution: .* memory"):
+        check_fit_resources(parse_config(huge))
+    _write_toml(tmp_path / "slow.toml", slow)
+    res = CliRunner().invoke(app, ["fit", str(tmp_path / "slow.toml"),
+                                   str(tmp_path / "missing.tif"), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 2 and "max_cpu_hours" in res.output, res.output
+    assert "missing.tif" not in res.output and not (tmp_path / "out").exists()

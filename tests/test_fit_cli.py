@@ -88,6 +88,7 @@ def _fit(cfg, images, out, *extra):
                           env=env, capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow  # a fit refined to 1600 rays and a second run: ~20 s
 def test_good_images_fit_and_cover_the_truth(case):
     out = case["root"] / "out-good"
     p = _fit(case["cfg"], case["good"], out)
@@ -99,6 +100,8 @@ def test_good_images_fit_and_cover_the_truth(case):
         assert abs(q["value"] - t) <= 2 * q["std"], (name, q)
         assert q["std_model"] > 0 and q["std_noise"] > 0
     assert res["model"]["estimator"] == "radiometric"  # the fit's default
+    # the sensor's noise model against the images' own phase-shift residual
+    assert 0.9 < res["noise"]["observed_to_model"] < 1.1, res["noise"]
     assert (out / "pmdsim-fit.json").is_file()
     again = _fit(case["cfg"], case["good"], out)  # an existing fit folder: refused
     assert again.returncode == 2 and "--overwrite" in again.stderr

@@ -8,6 +8,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from conftest import base_dict, merge
@@ -168,3 +170,65 @@ def test_texture_refuses_grazing_incidence():
         assert result.exit_code == 2, result.output
         assert "--incidence-deg" in result.output
     assert not math.isnan(0.0)
+
+
+@pytest.mark.parametrize("bits", [1, 2, 4])
+def test_camera_values_stay_in_the_displays_range(bits):
+    """Continuous monitor, gamma 2.2, a coarsely quantised drive: the 16-harmonic series
+    rings; every camera value must stay within [black, white] x the weight on the monitor
+    (the range of a weighted mean of displayed luminances), so never negative."""
+    from pmdsim.render import Simulation
+
+    cfg = parse_config(merge(base_dict(), {"monitor": {"pixel_model": "continuous",
+                                                       "gamma": 2.2, "bit_depth": bits,
+                                                       "black_level": 0.0}}))
+    fr = Simulation.from_config(cfg).render_fringes(widths=[20.0], shifts=4)
+    img = fr.images.astype(np.float64)
+    ok = np.isfinite(img)
+    assert ok.any()
+    hit = np.broadcast_to(fr.f_hit, img.shape)[ok]
+    assert img[ok].min() >= 0.0
+    assert np.all(img[ok] <= hit * cfg.monitor.white_level * (1 + 1e-6) + 1e-12)
+
+
+def _values():
+    return st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                     st.sampled_from([0.0, 1e-300, 1e-9, 0.5, 1.0, 2.0, 1e6, 1e30, -1.0]),
+                     st.integers(-5, 70000))
+
+
+def _sections():
+    sensor = st.fixed_dictionaries({"enabled": st.just(True)}, optional={
+        k: _values() for k in ("full_well_electrons", "dark_noise_electrons",
+                               "dark_signal_electrons", "dsnu_electrons", "prnu",
+                               "gain_dn_per_electron", "bit_depth", "offset_dn",
+                               "exposure_electrons", "target_fill")})
+    monitor = st.fixed_dictionaries({}, optional={
+        "falloff_exponent": _values(), "cover_glass_thickness_mm": _values(),
+        "cover_glass_index": _values(),
+        "flatness_coefficients_mm": st.lists(st.lists(_values(), min_size=2, max_size=2),
+                                             min_size=2, max_size=2),
+        "falloff_table": st.lists(st.tuples(st.floats(0, 89.9), _values()), max_size=4)
+                           .map(lambda rows: sorted(rows))})
+    return st.fixed_dictionaries({}, optional={"sensor": sensor, "monitor": monitor})
+
+
+@settings(max_examples=150, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(changes=_sections())
+def test_any_sensor_or_display_is_a_field_named_error_or_checked(changes):
+    """Extreme, non-finite and out-of-range sensor and display settings: a configuration
+    error naming a field, a physics refusal naming the section's field, or notes (each
+    naming its field); no other exception."""
+    try:
+        cfg = parse_config(merge(base_dict(), changes))
+    except ConfigError as err:
+        assert str(err).splitlines()[1].strip().split(":")[0].split(".")[0] in changes
+        return
+    try:
+        notes = check_physics(cfg, Scene.from_config(cfg))
+    except ConfigError as err:
+        field = _field(type("I", (), {"value": err})())
+        assert field.split(".")[0] in ("sensor", "monitor"), str(err)
+        return
+    assert all(n.split(".")[0] in ("sensor", "monitor") for n in notes), notes

@@ -59,3 +59,21 @@ def test_a_brdf_change_reuses_a_geometry_change_does_not_and_reuse_changes_no_by
         assert fresh[k].tobytes() == reused[k].tobytes(), k
     # the moved camera sees the plate elsewhere: its result is its own
     assert other["phase_deviation"].tobytes() != reused["phase_deviation"].tobytes()
+
+
+def test_a_sweep_runs_the_points_that_share_a_reference_together(tmp_path):
+    """A grid over (BRDF, finest width) with the width varying fastest: run in index
+    order, every point would need another reference than the last; scheduled by key, one
+    geometry and one reference per width are made."""
+    from pmdsim.run.sweep import run_sweep
+
+    sweep = {"decimation": 0, "parameters": {"brdf.alpha_x": [0.004, 0.01, 0.03],
+                                             "patterns.fringes.widths_px.0": [50.0, 100.0,
+                                                                              25.0]}}
+    sw.GEOMETRIES.clear()
+    sw.REFERENCES.clear()
+    res = run_sweep(parse_config(_config(sweep)), tmp_path / "s", scheduler="synchronous",
+                    figures=False)
+    assert len(res.computed) == 9
+    assert (sw.GEOMETRIES.made, sw.GEOMETRIES.reused) == (1, 8)
+    assert (sw.REFERENCES.made, sw.REFERENCES.reused) == (3, 6)

@@ -29,13 +29,16 @@ def test_cli_texture_issue_example(tmp_path):
 
 
 def test_cli_fit_recovers_noise_free_alphas(tmp_path):
+    """Noise-free float images of a converged render (4096 rays); the configuration's own
+    128 rays are refined by the fit until its alphas stop moving."""
     d = merge(base_dict(), {
         "camera": {"resolution": [20, 16], "focal_length_px": 40.0},
         "monitor": {"pixel_model": "continuous"},
         "brdf": {"__replace__": {"model": "ward", "alpha_x": 0.025, "alpha_y": 0.01}},
         "sampling": {"estimator": "radiometric", "n_rays": 128, "mode": "stratified"},
         "patterns": {"fringes": {"widths_px": [15.0, 25.0, 40.0, 70.0], "shifts": 4}}})
-    imgs = Simulation.from_config(parse_config(d)).render_fringes(
+    converged = parse_config(merge(d, {"sampling": {"n_rays": 4096}}))
+    imgs = Simulation.from_config(converged).render_fringes(
         (15.0, 25.0, 40.0, 70.0), ("x", "y"), 4).images
     paths = []
     for i, frame in enumerate(imgs.reshape(-1, *imgs.shape[-2:])):

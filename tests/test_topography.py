@@ -169,3 +169,57 @@ def test_regime_follows_the_rayleigh_parameter():
     assert tp.regime(0.9)[0] == "intermediate" and tp.regime(0.9)[2] == "rayleigh_rice"
     assert tp.regime(1.2)[2] == "slope_density"
     assert tp.regime(3.0)[0] == "geometric"
+
+
+def _smooth_x3p(path, sigma=3e-6):
+    """A smooth K-correlation patch (dx != dy, lx != ly) written by x3pio."""
+    kc = tp.KCorrelation(sigma, 2 * math.pi * 6e-3, 2 * math.pi * 2e-3, 2.3)
+    h = tp.synthesize(kc, (96, 128), 0.8e-3, 0.5e-3, seed=5)
+    x3pio.write(path, h * 1e-3, x_scale=0.8e-6, y_scale=0.5e-6)
+    return h
+
+
+def test_topography_model_picks_halo_or_slope_density_by_the_rayleigh_parameter(tmp_path):
+    """[brdf] model = "topography": a 3 nm finish is smooth (peak + halo, specular share
+    exp(-g^2)); the same map scaled to 300 nm is geometric (its slope density, alphas as
+    the analysis's, tangential on local x); regime = "geometric" forces the density."""
+    from pmdsim.brdf import brdf_from_config, equivalent_alphas
+    from pmdsim.brdf.rayleigh_rice import SpecularHaloBRDF
+    from pmdsim.brdf.slope_density import SlopeDensityBRDF
+    from pmdsim.config import TopographyConfig
+
+    h = _smooth_x3p(tmp_path / "s.x3p")
+    cfg = TopographyConfig(file=str(tmp_path / "s.x3p"), incidence_deg=25.0, fill="error", level="none")
+    b = brdf_from_config(cfg)
+    assert isinstance(b, SpecularHaloBRDF) and b.name == "topography"
+    g = 4 * math.pi * h.std() * math.cos(math.radians(25)) / 545e-6
+    assert b.specular_reflectance == pytest.approx(cfg.rho_s * math.exp(-g * g), rel=1e-9)
+    x3pio.write(tmp_path / "r.x3p", h * 100 * 1e-3, x_scale=0.8e-6, y_scale=0.5e-6)
+    rough = TopographyConfig(file=str(tmp_path / "r.x3p"), level="none")
+    b = brdf_from_config(rough)
+    assert isinstance(b, SlopeDensityBRDF)
+    a = tp.analyse(h * 100, 0.8e-3, 0.5e-3)
+    ax, ay = equivalent_alphas(rough)
+    assert ax == pytest.approx(a.alpha_tangential, rel=0.03) and ay == pytest.approx(a.alpha_radial, rel=0.03)
+    assert ax < ay  # lx > ly: steeper radially
+    forced = brdf_from_config(cfg.model_copy(update={"regime": "geometric"}))
+    assert isinstance(forced, SlopeDensityBRDF)
+
+
+def test_texture_from_file_command(tmp_path):
+    from typer.testing import CliRunner
+
+    from pmdsim.cli import app
+
+    _smooth_x3p(tmp_path / "s.x3p")
+    runner = CliRunner()
+    res = runner.invoke(app, ["texture", "--from", str(tmp_path / "s.x3p"), "--incidence-deg", "25",
+                              "-o", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert "smooth" in res.output and "Sdq" in res.output
+    for f in ("topography.json", "topography.txt", "topography.png"):
+        assert (tmp_path / "out" / f).is_file()
+    res = runner.invoke(app, ["texture", "--from", str(tmp_path / "missing.x3p")])
+    assert res.exit_code == 2 and "--from" in res.output and "missing.x3p" in res.output
+    res = runner.invoke(app, ["texture"])
+    assert res.exit_code == 2 and "--from" in res.output

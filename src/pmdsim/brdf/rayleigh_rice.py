@@ -203,7 +203,7 @@ def specular_halo(exact: RayleighRice, theta0: float, sigma_band: float | None =
     """The rendered model of ``exact`` at incidence ``theta0`` (rad). ``sigma_band``: RMS
     height of the PSD inside the table (default ``exact.sigma``); ``half_width``: the
     table's half widths in slope (default: where the PSD along each axis falls to 1e-4 of
-    its peak, at most the slope of a spatial frequency 1 / lambda)."""
+    its largest value, at most the slope of a spatial frequency 1 / lambda)."""
     lam = exact.wavelength
     c0 = math.cos(theta0)
     sigma_band = exact.sigma if sigma_band is None else sigma_band
@@ -225,9 +225,9 @@ def _extent(psd, lam, c0, axis):
     f = np.geomspace(fmax * 1e-6, fmax, 400)
     z = np.zeros_like(f)
     s = psd(f, z) if axis == 0 else psd(z, f)
-    s0 = psd(np.array([0.0]), np.array([0.0]))[0]
-    below = np.nonzero(s < 1e-4 * s0)[0]
-    fe = f[below[0]] if below.size else fmax
+    peak = int(np.argmax(s))
+    below = np.nonzero(s[peak:] < 1e-4 * s[peak])[0]
+    fe = f[peak + below[0]] if below.size else fmax
     return float(fe / kappa)
 
 

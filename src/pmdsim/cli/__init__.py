@@ -7,6 +7,7 @@
     pmdsim sweep CONFIG -o OUTDIR [--scheduler threads|processes|synchronous|tcp://..]
                                   [--workers N] [--overwrite] [--no-figures]
     pmdsim report RUN [--all | --figure NAME ...] [--variant NAME] [-o FOLDER]
+    pmdsim export RUN --format x3p|csv|xyz [-o FOLDER] [--overwrite]
     pmdsim texture --feed-um F --nose-radius-mm R [--rq-um Q --correlation-um L] [-o OUT]
     pmdsim fit CONFIG IMAGES... -o OUT
     pmdsim warmup
@@ -27,10 +28,11 @@ from .decode import decode
 from .studies import budget, converge, sweep
 from .texture import fit, texture
 from .report import report
+from .export import export
 from .install import version, warmup
 
 #: The commands, in the order ``pmdsim --help`` lists them.
-COMMANDS = (simulate, decode, converge, budget, texture, fit, version, sweep, report, warmup)
+COMMANDS = (simulate, decode, converge, budget, texture, fit, version, sweep, report, export, warmup)
 for _command in COMMANDS:
     app.command()(_command)
 del _command
@@ -41,4 +43,4 @@ def main() -> None:  # pragma: no cover - console entry for `python -m pmdsim.cl
 
 
 __all__ = ["app", "main", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "EXIT_TERMINATED", "COMMANDS",
-           "simulate", "decode", "converge", "budget", "texture", "fit", "version", "sweep", "report", "warmup"]
+           "simulate", "decode", "converge", "budget", "texture", "fit", "version", "sweep", "report", "export", "warmup"]

@@ -64,6 +64,10 @@ def converge(
         if not (0 < cw <= 65536 and 0 < ch <= 65536):
             raise InputError(f"--camera must be WxH with 1 to 65536 px per axis, e.g. 160x128, "
                              f"got {camera!r}")
+        from ..config.resources import check_study, convergence_configs
+
+        # the study's renders, one after the other: the largest must fit, all the CPU limit
+        check_study(convergence_configs(cfg, ns, thetas, ests, (cw, ch)), "converge")
         t0 = time.perf_counter()
         with console.status(f"convergence study of {cfg.name}") as status:
             result = run_convergence(
@@ -108,9 +112,11 @@ def budget(
                               "'footprint' (averaged over the pixel's vision rays)."),
 ) -> None:
     """Error budget: the chain with each system effect of CONFIG alone and all together on
-    the ideal mirror, and the surface's scattering minus that mirror; deviation from the
-    exact reflection points in mrad, monitor px, mm and urad. Writes OUT/budget.csv,
-    budget.json, budget.png (docs/system.md)."""
+    the ideal mirror, the surface's scattering minus that mirror, and the calibration
+    errors (sensitivity x uncertainty); per effect the reconstructed slope error (urad X/Y)
+    and height error (nm RMS/PV/P95 after [budget] removal), per direction the deviation from
+    the exact reflection points in mrad, monitor px, mm and urad. Writes OUT/budget.csv,
+    heights.csv, zernike.csv, budget.json, budget.png (docs/system.md)."""
     from ..config import ConfigError, load_config
     from ..report.budget import budget_text
     from ..run.budget import run_budget

@@ -11,8 +11,22 @@ from .common import _console, _fail, _guard, _output_folder
 
 
 def texture(
-    feed_um: float = typer.Option(..., "--feed-um", help="Feed per revolution f, um."),
-    nose_radius_mm: float = typer.Option(..., "--nose-radius-mm", help="Tool nose radius r, mm."),
+    feed_um: float | None = typer.Option(None, "--feed-um", help="Feed per revolution f, um."),
+    nose_radius_mm: float | None = typer.Option(None, "--nose-radius-mm",
+                                                help="Tool nose radius r, mm."),
+    from_file: Path | None = typer.Option(
+        None, "--from", help="A measured topography (X3P, .sur, .plu, .vk4, ...; or .npy/.csv/"
+        ".tif with --spacing-um): slope density, PSD, Sq, Sdq, correlation lengths, regime "
+        "instead of the machining."),
+    spacing_um: tuple[float, float] | None = typer.Option(
+        None, "--spacing-um", help="Sample spacing dx dy (um) of a plain-array --from file."),
+    height_unit: str = typer.Option("um", "--height-unit",
+                                    help="Height unit of a plain-array --from file (mm, um, nm)."),
+    radial_axis: str = typer.Option("y", "--radial-axis",
+                                    help="Axis of the --from map across the turning grooves."),
+    level: str = typer.Option("plane", "--level", help="Levelling of --from: none, mean, plane."),
+    fill: str = typer.Option("nearest", "--fill",
+                             help="Non-measured points of --from: error, nearest, mean."),
     rq_um: float = typer.Option(0.0, "--rq-um", help="Random roughness Rq, um."),
     correlation_um: float = typer.Option(10.0, "--correlation-um",
                                          help="Correlation length of the random roughness, um."),
@@ -33,6 +47,12 @@ def texture(
     import math
 
     _output_folder(output)
+    if from_file is not None:
+        return _texture_from(from_file, spacing_um, height_unit, radial_axis, level, fill,
+                             wavelength_nm, incidence_deg, output, no_figure)
+    if feed_um is None or nose_radius_mm is None:
+        _fail("give --feed-um and --nose-radius-mm (the machining), or --from FILE (a measured "
+              "topography)")
     if not (math.isfinite(incidence_deg) and 0 <= incidence_deg < 90):
         _fail(f"--incidence-deg must be at least 0 and below 90 deg (grazing incidence has no "
               f"reflection to measure), got {incidence_deg:g}")
@@ -60,6 +80,39 @@ def texture(
         console.print(f"figure {res.figure}")
 
 
+def _texture_from(path, spacing_um, height_unit, radial_axis, level, fill, wavelength_nm,
+                  incidence_deg, output, no_figure) -> None:
+    """``pmdsim texture --from FILE``: a measured topography's optical parameters."""
+    import math
+
+    from ..config import InputError
+    from ..run.texture import run_topography
+
+    if not (math.isfinite(wavelength_nm) and wavelength_nm > 0):
+        _fail(f"--wavelength-nm must be a positive finite number, got {wavelength_nm:g}")
+    if not (math.isfinite(incidence_deg) and 0 <= incidence_deg < 90):
+        _fail(f"--incidence-deg must be at least 0 and below 90 deg, got {incidence_deg:g}")
+    for name, value, allowed in (("--radial-axis", radial_axis, ("x", "y")),
+                                 ("--level", level, ("none", "mean", "plane")),
+                                 ("--fill", fill, ("error", "nearest", "mean")),
+                                 ("--height-unit", height_unit, ("mm", "um", "nm"))):
+        if value not in allowed:
+            _fail(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
+    spacing = None if spacing_um is None else (spacing_um[0] * 1e-3, spacing_um[1] * 1e-3)
+    try:
+        res = run_topography(path, output, figure=not no_figure, spacing_mm=spacing,
+                             height_unit=height_unit, radial_axis=radial_axis, level=level,
+                             fill=fill, wavelength_nm=wavelength_nm, incidence_deg=incidence_deg)
+    except (InputError, ValueError) as err:
+        _fail(str(err).replace("surface.file", "--from"))
+    console = _console()
+    console.print(res.text, markup=False)
+    if res.json is not None:
+        console.print(f"table  {res.json}")
+    if res.figure is not None:
+        console.print(f"figure {res.figure}")
+
+
 def fit(
     config: Path = typer.Argument(..., help="Run configuration (TOML) of the set-up and model; "
                                   "[patterns.fringes] describes the images."),
@@ -71,6 +124,9 @@ def fit(
     max_chi2: float = typer.Option(2.0, "--max-chi2", min=1.0,
                                    help="Largest reduced chi-square (noise and model error) "
                                    "of a fit that counts as describing the images."),
+    max_rays: int = typer.Option(6400, "--max-rays", min=1, max=10_000_000,
+                                 help="Most rays per pixel when the fit refines its model (x4 "
+                                 "steps from sampling.n_rays) to bound its numerical error."),
     no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
 ) -> None:
     """Images to parameters: fit alpha_x/alpha_y (tangential/radial) and a brightness scale
@@ -93,7 +149,7 @@ def fit(
         try:
             with console.status(f"fitting {cfg.brdf.model} alphas to {len(images)} images"):
                 res = run_fit(cfg, images, output, figure=not no_figure, overwrite=overwrite,
-                              max_chi2=max_chi2)
+                              max_chi2=max_chi2, max_rays=max_rays)
         except (FileNotFoundError, ValueError) as err:
             _fail(str(err))
     console.print(f"pmdsim fit '{cfg.name}' ({time.perf_counter() - t0:.1f} s)")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, field_validator, model_validator
@@ -54,8 +54,40 @@ class CameraConfig(_Model):
     aperture_samples: Annotated[Int, Field(ge=1, le=100_000)] = Field(
         16, description="stratified aperture samples per sub-pixel (thin lens only)")
     aperture_seed: Annotated[Int, Field(ge=0, lt=2**63)] = 0
+    roi: tuple[Annotated[Int, Field(ge=0)], Annotated[Int, Field(ge=0)], ResolutionAxis, ResolutionAxis] | Literal["auto"] | None = Field(
+        None, description="region of interest (col0, row0, width, height) of the sensor that "
+        "is rendered; 'auto': the smallest window holding every pixel that sees the surface "
+        "(plus a margin); none = the whole sensor")
 
     _up = field_validator("up")(_nonzero_vector)
+
+    def cropped(self, roi=None) -> "CameraConfig":
+        """This camera with the window ``roi`` (default: its own, a tuple) as its sensor:
+        resolution = the window, principal point (or camera_matrix) moved by its corner,
+        ``roi`` None. The same rays through the same pixels, numbered from the corner."""
+        roi = self.roi if roi is None else roi
+        if roi is None or roi == "auto":
+            return self
+        c0, r0, w, h = roi
+        upd: dict = {"resolution": (w, h), "roi": None}
+        if self.camera_matrix is not None:
+            k = [list(r) for r in self.camera_matrix]
+            k[0][2] -= c0
+            k[1][2] -= r0
+            upd["camera_matrix"] = tuple(tuple(r) for r in k)
+        else:
+            fw, fh = self.resolution
+            cx, cy = self.principal_point_px or ((fw - 1) / 2.0, (fh - 1) / 2.0)
+            upd["principal_point_px"] = (cx - c0, cy - r0)
+        return self.model_copy(update=upd)
+
+    @property
+    def rendered_resolution(self) -> tuple[int, int]:
+        """(width, height) of what is rendered: the window of ``roi``, else the sensor
+        (also for ``roi = "auto"`` until it is resolved: an upper bound)."""
+        if isinstance(self.roi, tuple):
+            return (self.roi[2], self.roi[3])
+        return tuple(self.resolution)
 
     @model_validator(mode="after")
     def _check(self) -> "CameraConfig":
@@ -96,6 +128,12 @@ class CameraConfig(_Model):
                 raise ValueError(
                     "focal_length_px contradicts focal_length_mm / pixel_pitch_mm: give one"
                 )
+        if isinstance(self.roi, tuple):
+            c0, r0, w, h = self.roi
+            if c0 + w > self.resolution[0] or r0 + h > self.resolution[1]:
+                raise ValueError(f"roi = {list(self.roi)} (col0, row0, width, height) reaches beyond "
+                                 f"the sensor's {self.resolution[0]} x {self.resolution[1]} px: "
+                                 "shrink the window or move its corner")
         if (self.look_at_mm is None) == (self.rotation is None):
             raise ValueError("give exactly one of look_at_mm (with up) or rotation")
         if self.look_at_mm is not None:

@@ -6,7 +6,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field
 
-from .base import Float, Int, PositiveFloat, _Model
+from .base import Bool, Float, Int, PositiveFloat, _Model
 
 
 class DiagnosticsConfig(_Model):
@@ -37,3 +37,6 @@ class DiagnosticsConfig(_Model):
         "error the sampling actually makes) or from the per-ray variance (delta: cheaper, an "
         "upper bound that ignores the stratification, ~5x pessimistic on Fig. 3)",
     )
+    allow_no_valid_pixels: Bool = Field(
+        False, description="keep a decoded run in which some fringe direction has no valid "
+        "pixel (by default an error naming the stage that removed them and its share)")

@@ -99,6 +99,11 @@ def load_config(path: str | Path) -> RunConfig:
         brdf["file"] = _resolve_file(path.parent, brdf["file"])
     if isinstance(brdf, dict) and isinstance(brdf.get("variation"), dict) and "file" in brdf["variation"]:
         brdf["variation"]["file"] = _resolve_file(path.parent, brdf["variation"]["file"])
+    variants = data.get("variants")
+    for var in variants if isinstance(variants, list) else ():  # a variant's own BRDF file
+        vb = var.get("brdf") if isinstance(var, dict) else None
+        if isinstance(vb, dict) and "file" in vb:
+            vb["file"] = _resolve_file(path.parent, vb["file"])
     return parse_config(data, str(path))
 
 

@@ -488,7 +488,10 @@ class Simulation:
                         acc = coef[0] * f_hit
                         for m, z in enumerate(zs, start=1):
                             acc = acc + coef[m] * (z * np.exp(1j * m * delta)).real
-                        images[di, wi, k] = acc
+                        # the truncated series of a steep (quantised) response rings past
+                        # the display's range; a weighted mean of luminances cannot: clip
+                        # to [min, max] luminance x the weight on the monitor (never < 0)
+                        images[di, wi, k] = np.clip(acc, g.min() * f_hit, g.max() * f_hit)
         return FringeResult(directions, widths, deltas, images, sums, f_total, f_hit, sums_err,
                             self.describe_sampling(self.fringes_smooth()))
 

@@ -82,7 +82,8 @@ def plot_texture(params, path, wavelengths_nm=(610.0, 545.0, 465.0), weights=(1.
 
 def plot_fit(res, path, frame: str = "fixed") -> Path:
     """Median decoded modulation against fringe width: measured (dots), closed-form start
-    (dashed), fitted simulation (line), per direction. ``res``: :class:`~pmdsim.studies.fit.FitResult`."""
+    (dashed), fitted simulation (line), per direction; a failed fit says so in red in the
+    title. ``res``: :class:`~pmdsim.studies.fit.FitResult`."""
     fig = _figure((5.0 * len(res.directions), 4.0))
     w = np.asarray(res.widths)
     names = {"alpha_x": "alpha_tangential" if frame == "rotational" else "alpha_x",
@@ -103,7 +104,15 @@ def plot_fit(res, path, frame: str = "fixed") -> Path:
         ax.set_title(f"{d.upper()} fringes", fontsize=10)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
-    fig.suptitle(text, fontsize=9)
+    if not getattr(res, "success", True):
+        import textwrap
+
+        why = textwrap.fill(f"FIT FAILED ({res.reason}): not a result",
+                            width=int(14 * 5.0 * len(res.directions)))
+        text = f"{why}\n{text}"
+    elif np.isfinite(res.chi2_reduced):
+        text += f"; reduced chi-square {res.chi2_reduced:.3g}"
+    fig.suptitle(text, fontsize=9, color="tab:red" if not getattr(res, "success", True) else "k")
     path = Path(path)
     fig.savefig(path, dpi=DPI)
     return path
@@ -123,8 +132,10 @@ def plot_fit_coverage(results, path, k: float = 2.0) -> Path:
     ax.plot(idx - 0.12, z[:, 0], "o", color="tab:blue", label="alpha_x")
     ax.plot(idx + 0.12, z[:, 1], "s", color="tab:orange", label="alpha_y")
     for i in idx[~covered]:
-        ax.annotate("missed", (i, max(z[i].max(), k)), textcoords="offset points",
-                    xytext=(0, 6), ha="center", fontsize=7, color="tab:red")
+        worst = z[i][np.argmax(np.abs(z[i]))]
+        ax.annotate("missed", (i, worst), textcoords="offset points",
+                    xytext=(0, 8 if worst > 0 else -14), ha="center", fontsize=7,
+                    color="tab:red")
     ax.set_xticks(idx, [f"{r.case.seed}" for r in results], fontsize=8)
     ax.set_xlabel("case (seed); alphas 0.004-0.04, incidence 15-40 deg, exposure 1500-9000 e-, "
                   "dark noise 2-20 e-", fontsize=8)
@@ -132,10 +143,63 @@ def plot_fit_coverage(results, path, k: float = 2.0) -> Path:
     lim = max(3.0, float(np.nanmax(np.abs(z))) * 1.15)
     ax.set_ylim(-lim, lim)
     ax.set_title(f"fit coverage: both alphas inside k = {k:g} in {int(covered.sum())} of "
-                 f"{len(results)} cases (default fit settings, truth rendered with "
-                 "4096 rays)", fontsize=9)
+                 f"{len(results)} cases (default fit settings; truth: Gauss rule, 4096 "
+                 "nodes)", fontsize=9)
     ax.legend(fontsize=8, loc="lower right", ncols=3)
     ax.grid(alpha=0.3)
+    path = Path(path)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def plot_topography(analysis, heights, dx: float, dy: float, path) -> Path:
+    """A measured topography (``pmdsim texture --from``): the height map (nm, local frame:
+    x tangential, y radial), the PSD along each axis (the periodogram's central row and
+    column, positive frequencies, Hann window) with the K-correlation fit, and the slope
+    densities per axis with the equivalent Gaussian (Ward/Beckmann) lobes.
+    ``analysis``: :class:`~pmdsim.brdf.topography.TopographyAnalysis`; lengths in mm."""
+    from ..brdf import topography as tp
+
+    a = analysis
+    h = np.asarray(heights, np.float64)
+    h = h - h.mean()
+    ny, nx = h.shape
+    fig = _figure((13.0, 4.2))
+    ax0, ax1, ax2 = fig.subplots(1, 3)
+    im = ax0.imshow(h * 1e6, origin="lower", cmap="viridis", aspect="equal",
+                    extent=(0, nx * dx * 1e3, 0, ny * dy * 1e3))
+    fig.colorbar(im, ax=ax0, label="height, nm")
+    ax0.set_xlabel("x (tangential), um")
+    ax0.set_ylabel("y (radial), um")
+    ax0.set_title(f"Sq {a.sq_um * 1e3:.3g} nm, Sdq {a.sdq:.3g}")
+    fx, fy, s = tp.periodogram(h, dx, dy, "hann")
+    kc = tp.KCorrelation(a.kc_sigma_um * 1e-3, 2 * math.pi * a.kc_correlation_tangential_um * 1e-3,
+                         2 * math.pi * a.kc_correlation_radial_um * 1e-3, a.kc_exponent)
+    ix, iy = nx // 2, ny // 2  # zero frequency after fftshift
+    for f, row, fit, colour, name in (
+            (fx[ix + 1:], s[iy, ix + 1:], kc(fx[ix + 1:], 0.0), "tab:blue", "fx (tangential)"),
+            (fy[iy + 1:], s[iy + 1:, ix], kc(0.0, fy[iy + 1:]), "tab:orange", "fy (radial)")):
+        ax1.loglog(f * 1e-3, row * 1e12, ".", ms=2, color=colour, alpha=0.5, label=f"periodogram, {name}")
+        ax1.loglog(f * 1e-3, fit * 1e12, "-", color=colour, lw=1.5, label=f"K-correlation fit, {name}")
+    ax1.set_xlabel("spatial frequency, 1/um")
+    ax1.set_ylabel("PSD, um^4")
+    ax1.set_title(f"correlation lengths {a.kc_correlation_tangential_um:.3g} / "
+                  f"{a.kc_correlation_radial_um:.3g} um, C = {a.kc_exponent:.3g}", fontsize=9)
+    ax1.legend(fontsize=7)
+    gy, gx = np.gradient(h, dy, dx)
+    for g, alpha, colour, name in ((gx, a.alpha_tangential, "tab:blue", "tangential"),
+                                   (gy, a.alpha_radial, "tab:orange", "radial")):
+        lim = 5 * max(a.alpha_tangential, a.alpha_radial)
+        hist, edges = np.histogram(g.ravel(), bins=121, range=(-lim, lim), density=True)
+        c = 0.5 * (edges[1:] + edges[:-1])
+        ax2.plot(c * 1e3, hist * 1e-3, color=colour, lw=1.2, label=f"slopes, {name}")
+        ax2.plot(c * 1e3, np.exp(-(c / alpha) ** 2) / (math.sqrt(math.pi) * alpha) * 1e-3, "--",
+                 color=colour, lw=1, label=f"Gaussian, alpha = {alpha:.3g}")
+    ax2.set_xlabel("slope, mrad")
+    ax2.set_ylabel("density, 1/mrad")
+    ax2.set_title(f"{a.regime} (Rayleigh {a.rayleigh:.3g} at {a.wavelength_nm:g} nm, "
+                  f"{a.incidence_deg:g} deg)", fontsize=9)
+    ax2.legend(fontsize=7)
     path = Path(path)
     fig.savefig(path, dpi=DPI)
     return path

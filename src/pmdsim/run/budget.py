@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..config import RunConfig, check_resources
+from ..scene import resolve_roi
 from ..studies.budget import HEIGHT_COLUMNS, TABLE_COLUMNS, budget
 from . import files as pio
 from .threads import single_blas
@@ -55,8 +56,13 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
                progress: Callable[[str], None] | None = None, truth: str = "centre") -> BudgetResult:
     """Compute :func:`pmdsim.studies.budget.budget` and write it into ``outdir``."""
     final = Path(outdir).absolute()
+    cfg = resolve_roi(cfg)  # camera.roi = "auto": the window that sees the part
     check_resources(cfg)  # the budget's largest run, before anything is computed
     pio.check_output_dir(final, overwrite, MARKER)
+    from ..scene import Scene
+    from ..scene.sanity import check_physics
+
+    check_physics(cfg, Scene.from_config(cfg))  # a sensor/display that leaves no signal
     result = budget(cfg, progress, truth)
     rows = result.rows
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..config import ConfigError, InputError, RunConfig
-from ..studies.fit import MAX_CHI2, FitResult, NoiseModel, fit_fringe_images, format_fit
+from ..studies.fit import (MAX_CHI2, MAX_RAYS, FitResult, NoiseModel, check_fit_resources,
+                           fit_fringe_images, format_fit)
 from . import files as pio
 from .threads import single_blas
 
@@ -79,14 +80,16 @@ def load_fit_images(cfg: RunConfig, image_paths) -> tuple[np.ndarray, NoiseModel
 
 @single_blas
 def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwrite: bool = False,
-            max_chi2: float = MAX_CHI2) -> FitRun:
+            max_chi2: float = MAX_CHI2, max_rays: int = MAX_RAYS) -> FitRun:
     """Fit the configured model's alphas to fringe images (files in the order direction,
     width, shift of ``patterns.fringes``), write fit.json, fit.txt, fit.png to ``outdir``.
     Returns also when the fit failed (``result.success`` false; the files say so)."""
     final = check_fit_output(outdir, overwrite)
+    check_fit_resources(cfg, max_rays)  # memory and time, before the images are read
     fr = cfg.patterns.fringes
     images, noise, saturated = load_fit_images(cfg, image_paths)
-    res = fit_fringe_images(cfg, images, fr.widths_px, fr.directions, noise, max_chi2=max_chi2)
+    res = fit_fringe_images(cfg, images, fr.widths_px, fr.directions, noise, max_chi2=max_chi2,
+                            max_rays=max_rays)
     text = format_fit(res, cfg.anisotropy.frame)
     if saturated:
         text += f"\n{saturated} saturated values left out"

@@ -61,6 +61,7 @@ from ..scene.sanity import check_physics
 from ..studies import coverage
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
+from ..scene import resolve_roi
 from . import files as pio
 from .manifest import write_run_manifest, write_variants_manifest
 from .member import run_member
@@ -151,6 +152,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         fringe widths do not allow it (the message names ``patterns.fringes.widths_px``).
     """
     t_start = time.perf_counter()
+    cfg = resolve_roi(cfg)  # camera.roi = "auto": the window that sees the part, stored as such
     plan = plan_run(cfg, progress, figures, decode, diagnostics)
     if client is not None:
         on_cluster(plan, client)
@@ -177,14 +179,14 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
             if cfg.variants:
                 result = run_variants(plan, geometry, reference, tmp, shared)
             else:
-                result, _ = run_member(cfg, plan.sim, geometry, tmp, plan.steps, plan.figures,
-                                       plan.inputs, reference=reference, standalone=True,
-                                       diagnostics=plan.diagnostics)
+                result, _ = run_member(plan, cfg, plan.sim, geometry, tmp,
+                                       reference=reference, standalone=True)
                 result = replace(result, notes=tuple(plan.notes) + result.notes,
                                  timings=dict(result.timings, **shared))
         finally:
             if reference is not None:  # a failed or interrupted run leaves no thread behind
                 reference.settle()
+        result = replace(result, notes=result.notes + _check_valid(cfg, result))
         timings = dict(result.timings, total=time.perf_counter() - t_start)
         result = replace(result, timings=timings)
         # the folder's size, measured now that everything but the manifest is written
@@ -199,6 +201,20 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         else:
             write_run_manifest(tmp, cfg, result, timings)
     return moved(result, tmp, Path(outdir).absolute())
+
+
+def _check_valid(cfg: RunConfig, result: RunResult) -> tuple[str, ...]:
+    """Refuse (before the folder is kept) a decoded run with a fringe direction without a
+    valid pixel, naming the stage that removed them (:mod:`pmdsim.studies.valid_pixels`);
+    notes when ``diagnostics.allow_no_valid_pixels`` keeps it."""
+    from ..studies.valid_pixels import check_valid
+
+    h, w = result.shape
+    notes: list[str] = []
+    for sub in result.variants or (result,):
+        notes += check_valid(sub.statistics or {}, h * w, cfg.diagnostics.allow_no_valid_pixels,
+                             sub.config.name if result.variants else "")
+    return tuple(notes)
 
 
 def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,

@@ -389,7 +389,10 @@ def _run_claimed(plan: SweepPlan, outdir: Path, overwrite: bool, client, schedul
     import dask
 
     dec = plan.sweep.decimation
-    keys = [f"pmdsim-sweep-point-{p.index}" for p in todo]
+    # Dask runs independent tasks in the order of their keys (dask.order breaks ties by
+    # key; the local schedulers take them last first): the rank in ``todo`` keeps the
+    # points that share a geometry and a reference together
+    keys = [f"pmdsim-sweep-point-{rank:06d}-{p.index}" for rank, p in enumerate(todo)]
     tasks = [dask.delayed(compute_point, pure=False)(
         str(store), p.position, p.config.model_dump_json(), dec, p.index, dask_key_name=k)
         for p, k in zip(todo, keys)]

@@ -37,3 +37,39 @@ def run_texture(outdir=None, *, figure: bool = True, wavelengths_nm=(610.0, 545.
     return TextureRun(p, text, js, fig)
 
 
+@dataclass(frozen=True)
+class TopographyRun:
+    analysis: "object"
+    text: str
+    json: Path | None
+    figure: Path | None
+
+
+def run_topography(path, outdir=None, *, figure: bool = True, spacing_mm=None,
+                   height_unit: str = "um", radial_axis: str = "y", level: str = "plane",
+                   fill: str = "nearest", outlier_sigma=None, wavelength_nm: float = 545.0,
+                   incidence_deg: float = 0.0) -> TopographyRun:
+    """``pmdsim texture --from FILE``: read a measured topography
+    (:func:`pmdsim.topofile.read_topography`, errors name ``--from``), analyse it in the
+    local frame (:func:`pmdsim.brdf.topography.analyse`) and write topography.json,
+    topography.txt and topography.png to ``outdir`` if given."""
+    from ..brdf import topography as tp
+    from ..report.texture import plot_topography
+    from ..topofile import read_topography
+
+    t = read_topography(path, "--from", spacing_mm=spacing_mm, height_unit=height_unit,
+                        level=level, fill=fill, outlier_sigma=outlier_sigma)
+    h, dx, dy = tp.to_local(t.heights, t.dx, t.dy, radial_axis)
+    a = tp.analyse(h, dx, dy, wavelength_nm, incidence_deg, source=str(path))
+    text = tp.format_analysis(a)
+    js = fig = None
+    if outdir is not None:
+        out = Path(outdir)
+        out.mkdir(parents=True, exist_ok=True)
+        js = out / "topography.json"
+        js.write_text(json.dumps(a.as_dict() | {"reader": t.reader, "invalid_points": t.invalid,
+                                                "radial_axis": radial_axis}, indent=2))
+        (out / "topography.txt").write_text(text + "\n")
+        if figure:
+            fig = plot_topography(a, h, dx, dy, out / "topography.png")
+    return TopographyRun(a, text, js, fig)

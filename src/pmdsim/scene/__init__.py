@@ -50,8 +50,11 @@ class Scene:
             # a curved surface is turned about its vertex normal, not each point's normal
             anisotropy = replace(anisotropy, axis=surface.normal.copy())
         var = getattr(cfg.brdf, "variation", None)
-        camera = Camera.from_config(cfg.camera).focused_on(surface)
-        brdf = brdf_from_config(cfg.brdf)
+        cam_cfg = cfg.camera
+        if cam_cfg.roi == "auto":
+            cam_cfg = cam_cfg.cropped(auto_roi(Camera.from_config(cam_cfg), surface))
+        camera = Camera.from_config(cam_cfg).focused_on(surface)
+        brdf = brdf_from_config(cfg.brdf, set_up_incidence_deg(camera, surface))
         return cls(
             brdf_variation=(None if var is None
                             else BrdfVariation.from_config(var, surface, anisotropy)),
@@ -59,7 +62,7 @@ class Scene:
             monitor=Monitor.from_config(cfg.monitor),
             surface=surface,
             anisotropy=anisotropy,
-            brdf=brdf_from_config(cfg.brdf, set_up_incidence_deg(camera, surface)),
+            brdf=brdf,
             sampling=sampling_from_config(s, brdf),
             estimator=s.estimator,
         )
@@ -76,6 +79,63 @@ class Scene:
         return 1 if self.brdf.is_delta else self.sampling.n_rays
 
 
+def _surface_points(surface, n: int = 129) -> np.ndarray:
+    """World points (N, 3) on the surface: a grid of n x n over its local bounds (inside the
+    aperture) and n^2 / 4 points on the bounds' outline, to find the pixels that see it."""
+    rot = np.stack([surface.x_axis, surface.y_axis, surface.normal], axis=1).astype(np.float64)
+    if hasattr(surface, "sag"):
+        x0, x1, y0, y1 = surface.bounds()
+    else:  # flat rectangle
+        x0, x1, y0, y1 = -surface.size[0] / 2, surface.size[0] / 2, -surface.size[1] / 2, surface.size[1] / 2
+    gx, gy = np.meshgrid(np.linspace(x0, x1, n), np.linspace(y0, y1, n))
+    t = np.linspace(0.0, 2 * np.pi, n * n // 4, endpoint=False)
+    if hasattr(surface, "sag") and surface.aperture[0] in ("circular", "annular"):
+        _, cx, cy, a, _ = surface.aperture
+        ex, ey = cx + a * (1 - 1e-9) * np.cos(t), cy + a * (1 - 1e-9) * np.sin(t)
+    else:
+        ex, ey = np.array([]), np.array([])
+    x = np.concatenate([gx.ravel(), ex])
+    y = np.concatenate([gy.ravel(), ey])
+    if hasattr(surface, "sag"):
+        keep = np.asarray(surface.in_aperture(x, y), bool)
+        x, y = x[keep], y[keep]
+        z = np.asarray(surface.sag(x, y)[0], np.float64)
+        ok = np.isfinite(z)
+        x, y, z = x[ok], y[ok], z[ok]
+    else:
+        z = np.zeros_like(x)
+    return surface.centre + np.stack([x, y, z], axis=1) @ rot.T
+
+
+def auto_roi(camera: Camera, surface, margin_px: int = 4) -> tuple[int, int, int, int] | None:
+    """``camera.roi = "auto"``: the window (col0, row0, width, height) of ``camera``'s
+    sensor holding every pixel that sees ``surface`` (its points projected, the bounding box
+    widened by ``margin_px``), None when no surface point lands on the sensor."""
+    pts = _surface_points(surface)
+    pc = (pts - camera.position) @ camera.rotation
+    pix = camera.project(pts[pc[:, 2] > 0])
+    w, h = camera.width, camera.height
+    ok = np.all(np.isfinite(pix), axis=1) & (pix[:, 0] > -0.5) & (pix[:, 0] < w - 0.5) \
+        & (pix[:, 1] > -0.5) & (pix[:, 1] < h - 0.5)
+    if not ok.any():
+        return None
+    c0 = max(0, int(np.floor(pix[ok, 0].min())) - margin_px)
+    c1 = min(w - 1, int(np.ceil(pix[ok, 0].max())) + margin_px)
+    r0 = max(0, int(np.floor(pix[ok, 1].min())) - margin_px)
+    r1 = min(h - 1, int(np.ceil(pix[ok, 1].max())) + margin_px)
+    return (c0, r0, c1 - c0 + 1, r1 - r0 + 1)
+
+
+def resolve_roi(cfg: RunConfig) -> RunConfig:
+    """``cfg`` with ``camera.roi = "auto"`` replaced by its window (:func:`auto_roi`; None
+    when the camera does not see the surface), so that the estimate counts the rendered
+    pixels and the stored configuration names them."""
+    if cfg.camera.roi != "auto":
+        return cfg
+    win = auto_roi(Camera.from_config(cfg.camera), surface_from_config(cfg.surface))
+    return cfg.model_copy(update={"camera": cfg.camera.model_copy(update={"roi": win})})
+
+
 def set_up_incidence_deg(camera, surface) -> float:
     """Angle (deg) between the surface normal at its centre and the direction to the camera."""
     centre = np.asarray(getattr(surface, "centre", np.zeros(3)), np.float64)
@@ -85,4 +145,4 @@ def set_up_incidence_deg(camera, surface) -> float:
     return float(np.degrees(np.arccos(min(c, 1.0))))
 
 
-__all__ = ["Scene", "BrdfVariation", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]
+__all__ = ["Scene", "auto_roi", "resolve_roi", "set_up_incidence_deg", "BrdfVariation", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]

@@ -72,6 +72,10 @@ class Camera:
 
     @classmethod
     def from_config(cls, cfg: CameraConfig) -> "Camera":
+        """The camera of ``cfg``; with a window ``roi`` (a tuple) that window as its sensor
+        (:meth:`CameraConfig.cropped`); ``roi = "auto"`` is resolved by the scene
+        (:func:`pmdsim.scene.auto_roi`)."""
+        cfg = cfg.cropped()
         w, h = cfg.resolution
         if cfg.camera_matrix is not None:
             k = np.asarray(cfg.camera_matrix, np.float64)

@@ -63,6 +63,8 @@ def reduced_config(cfg: RunConfig, camera_size: tuple[int, int] = (160, 128)) ->
     1), the principal point accordingly (``(c + 0.5) s - 0.5``): the same field of view
     and surface, seen with fewer, larger pixels.
     """
+    if isinstance(cfg.camera.roi, tuple):  # the window as the sensor
+        cfg = cfg.model_copy(update={"camera": cfg.camera.cropped()})
     w, h = cfg.camera.resolution
     s = min(1.0, camera_size[0] / w, camera_size[1] / h)
     if s >= 1.0:

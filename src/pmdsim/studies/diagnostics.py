@@ -557,6 +557,8 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
         phase_se = phase_error_rule(sim, pgrid, widths, directions)
     else:
         phase_se = phase_error_seeds(sim, pgrid, widths, directions, n_seeds)
+    if rays is not None:
+        phase_se, rays = _with_specular_peak(scene.brdf, phase_se, rays)
     vision = scene.camera.rays_per_pixel
     if phase_se is not None and vision > 1 and scene.sampling.mode == "random":
         # camera optics: a pixel averages S vision rays with independently rotated bundles
@@ -600,6 +602,25 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
     return Diagnostics(scene.estimator, scene.rays_per_pixel, math.degrees(scene.sampling.theta_max),
                        directions, widths, pgrid, surface, energy, rays, phase_method, phase_se,
                        summary, excluded)
+
+
+def _with_specular_peak(brdf, phase_se, rays):
+    """A specular peak (reflectance a) beside the lobe (h; ``pmdsim.render.specular``): the
+    rays sample the lobe alone, whose fringe of modulation m adds to the peak's full one, so
+    the pixel's modulation is (a + h m) / (a + h) and its phase error the lobe's times
+    h m / (a + h m)."""
+    from dataclasses import replace
+
+    from ..render.specular import specular_reflectance
+
+    a = specular_reflectance(brdf)
+    if a <= 0:
+        return phase_se, rays
+    h = float(brdf.halo_reflectance)
+    m = rays.modulation
+    share = h * m / (a + h * m)
+    rays = replace(rays, modulation=(a + h * m) / (a + h), phase_se=rays.phase_se * share)
+    return (None if phase_se is None else phase_se * share), rays
 
 
 from .diagnostic_checks import (MAX_SUGGESTED_RAYS, MIN_ESS, DiagnosticWarning,  # noqa: E402,F401

@@ -37,9 +37,10 @@ or ``slope_density`` with the Gaussian density) and a brightness scale:
 The brightness ``scale`` multiplies the simulated camera values (it absorbs ``rho_s``, the
 exposure and the sensor gain, which images alone cannot separate). The model's sampling
 settings are the configuration's, except that the estimator is ``radiometric`` (the
-rendering integral: the physical answer) and the sample set ``stratified`` (smooth in the
-parameters) unless the configuration sets ``sampling.estimator``/``mode`` explicitly
-(:func:`fit_config`). Use ``monitor.pixel_model = "continuous"``: a nearest-pixel monitor
+rendering integral: the physical answer) and the sample set the ``stratified`` lattice
+unless the configuration sets ``sampling.estimator``/``mode`` explicitly
+(:func:`fit_config`; the Gauss rule, ``mode = "rule"``, converges faster but at 100 nodes
+missed lobes cut by the monitor's edge in the coverage study). Use ``monitor.pixel_model = "continuous"``: a nearest-pixel monitor
 makes the model piecewise constant on the scale of a ray crossing a pixel edge.
 """
 
@@ -57,7 +58,7 @@ from .fit_stats import (NoiseModel, fringe_signal_ratio, harmonic_noise_variance
                         parameter_covariance)
 
 __all__ = ["FIT_FIELDS", "NoiseModel", "FitResult", "fit_fringe_images", "fit_config",
-           "decoded_modulation", "median_modulation", "closed_form_start",
+           "check_fit_resources", "fit_levels", "decoded_modulation", "median_modulation", "closed_form_start",
            "slope_jacobian", "format_fit"]
 
 #: Models whose alphas can be fitted, with the configuration fields of (alpha_x, alpha_y).
@@ -70,6 +71,8 @@ MAX_CHI2 = 2.0
 #: A direction's fringes count as signal when the first harmonic's power exceeds what
 #: noise alone gives by this many standard errors (1 / sqrt(pixels)) in some width.
 SIGNAL_SIGMAS = 6.0
+#: Default most rays per pixel of the refinement (100 -> 400 -> 1600 -> 6400).
+MAX_RAYS = 6400
 #: Pixels whose lobe puts more than this share of its weight off the monitor are not fitted.
 EDGE_SHARE = 1e-6
 #: Relative floor of the noise estimated from noise-free images (the fit's own precision).
@@ -132,7 +135,8 @@ class FitResult:
                            for i, (n, v, s, s0) in enumerate(zip(self.names, self.values,
                                                                  self.std, self.start))},
             "covariance": self.cov.tolist(),
-            "chi2_reduced": self.chi2_reduced, "max_chi2": self.max_chi2,
+            "chi2_reduced": self.chi2_reduced if np.isfinite(self.chi2_reduced) else None,
+            "max_chi2": self.max_chi2,
             "residual_rms": self.residual_rms,
             "n_data": self.n_data, "n_evaluations": self.n_evaluations,
             "converged": self.converged, "message": self.message,
@@ -170,14 +174,19 @@ def median_modulation(images) -> np.ndarray:
 
 def fit_config(cfg: RunConfig) -> RunConfig:
     """The configuration the fit renders with: ``sampling.estimator = "radiometric"`` and
-    ``sampling.mode = "stratified"`` unless the configuration sets them explicitly; no
-    variants."""
+    ``sampling.mode = "stratified"`` unless the configuration sets them explicitly; the
+    rule's embedded error estimate off unless set (the fit estimates its model's error by
+    refinement); no variants."""
     d = cfg.model_dump()
     given = cfg.sampling.model_fields_set
     if "estimator" not in given:
         d["sampling"]["estimator"] = "radiometric"
     if "mode" not in given:
+        # the lattice, not the Gauss rule: measured on the coverage study, the rule at 100
+        # nodes misses lobes cut by the monitor's edge (chi-square 1.27, k = 2 missed)
         d["sampling"]["mode"] = "stratified"
+    if "error_estimate" not in given:
+        d["sampling"]["error_estimate"] = False  # the fit estimates its model's error itself
     d["variants"] = []
     return RunConfig.model_validate(d)
 
@@ -276,11 +285,67 @@ def closed_form_start(sim: Simulation, widths, directions, modulation) -> tuple[
 
 
 # =========================================================================== the fit
+def model_error_variance(render, values, n_rays: int, model, valid) -> np.ndarray:
+    """(n,) variance (squared image units) of the model's numerical error of each fitted
+    value ``[valid]``: the fit's render ``model`` (unscaled, at ``values``) against one with
+    ``1/REFINE_FACTOR`` of the rays (an overestimate: about the coarser set's error). It
+    enters the chi-square through :func:`~pmdsim.studies.fit_stats.parameter_covariance`;
+    the rule of a renderer that reports its own per-pixel error would replace it here."""
+    coarse = max(n_rays // REFINE_FACTOR, 1)
+    if coarse == n_rays:
+        return np.zeros(int(np.sum(valid)))
+    other = render(values[0], values[1], coarse)
+    d = values[2] * (np.nan_to_num(model[valid]) - np.nan_to_num(other[valid]))
+    return d * d
+
+
+def fit_levels(cfg: RunConfig, max_rays: int = None) -> list[int]:
+    """The rays per pixel the fit may render with: ``sampling.n_rays`` and its refinements
+    (x ``REFINE_FACTOR`` up to ``max_rays``)."""
+    max_rays = MAX_RAYS if max_rays is None else max_rays
+    levels = [cfg.sampling.n_rays]
+    while levels[-1] * REFINE_FACTOR <= max_rays:
+        levels.append(levels[-1] * REFINE_FACTOR)
+    return levels
+
+
+def check_fit_resources(cfg: RunConfig, max_rays: int = None, max_nfev: int = 60) -> float:
+    """Refuse, before any work, a fit that cannot fit this machine: one render at the
+    largest ray count must fit the memory (:func:`pmdsim.config.check_resources`), and all
+    renders together (about ``2 max_nfev`` at the first count, ``2 REFINE_NFEV`` per
+    refinement, each at most a run's estimate) ``compute.max_cpu_hours``. Returns the
+    estimated CPU seconds."""
+    from ..config import check_resources, estimate_resources
+
+    cfg = fit_config(cfg)
+    levels = fit_levels(cfg, max_rays)
+
+    def at(n):
+        d = cfg.model_dump()
+        d["sampling"]["n_rays"] = int(n)
+        return RunConfig.model_validate(d)
+
+    check_resources(at(levels[-1]), max_cpu_hours=float("inf"))
+    cpu = sum(estimate_resources(at(n)).cpu_seconds * (2 * (max_nfev if i == 0 else REFINE_NFEV))
+              for i, n in enumerate(levels))
+    limit = cfg.compute.max_cpu_hours
+    if cpu > limit * 3600:
+        raise ConfigError(
+            f"invalid configuration:\n  sampling.n_rays: the fit may render up to "
+            f"{2 * max_nfev} times with {levels[0]} rays per pixel and refine to "
+            f"{levels[-1]} (--max-rays), about {cpu / 3600:.3g} CPU hours, more than "
+            f"compute.max_cpu_hours = {limit:g}; use a smaller camera (camera.resolution or "
+            "camera.roi), fewer rays (sampling.n_rays, --max-rays), or raise "
+            "compute.max_cpu_hours if you mean it")
+    return cpu
+
+
 def _noise_scale(sol, images, valid, meas, noise: NoiseModel | None, sigma):
     """The noise behind the weights of ``sol`` (a least-squares solution): with a sensor
     model, its check against the residual's part no phase-shifted sinusoid makes; without
     one, that part's variance, which scales the (unit-weighted) Jacobian and residuals.
-    Returns (summary, chi-square testable, (weighted Jacobian, weighted residuals))."""
+    Returns (summary, chi-square testable, (weighted Jacobian, weighted residuals, the
+    factor that turns the fit's weights into the noise's))."""
     fitted = np.full(images.shape, np.nan)
     fitted[valid] = sol.fun * sigma + meas
     resid = np.where(valid, images - fitted, np.nan)
@@ -288,17 +353,17 @@ def _noise_scale(sol, images, valid, meas, noise: NoiseModel | None, sigma):
         var, dof = harmonic_noise_variance(resid / np.where(valid, noise.sigma(fitted), np.nan))
         return ({"source": "sensor model (EMVA 1288)", "dof": dof,
                  "observed_to_model": float(np.sqrt(var)) if np.isfinite(var) else None},
-                True, (sol.jac, sol.fun))
+                True, (sol.jac, sol.fun, 1.0))
     info = {"source": "the residual's part that no phase-shifted sinusoid makes"}
     var, dof = harmonic_noise_variance(resid)
     if not np.isfinite(var):
         return (info | {"sigma": None, "note": "K = 3 shifts and no sensor model: the noise "
                         "is unknown, the chi-square test was not made"}, False,
-                (sol.jac, sol.fun))
+                (sol.jac, sol.fun, 1.0))
     # floor: noise-free (simulated, float) images are fitted to the optimiser's precision
     # (xtol 1e-6 in the logarithms), not to 0
     s = max(np.sqrt(var), PRECISION_FLOOR * float(np.sqrt(np.mean(meas**2))))
-    return info | {"sigma": float(s), "dof": dof}, True, (sol.jac / s, sol.fun / s)
+    return info | {"sigma": float(s), "dof": dof}, True, (sol.jac / s, sol.fun / s, s)
 
 
 def _signal_check(images, noise: NoiseModel | None, directions, widths) -> dict:
@@ -332,7 +397,7 @@ def _signal_check(images, noise: NoiseModel | None, directions, widths) -> dict:
 def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
                       noise: NoiseModel | None = None, start=None, diff_step: float = 2e-3,
                       max_nfev: int = 60, max_chi2: float = MAX_CHI2,
-                      max_rays: int = 6400) -> FitResult:
+                      max_rays: int = MAX_RAYS) -> FitResult:
     """Fit (alpha_x, alpha_y, scale) to fringe images; see the module docstring.
 
     Parameters
@@ -457,14 +522,17 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
             refined = True
             break
     values = np.exp(sol.x)
-    fitted = render(values[0], values[1], n_rays) * values[2]
-    cv = parameter_covariance(sol_w[0], sol_w[1], shift=shift)
+    fitted_raw = render(values[0], values[1], n_rays)
+    fitted = fitted_raw * values[2]
+    var_model = model_error_variance(render, values, n_rays, fitted_raw, valid)
+    cv = parameter_covariance(sol_w[0], sol_w[1], shift=shift,
+                              model_variance=var_model / (sigma * sol_w[2]) ** 2)
     jac_exp = np.diag(values)
     cov = jac_exp @ cv.cov @ jac_exp
     std = np.sqrt(np.diag(cov))
     std_noise = np.sqrt(np.diag(jac_exp @ cv.cov_noise @ jac_exp))
     std_model = np.sqrt(np.diag(jac_exp @ cv.cov_model @ jac_exp))
-    chi2 = cv.chi2_reduced
+    chi2 = cv.chi2_reduced if tested else float("nan")  # no noise estimate: no test
     model_info = {"estimator": cfg.sampling.estimator, "mode": cfg.sampling.mode,
                   "n_rays": n_rays, "ladder": ladder, "birge_factor": cv.birge,
                   "method": ("the change of the fitted values from the last refinement (rays "
@@ -516,8 +584,10 @@ def format_fit(res: FitResult, frame: str = "fixed") -> str:
     for n, v, s, a, b, s0 in zip(res.names, res.values, res.std, sn, sm, res.start):
         lines.append(f"{label[n]:<22} {v:12.6g} {s:12.3g} {2 * s:12.3g} {a:10.3g} {b:10.3g} "
                      f"{s0:12.6g}")
-    lines.append(f"reduced chi-square {res.chi2_reduced:.3g} (noise and model error; accepted "
-                 f"<= {res.max_chi2:g}), residual RMS {res.residual_rms:.4g} over {res.n_data} "
+    chi2 = (f"reduced chi-square {res.chi2_reduced:.3g} (noise and model error; accepted "
+            f"<= {res.max_chi2:g})" if np.isfinite(res.chi2_reduced) else
+            "reduced chi-square not tested (no sensor model and 3 shifts: the noise is unknown)")
+    lines.append(f"{chi2}, residual RMS {res.residual_rms:.4g} over {res.n_data} "
                  f"values, {res.n_evaluations} simulations; {res.message}")
     if res.model:
         steps = " -> ".join(str(s["n_rays"]) for s in res.model.get("ladder", []))

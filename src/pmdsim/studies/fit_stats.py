@@ -5,25 +5,27 @@ The residual of one image value is ``r = s m(theta) - y`` (``y`` the measured va
 level removed; ``m`` the simulated camera value, ``s`` the brightness scale). Its covariance
 is modelled as
 
-    C = D + U U^T
+    C = D + V + U U^T
 
 - ``D = diag(sigma^2)``: the sensor's noise of each value (:class:`NoiseModel`, EMVA 1288:
   dark noise, shot noise, quantisation and the fixed patterns PRNU/DSNU), or, without a
   sensor model, one variance estimated from the images themselves
   (:func:`harmonic_split`: the part of the residual that no phase-shifted sinusoid can make);
-- ``U U^T``: the model's own numerical error (the sampling error of the simulated images),
-  as ``m`` columns, each a correlated error pattern over all values with a standard
-  uncertainty of one (:func:`pmdsim.studies.fit.model_error` makes them). It enters only
-  here: :func:`parameter_covariance` propagates it to the parameters.
+- ``V + U U^T``: the model's own numerical error (the sampling error of the simulated
+  images): ``V`` the variance of each value's error (diagonal;
+  :func:`pmdsim.studies.fit.model_error_variance` estimates it), ``U`` error patterns
+  correlated over all values, ``m`` columns of unit standard uncertainty. They enter only
+  here, through :func:`parameter_covariance`; the model's error carried to the parameters
+  (how far they move when the sample set is refined) enters there as ``shift``.
 
 The fit minimises ``|D^(-1/2) r|^2`` (the noise-weighted least squares); the parameters'
 covariance is the sandwich of that estimator under ``C``:
 
-    A = (J^T J)^-1 J^T,   cov = b (J^T J)^-1 + (A U_w)(A U_w)^T
+    A = (J^T J)^-1 J^T,   cov = b (J^T J)^-1 + (A U_w)(A U_w)^T + shift shift^T
 
 with ``J`` the Jacobian of the weighted residuals, ``U_w = D^(-1/2) U``, and ``b`` the Birge
 factor ``max(1, chi2_nu)`` that widens the noise part when the residuals are larger than
-``C`` says (never narrows it). ``chi2_nu = r_w^T (I + U_w U_w^T)^-1 r_w / (n - p)``
+``C`` says (never narrows it). ``chi2_nu = r_w^T (I + V_w + U_w U_w^T)^-1 r_w / (n - p)``
 (Woodbury) is the reduced chi-square against the whole covariance, the number the fit's
 verdict tests.
 """
@@ -154,26 +156,30 @@ class Covariance:
 
 
 def parameter_covariance(jac, residual, model_error=None, birge: bool = True,
-                         shift=None) -> Covariance:
+                         shift=None, model_variance=None) -> Covariance:
     """Covariance of least-squares parameters from the Jacobian ``jac`` (n, p) of the
     noise-weighted residuals ``residual`` (n,) at the optimum, and the model's numerical
-    error ``model_error`` (n, m): columns of noise-weighted error patterns, each of unit
-    standard uncertainty (``None``: no model error). ``shift`` (p,) or (p, k): the model's
-    numerical error already carried to the parameters (e.g. how far they move when the
-    model's sample set is refined), each column a standard uncertainty; it adds
-    ``shift shift^T``. See the module docstring."""
+    error: ``model_error`` (n, m), columns of noise-weighted error patterns, each of unit
+    standard uncertainty (``U``); ``model_variance`` (n,), the noise-weighted variance of
+    each value's own error (a diagonal ``V``: it enters the chi-square, ``C = I + V + U U^T``,
+    not the parameters, whose share of a correlated error ``V`` cannot say); ``shift`` (p,)
+    or (p, k): the error already carried to the parameters (e.g. how far they move when the
+    model's sample set is refined), each column a standard uncertainty, adding
+    ``shift shift^T``. ``None``: no such term. See the module docstring."""
     j = np.asarray(jac, np.float64)
     r = np.asarray(residual, np.float64)
     n, p = j.shape
     u = np.zeros((n, 0)) if model_error is None else np.asarray(model_error, np.float64)
     if u.ndim == 1:
         u = u[:, None]
+    d = np.ones(n) if model_variance is None else 1.0 + np.asarray(model_variance, np.float64)
     jtj_inv = np.linalg.pinv(j.T @ j)
     a = jtj_inv @ j.T
-    # r^T (I + U U^T)^-1 r by Woodbury: r.r - (U^T r)^T (I_m + U^T U)^-1 (U^T r)
-    utr = u.T @ r
-    small = np.eye(u.shape[1]) + u.T @ u
-    quad = float(r @ r - utr @ np.linalg.solve(small, utr)) if u.shape[1] else float(r @ r)
+    # r^T (D + U U^T)^-1 r by Woodbury: r D^-1 r - (U^T D^-1 r)^T (I + U^T D^-1 U)^-1 (...)
+    rd = r / d
+    utr = u.T @ rd
+    small = np.eye(u.shape[1]) + u.T @ (u / d[:, None])
+    quad = float(r @ rd - (utr @ np.linalg.solve(small, utr) if u.shape[1] else 0.0))
     dof = max(n - p, 1)
     chi2 = quad / dof
     b = max(1.0, chi2) if birge else 1.0

@@ -1,0 +1,51 @@
+"""Nothing exits 0 with 0 % valid pixels unless asked; the message names the stage that
+removed them and its share (pmdsim.studies.valid_pixels)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import make_config
+from pmdsim.config import ConfigError
+from pmdsim.studies.valid_pixels import check_valid, removed_by_stage
+
+WIDE = {"brdf": {"alpha_x": 1.0, "alpha_y": 1.0},
+        "sampling": {"estimator": "radiometric", "n_rays": 32},
+        "patterns": {"fringes": {"widths_px": [10.0, 40.0, 200.0]}}}
+
+
+def test_the_stage_counts_add_up_to_the_camera_pixels():
+    px = {"surface": 900, "considered": 700, "valid": 100, "low_modulation": 50,
+          "decode_flagged": 120, "lobe_off_monitor": 430, "reference_flagged_on_surface": 200,
+          "decode_flags_of_considered": {"SATURATED": 20, "LOW_AMPLITUDE": 100}}
+    counts = removed_by_stage(px, 1000)
+    assert sum(counts.values()) + px["valid"] == 1000
+    assert counts == {"geometry": 100, "display": 200, "lobe off the monitor": 430,
+                      "scattering": 50, "sensor": 20, "decoding": 100}
+    assert check_valid({"directions": {"x": {"pixels": px}}}, 1000, False) == []
+
+
+def test_a_lobe_off_the_monitor_is_refused_naming_that_stage(tmp_path):
+    """Ward alphas of 1 with the radiometric estimator: every bundle hangs off the
+    monitor. The run is refused (nothing written) and the message names the lobe and its
+    share, which matches the dataset the allowed run keeps."""
+    from pmdsim import load_run
+    from pmdsim.run import run_simulation
+
+    cfg = make_config(**WIDE)
+    with pytest.raises(ConfigError) as info:
+        run_simulation(cfg, tmp_path / "refused", figures=False, diagnostics=False)
+    msg = str(info.value)
+    assert msg.splitlines()[1].strip().startswith("brdf:")
+    assert "lobe off the monitor" in msg and "0 of 1,280 camera pixels valid" in msg
+    assert not (tmp_path / "refused").exists()
+    allowed = make_config(**WIDE, diagnostics={"allow_no_valid_pixels": True})
+    res = run_simulation(allowed, tmp_path / "kept", figures=False, diagnostics=False)
+    note = next(n for n in res.notes if "allow_no_valid_pixels = true" in n)
+    ds = load_run(tmp_path / "kept")
+    off = np.asarray(ds["lobe_off_monitor"].values, bool)
+    share = float(note.split("% have their lobe")[0].split("; ")[-1])
+    considered = res.statistics["directions"]["x"]["pixels"]["lobe_off_monitor"]
+    assert share == pytest.approx(100 * considered / off.size, abs=0.05)
+    assert off.sum() >= considered > 0
