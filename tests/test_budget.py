@@ -86,7 +86,9 @@ def test_effects_alone_match_closed_forms(rows):
 def test_surface_is_reported_apart_from_the_system(rows):
     for d in ("x", "y"):
         s_ideal = _get(rows, "surface_ideal", d)["rms_px"]
-        assert s_ideal > 0.01  # the Ward lobe biases the decoded point
+        # the Ward lobe biases the decoded point: the wide lobe (alpha_x 0.025) more than the
+        # narrow one (alpha_y 0.002; converged rule sampling, no sampling noise on top)
+        assert s_ideal > (0.01 if d == "x" else 0.003)
         assert _get(rows, "ideal", d)["rms_px"] < s_ideal / 100
 
 

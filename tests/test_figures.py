@@ -289,3 +289,23 @@ def test_problems_are_found():
     assert any("x: 0 labelled ticks" in p for p in found)
     assert any("no y label" in p for p in found)
     assert sum("no y label" in p for p in found) == 2  # the map's and the colour bar's
+
+
+def test_dot_shape_figure_has_labelled_axes(tmp_path, recorded):
+    """The dot scan's shapes (maps and the orientation plot). The contact sheet's crops are
+    thumbnails whose size its title states; they carry no ticks by design."""
+    from types import SimpleNamespace
+
+    from pmdsim.measure.chain import dot_table
+    from pmdsim.report.dots import plot_dot_shapes
+
+    rows, cols = np.mgrid[0:40, 0:56]
+    dots, images = [], []
+    for k, (u, v) in enumerate([(60, 60), (300, 60), (60, 200), (300, 200)]):
+        c, r = 10 + 30 * (k % 2), 10 + 18 * (k // 2)
+        images.append(np.exp(-0.5 * ((cols - c) ** 2 / (1.5 + k) ** 2 + (rows - r) ** 2 / 1.2 ** 2)))
+        dots.append(SimpleNamespace(u=u, v=v, size=15))
+    images = np.array(images)
+    table = dot_table(images, dots, "a")
+    plot_dot_shapes({"a": images}, {"a": table}, tmp_path / "dot_shapes.png", centre_px=(27.5, 19.5))
+    assert recorded == {"dot_shapes.png": []}

@@ -46,7 +46,7 @@ def test_fit_defaults_to_the_radiometric_estimator_unless_set():
     from pmdsim.config import parse_config
 
     cfg = fit_config(parse_config(d))
-    assert (cfg.sampling.estimator, cfg.sampling.mode) == ("radiometric", "rule")
+    assert (cfg.sampling.estimator, cfg.sampling.mode) == ("radiometric", "stratified")
     assert cfg.sampling.error_estimate is False  # the fit refines instead
     own = fit_config(parse_config(d | {"sampling": {"estimator": "paper", "mode": "random",
                                                     "error_estimate": True}}))

@@ -130,9 +130,9 @@ def test_writing_runs_behind_the_chain_and_the_manifest_comes_last(tmp_path, mon
     monkeypatch.setattr(simulate_mod, "write_run_manifest", write_run_manifest)
     original = member_mod.run_member
 
-    def run_member(cfg, sim, geometry, folder, *args, **kwargs):
+    def run_member(plan, cfg, sim, geometry, folder, *args, **kwargs):
         seen["folder"] = folder
-        return original(cfg, sim, geometry, folder, *args, **kwargs)
+        return original(plan, cfg, sim, geometry, folder, *args, **kwargs)
 
     monkeypatch.setattr(simulate_mod, "run_member", run_member)
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})

@@ -117,8 +117,7 @@ def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quant
         p95 = np.array([by[k][f"p95_{quantity}"] if k in by else np.nan for k in labels], float)
         colours = [_COLOURS.get(k[0], "tab:gray") for k in labels]
         _bars(ax, labels, (("P95 |dev|", p95), ("RMS", rms)), colours, unit)
-        ax.set_title(f"{d.upper()} fringes: decoded minus exact (system) / minus mirror (surface)",
-                     fontsize=9)
+        ax.set_title(f"{d.upper()} fringes, per pixel (3-D slope conversion)", fontsize=9)
         ax.set_yticklabels([f"{lab}  [{part}]" for part, lab in labels] if ax is axes[0] else [],
                            fontsize=8)
     axes[0].legend(loc="lower right", fontsize=8)
@@ -141,10 +140,10 @@ def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quant
         ax2.set_title("reconstructed slopes (surface frame)", fontsize=9)
         ax2.legend(loc="lower right", fontsize=8)
     est = f"; estimator {settings['estimator']}" if settings and settings.get("estimator") else ""
-    fig.suptitle(title + est + "  (light: P95 or PV; blue: system on the ideal mirror, "
-                 "orange: surface minus mirror, green: calibration, sensitivity x uncertainty)",
+    fig.suptitle(title + est + "\nlight: P95 or PV; blue: system (mirror decoded minus the exact point), "
+                 "orange: surface minus the mirror, green: calibration (sensitivity x uncertainty)",
                  fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.5 / fig.get_size_inches()[1]))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

@@ -112,9 +112,9 @@ def diagnostics_text(name: str, d: dict) -> str:
         lines.append(f"effective sample size: median {_fmt(d['ess_median'], '.1f')}, "
                      f"min {_fmt(d['ess_min'], '.1f')} of {d['n_rays']} rays")
     if "phase_se_rad" in d:
-        how = ("spread over independent rotations of the sample set"
-               if d["phase_se_method"] == "seeds" else
-               "N independent rays, an upper bound for the lattice")
+        how = {"seeds": "spread over independent rotations of the sample set",
+               "rule": "the stated error of the rule rendered (embedded rule or replicates)",
+               }.get(d["phase_se_method"], "N independent rays, an upper bound for the lattice")
         lines.append(f"phase standard error ({d['phase_se_method']} method: {how}), mrad, "
                      "median / P95; fringe modulation:")
         for key, v in d["phase_se_rad"].items():

@@ -143,8 +143,8 @@ def plot_fit_coverage(results, path, k: float = 2.0) -> Path:
     lim = max(3.0, float(np.nanmax(np.abs(z))) * 1.15)
     ax.set_ylim(-lim, lim)
     ax.set_title(f"fit coverage: both alphas inside k = {k:g} in {int(covered.sum())} of "
-                 f"{len(results)} cases (default fit settings, truth rendered with "
-                 "4096 rays)", fontsize=9)
+                 f"{len(results)} cases (default fit settings; truth: Gauss rule, 4096 "
+                 "nodes)", fontsize=9)
     ax.legend(fontsize=8, loc="lower right", ncols=3)
     ax.grid(alpha=0.3)
     path = Path(path)

@@ -288,10 +288,11 @@ STEPS = ((render, "render"), (capture, "render"), (dataset, "write"), (decode, "
 
 
 # ----------------------------------------------------------------------------- the run
-def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
-               steps: _Steps, figures: bool, inputs, reference=None,
-               standalone: bool = True, diagnostics: bool = True) -> tuple[RunResult, object]:
-    """Render one configuration (no variants) and write its images, dataset, config and
+def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
+               reference=None, standalone: bool = True) -> tuple[RunResult, object]:
+    """Render one configuration ``cfg`` (no variants; one member of the
+    :class:`~pmdsim.run.simulate.RunPlan` ``plan``, which gives the inputs, the progress
+    steps and whether to draw and diagnose) and write its images, dataset, config and
     figures into ``folder`` (no manifest): :data:`STEPS`. Returns its result and its
     in-memory dataset.
 
@@ -301,7 +302,8 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
     for all variants together). With ``diagnostics`` (and a lobe) the run diagnostics go
     into the dataset, statistics.json and summary.txt, and their warnings into the result."""
     folder.mkdir(parents=True, exist_ok=True)
-    m = Member(cfg, sim, geometry, folder, steps, inputs, reference, standalone, diagnostics)
+    m = Member(cfg, sim, geometry, folder, plan.steps, plan.inputs, reference, standalone,
+               plan.diagnostics)
     m.timings = {"render": 0.0, "write": 0.0, "decode": 0.0, "diagnostics": 0.0,
                  "figures": 0.0}
     with contextlib.ExitStack() as stack:
@@ -311,7 +313,7 @@ def run_member(cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path
             ThreadPoolExecutor(1, thread_name_prefix="pmdsim-images"))
         m.writer = DatasetWriter(folder / DATASET_NAME)
         stack.callback(m.writer.close)
-        if figures:
+        if plan.figures:
             import_in_background()  # matplotlib, while the render runs without the GIL
             m.figures = FigureSchedule(
                 cfg.output.figure_set, reference is not None and cfg.patterns.fringes is not None,

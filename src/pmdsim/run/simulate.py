@@ -179,9 +179,8 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
             if cfg.variants:
                 result = run_variants(plan, geometry, reference, tmp, shared)
             else:
-                result, _ = run_member(cfg, plan.sim, geometry, tmp, plan.steps, plan.figures,
-                                       plan.inputs, reference=reference, standalone=True,
-                                       diagnostics=plan.diagnostics)
+                result, _ = run_member(plan, cfg, plan.sim, geometry, tmp,
+                                       reference=reference, standalone=True)
                 result = replace(result, notes=tuple(plan.notes) + result.notes,
                                  timings=dict(result.timings, **shared))
         finally:

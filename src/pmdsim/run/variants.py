@@ -31,9 +31,8 @@ def run_variants(plan, geometry, reference, tmp: Path, shared_timings: dict) -> 
     compare = plan.figures and cfg.patterns.fringes is not None
     subs, datasets = [], {}
     for name, c, sim in plan.members:
-        res, ds = run_member(c, sim, geometry, tmp / name, plan.steps, plan.figures,
-                             plan.inputs, reference=reference, standalone=False,
-                             diagnostics=plan.diagnostics)
+        res, ds = run_member(plan, c, sim, geometry, tmp / name, reference=reference,
+                             standalone=False)
         res = replace(res, notes=tuple(plan.notes))
         write_run_manifest(tmp / name, c, res, dict(res.timings, **shared_timings))
         subs.append(res)

@@ -40,7 +40,7 @@ GROUPS = (
     ("monitor_position_mm", "monitor position", "mm"),
     ("monitor_orientation_deg", "monitor orientation", "deg"),
     ("monitor_pitch_rel", "monitor pixel pitch", "relative"),
-    ("surface_distance_mm", "nominal surface distance (height-slope ambiguity)", "mm"),
+    ("surface_distance_mm", "nominal surface distance", "mm"),
 )
 
 
@@ -127,6 +127,7 @@ def calibration_rows(cfg, scene, decoded, rec0, spec, disc) -> list[dict]:
                 r.pop(k)
             comps.append(r)
         row = {"effect": field_name, "label": f"{label} ({sigma:g} {unit})".replace(" )", ")"),
+               "note": ("the monocular height-slope ambiguity" if field_name == "surface_distance_mm" else ""),
                "part": "calibration", **_quadrature(comps), "n_nodes": min(c["n_nodes"] for c in comps),
                "removed": spec.describe(), "rim_excluded": comps[0]["rim_excluded"], "seconds": 0.0,
                "how": (f"sensitivity x uncertainty: reconstructed with {label} off by {sigma:g} {unit} "

@@ -409,6 +409,55 @@ def phase_error_seeds(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
     return se.reshape(se.shape[:2] + grid.grid_shape)
 
 
+def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
+                     directions: Sequence[str] = ("x", "y")) -> np.ndarray:
+    """The stated numerical phase error (n_directions, n_widths, gr, gc), rad, of the sample
+    sets the run actually renders (mode ``rule``: the rule against its embedded rule; mode
+    ``rqmc``: the replicates' spread), at the grid pixels: the same statement as
+    :meth:`pmdsim.render.FringeResult.phase_error`, from the rays of
+    :meth:`~pmdsim.render.Simulation.transport` (linear fringes, as the other methods)."""
+    from ..render import Simulation
+    from ..render.results import phase_error
+    from ..scene.quadrature import student_t975
+
+    nearest = sim.scene.monitor.pixel_model == "nearest"
+    rows, cols = grid.pixel_rows, grid.pixel_cols
+    valid, _ = incidence(sim.scene, rows, cols)
+    passes = sim.plan(sim.fringes_smooth())
+    sums = []
+    for samp in passes:
+        run = Simulation(sim.scene.replace(sampling=samp), sim.tile_rows, sim.scheduler,
+                         sim.num_workers)
+        u, v, w, _, _ = run.transport(rows, cols, directions=False)
+        sums.append(ray_sums(u, v, w, tuple(widths), tuple(directions), nearest))
+    z = np.stack(sums)  # (passes, nd, nw, K)
+    if len(passes) == 1:
+        se = np.full(z.shape[1:], np.nan)
+    elif passes[0].mode == "rule":
+        se = phase_error(z[0], z[0] - z[1], "embedded")
+    else:
+        r = z.shape[0]
+        half = student_t975(r - 1) / math.sqrt(r)
+        err = half * (z.real.std(0, ddof=1) + 1j * z.imag.std(0, ddof=1))
+        se = phase_error(z.mean(0), err, "replicates")
+    se[..., ~valid] = np.nan
+    return se.reshape(se.shape[:2] + grid.grid_shape)
+
+
+def ray_sums(u, v, weights, widths, directions, nearest: bool) -> np.ndarray:
+    """``sum_p w_p exp(i k c_p)`` (n_directions, n_widths, K) of the rays of K pixels."""
+    w = np.asarray(weights, np.float64)
+    out = np.zeros((len(directions), len(widths), w.shape[0]), np.complex128)
+    for di, d in enumerate(directions):
+        c = np.asarray(u if d == "x" else v, np.float64)
+        c = np.where(np.isfinite(c), c, 0.0)
+        if nearest:
+            c = np.floor(c + 0.5)
+        for wi, width in enumerate(widths):
+            out[di, wi] = (w * np.exp(1j * 2 * np.pi * c / width)).sum(-1)
+    return out
+
+
 def ray_phases(u, v, weights, widths, directions, nearest: bool) -> np.ndarray:
     """``arg sum_p w_p exp(i k c_p)`` (n_directions, n_widths, K) of the rays of K pixels
     (the phase the renderer's fringe sums decode to, gamma 1)."""
@@ -486,8 +535,11 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
         pixels whose bundle hangs off the monitor: their phase error says nothing about the
         sampling of the pixels that are measured). Their maps are kept.
     """
-    if phase_method not in ("delta", "seeds"):
-        raise ValueError(f"phase_method must be 'delta' or 'seeds', got {phase_method!r}")
+    if phase_method not in ("delta", "seeds", "rule"):
+        raise ValueError(f"phase_method must be 'delta', 'seeds' or 'rule', got {phase_method!r}")
+    if phase_method == "seeds" and sim.scene.sampling.estimates_error:
+        # the run states the error of the rule it renders: judge that, not random rotations
+        phase_method = "rule"
     widths = tuple(float(w) for w in (widths or (50.0,)))
     directions = tuple(directions)
     scene = sim.scene
@@ -501,6 +553,8 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
         phase_se = None
     elif phase_method == "delta":
         phase_se = rays.phase_se
+    elif phase_method == "rule":
+        phase_se = phase_error_rule(sim, pgrid, widths, directions)
     else:
         phase_se = phase_error_seeds(sim, pgrid, widths, directions, n_seeds)
     if rays is not None:
@@ -569,167 +623,5 @@ def _with_specular_peak(brdf, phase_se, rays):
     return (None if phase_se is None else phase_se * share), rays
 
 
-@dataclass(frozen=True)
-class DiagnosticWarning:
-    """One warning: what is wrong (``message``) and the setting that fixes it
-    (``setting`` = ``suggested`` value, or a change of estimator)."""
-
-    code: str
-    message: str
-    setting: str
-    suggested: object
-
-    def __str__(self) -> str:
-        return self.message
-
-
-#: Below this effective sample size (median) the fringes are not judged at all (the noise
-#: floor 2/sqrt(ESS) of the modulation would exceed 1): a "too_few_rays" warning instead.
-MIN_ESS = 4
-#: Suggestions never ask for more rays than the configuration allows.
-MAX_SUGGESTED_RAYS = 10_000_000
-
-
-def _wider_width(width: float, spread_px: float, target: float) -> float:
-    """The fringe width (monitor px) whose modulation reaches ``target`` if the lobe's
-    footprint on the monitor were Gaussian with the rays' standard deviation ``spread_px``,
-    ``m(w) = exp(-2 pi^2 sigma^2 / w^2)``, with a margin of 1.2; rounded up, and at least
-    twice ``width``."""
-    t = min(max(target, 0.01), 0.9)
-    if not math.isfinite(spread_px) or spread_px <= 0:
-        return float(_nice_up(2 * width))
-    need = math.pi * spread_px * math.sqrt(2.0 / math.log(1.0 / t))
-    return float(_nice_up(max(1.2 * need, 2 * width)))
-
-
-def _nice_up(x: float) -> int:
-    """Round up to two significant digits (1234 -> 1300)."""
-    if x <= 0 or not math.isfinite(x):
-        return 0
-    e = 10 ** max(0, int(math.floor(math.log10(x))) - 1)
-    return int(math.ceil(x / e) * e)
-
-
-def check(diag: Diagnostics, min_energy_fraction: float = 0.95, max_phase_error_mrad: float = 1.0,
-          min_ess_fraction: float = 0.1, min_modulation: float = 0.05,
-          bounds=None) -> list[DiagnosticWarning]:
-    """Warnings for a :class:`Diagnostics`, each with the setting that would fix it.
-
-    ``bounds``: a :class:`pmdsim.config.DiagnosticsConfig` whose values replace the
-    keyword arguments. Grid pixels in ``diag.excluded`` (bundles off the monitor) and NaN
-    values (no surface, no hit) are left out of every statistic. The energy fraction is
-    judged by its median over the grid pixels (the suggested theta_max covers the worst
-    pixel). With a median effective sample size (ESS) below ``MIN_ESS`` the fringes are not
-    judged ("too_few_rays", raise n_rays). Otherwise each fringe (direction, width) is
-    judged by its median modulation ``m`` against the noise floor ``2 / sqrt(ESS)``:
-    ``m`` below a floor that exceeds ``min_modulation`` cannot be told from noise
-    ("modulation_undetermined", raise n_rays); ``m < min_modulation`` is washed out (a wider
-    width is suggested); the others' phase error, P95 over the pixels of the worst fringe,
-    is compared with ``max_phase_error_mrad``. The ESS fraction is judged by its median.
-    Every warning's ``setting = suggested``, applied, is meant to clear it (tested).
-    """
-    if bounds is not None:
-        min_energy_fraction = bounds.min_energy_fraction
-        max_phase_error_mrad = bounds.max_phase_error_mrad
-        min_ess_fraction = bounds.min_ess_fraction
-    out: list[DiagnosticWarning] = []
-    cone = diag.estimator in CONE_ESTIMATORS
-    e = diag.energy
-    if cone and e is not None and np.isfinite(e.fraction).any():
-        med = float(np.nanmedian(e.fraction))
-        if med < min_energy_fraction:
-            fr = e.fraction
-            # the cone angle that keeps min_energy_fraction is known if it was the target
-            theta_ok = float(np.nanmax(e.theta_needed_deg)) if math.isclose(e.target, min_energy_fraction) else None
-            msg = (f"theta_max = {diag.theta_max_deg:g} deg holds {100 * med:.0f} % of the lobe "
-                   f"energy (median over pixels; min {100 * float(np.nanmin(fr)):.0f} %)")
-            if theta_ok is not None:
-                sugg = math.ceil(theta_ok * 10) / 10
-                msg += f"; theta_max >= {sugg:g} deg keeps {100 * min_energy_fraction:.0f} %"
-            else:
-                sugg = None
-            msg += " (or use sampling.estimator = 'radiometric', which samples the whole lobe)"
-            out.append(DiagnosticWarning("energy_fraction", msg, "sampling.theta_max_deg", sugg))
-    rays = diag.rays
-    ess_med = _pct(diag.judged(rays.ess), 50) if rays is not None else float("nan")
-    few = rays is not None and math.isfinite(ess_med) and ess_med < MIN_ESS
-    if few and cone:
-        # The cone's rays miss the lobe (narrower than their spacing, or off to one side):
-        # more rays of the same cone barely help; importance sampling of the lobe does.
-        out.append(DiagnosticWarning(
-            "effective_sample_size",
-            f"effective sample size {ess_med:.2g} of {diag.n_rays} rays (median over pixels) "
-            f"< {MIN_ESS}: almost all the weight sits on one ray of the cone, the fringes' "
-            "modulation and phase error cannot be judged; use sampling.estimator = "
-            "'radiometric' (importance sampling of the lobe)",
-            "sampling.estimator", "radiometric"))
-    elif few:
-        n_new = min(_nice_up(diag.n_rays * 1.5 * MIN_ESS / max(ess_med, 0.25)), MAX_SUGGESTED_RAYS)
-        out.append(DiagnosticWarning(
-            "too_few_rays",
-            f"effective sample size {ess_med:.2g} (median over pixels) < {MIN_ESS}: too few of "
-            f"the {diag.n_rays} rays carry weight to judge the fringes' modulation or phase "
-            f"error; raise sampling.n_rays to ~ {n_new}",
-            "sampling.n_rays", n_new))
-    if diag.phase_se is not None and not few:
-        worst, which = -1.0, None
-        floor = 2.0 / math.sqrt(ess_med) if math.isfinite(ess_med) else 0.0
-        for di, d in enumerate(diag.directions):
-            for wi, wd in enumerate(diag.widths):
-                mod = _pct(diag.judged(rays.modulation[di, wi]), 50) if rays is not None else 1.0
-                if not math.isfinite(mod):
-                    continue  # no pixel to judge (an empty view stops the run before this)
-                if mod < floor and floor > min_modulation:
-                    # indistinguishable from sampling noise, which is above the bound:
-                    # more rays tell whether the lobe washes the fringes out
-                    # a modulation below the floor is consistent with none: bring the floor
-                    # below min_modulation (ESS grows with N), then the next run can tell
-                    n_new = min(_nice_up(diag.n_rays * 1.5 * (floor / min_modulation) ** 2),
-                                MAX_SUGGESTED_RAYS)
-                    out.append(DiagnosticWarning(
-                        "modulation_undetermined",
-                        f"{d} fringes of {wd:g} px: modulation {mod:.3g} (median) is within the "
-                        f"sampling noise ~ {floor / 2:.2g} of {ess_med:.3g} effective rays: "
-                        f"whether the lobe washes them out cannot be told; raise "
-                        f"sampling.n_rays to ~ {n_new}",
-                        "sampling.n_rays", n_new))
-                    continue
-                if mod < min_modulation:
-                    spread = (_pct(diag.judged(rays.spread_px[di]), 50)
-                              if rays is not None and rays.spread_px is not None else float("nan"))
-                    wider = _wider_width(wd, spread, 2.0 * max(min_modulation, floor))
-                    out.append(DiagnosticWarning(
-                        "washed_out",
-                        f"{d} fringes of {wd:g} px keep a modulation of {mod:.3g} (median; "
-                        f"sampling noise alone gives ~ {floor / 2:.2g}): the lobe washes them "
-                        f"out, their phase cannot be measured at any number of rays; use wider "
-                        f"fringes (~ {wider:g} px instead of {wd:g})",
-                        "patterns.fringes.widths_px",
-                        tuple(sorted({wider if w == wd else w for w in diag.widths})),
-                    ))
-                    continue
-                p95 = _pct(diag.judged(diag.phase_se[di, wi]), 95)
-                if p95 > worst:
-                    worst, which = p95, (d, wd)
-        if which is not None and worst * 1e3 > max_phase_error_mrad:
-            n_new = min(_nice_up(diag.n_rays * (worst * 1e3 / max_phase_error_mrad) ** 2),
-                        MAX_SUGGESTED_RAYS)
-            out.append(DiagnosticWarning(
-                "phase_error",
-                f"phase standard error {worst * 1e3:.2g} mrad for {which[0]} fringes of "
-                f"{which[1]:g} px (P95 over pixels, {diag.phase_se_method} method) > "
-                f"{max_phase_error_mrad:g} mrad: raise sampling.n_rays to ~ {n_new} (assuming "
-                "1/sqrt(N); the lattice often converges faster: see pmdsim converge)",
-                "sampling.n_rays", n_new,
-            ))
-    if cone and rays is not None and math.isfinite(ess_med) and ess_med >= MIN_ESS:
-        med = ess_med
-        if med < min_ess_fraction * diag.n_rays:
-            out.append(DiagnosticWarning(
-                "effective_sample_size",
-                f"effective sample size {med:.1f} of {diag.n_rays} rays (median over pixels): "
-                "most rays of the cone carry almost no weight; use sampling.estimator = "
-                "'radiometric' (importance sampling of the lobe)",
-                "sampling.estimator", "radiometric",
-            ))
-    return out
+from .diagnostic_checks import (MAX_SUGGESTED_RAYS, MIN_ESS, DiagnosticWarning,  # noqa: E402,F401
+                                _nice_up, _wider_width, check)

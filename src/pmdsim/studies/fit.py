@@ -36,10 +36,11 @@ or ``slope_density`` with the Gaussian density) and a brightness scale:
 
 The brightness ``scale`` multiplies the simulated camera values (it absorbs ``rho_s``, the
 exposure and the sensor gain, which images alone cannot separate). The model's sampling
-settings are the configuration's (by default ``mode = "rule"``: a deterministic Gauss rule,
-smooth in the parameters), except that the estimator is ``radiometric`` (the rendering
-integral: the physical answer) unless the configuration sets ``sampling.estimator``
-explicitly (:func:`fit_config`). Use ``monitor.pixel_model = "continuous"``: a nearest-pixel monitor
+settings are the configuration's, except that the estimator is ``radiometric`` (the
+rendering integral: the physical answer) and the sample set the ``stratified`` lattice
+unless the configuration sets ``sampling.estimator``/``mode`` explicitly
+(:func:`fit_config`; the Gauss rule, ``mode = "rule"``, converges faster but at 100 nodes
+missed lobes cut by the monitor's edge in the coverage study). Use ``monitor.pixel_model = "continuous"``: a nearest-pixel monitor
 makes the model piecewise constant on the scale of a ray crossing a pixel edge.
 """
 
@@ -172,14 +173,18 @@ def median_modulation(images) -> np.ndarray:
 
 
 def fit_config(cfg: RunConfig) -> RunConfig:
-    """The configuration the fit renders with: ``sampling.estimator = "radiometric"`` unless
-    the configuration sets it explicitly (the sample set is the configuration's, by
-    default the deterministic Gauss rule); the rule's embedded error estimate off unless
-    set (the fit estimates its model's error by refinement); no variants."""
+    """The configuration the fit renders with: ``sampling.estimator = "radiometric"`` and
+    ``sampling.mode = "stratified"`` unless the configuration sets them explicitly; the
+    rule's embedded error estimate off unless set (the fit estimates its model's error by
+    refinement); no variants."""
     d = cfg.model_dump()
     given = cfg.sampling.model_fields_set
     if "estimator" not in given:
         d["sampling"]["estimator"] = "radiometric"
+    if "mode" not in given:
+        # the lattice, not the Gauss rule: measured on the coverage study, the rule at 100
+        # nodes misses lobes cut by the monitor's edge (chi-square 1.27, k = 2 missed)
+        d["sampling"]["mode"] = "stratified"
     if "error_estimate" not in given:
         d["sampling"]["error_estimate"] = False  # the fit estimates its model's error itself
     d["variants"] = []

@@ -3,8 +3,8 @@
 Each case (:func:`coverage_cases`) draws, from one seed, Ward alphas (log-uniform, unequal
 in x and y), the angle of incidence (camera and monitor tilted about the plate's x axis)
 and the noise (exposure and dark noise of a 12-bit EMVA sensor). Its "measured" images are
-rendered with a converged model (radiometric estimator, ``TRUTH_RAYS`` rays: a different
-and 40x larger sample set than the fit's) and captured by the sensor; the fit then runs
+rendered with a converged model (radiometric estimator, the Gauss rule with ``TRUTH_RAYS``
+nodes: another kind of sample set than the fit's lattice, 40x larger) and captured by the sensor; the fit then runs
 with the **default settings** (a configuration without a ``[sampling]`` section: the fit's
 defaults, :func:`pmdsim.studies.fit.fit_config`). A case covers the truth when both alphas
 lie inside their k = 2 intervals. Small cameras (20 x 16 px) keep a case to seconds.
@@ -25,7 +25,7 @@ from ..scene.sensor import Sensor
 from .fit import fit_fringe_images
 from .fit_stats import NoiseModel
 
-#: Rays of the converged "truth" renders (the fit's default is 100).
+#: Nodes of the converged "truth" renders (Gauss rule; the fit's default is 100 rays).
 TRUTH_RAYS = 4096
 WIDTHS = (12.0, 25.0, 50.0, 100.0, 200.0)
 SHIFTS = 4
@@ -110,7 +110,8 @@ def truth_images(case: CoverageCase) -> tuple[np.ndarray, RunConfig]:
     cfg = parse_config(d)
     truth = parse_config(d | {"brdf": {"model": "ward", "alpha_x": case.alpha_x,
                                        "alpha_y": case.alpha_y, "rho_s": 0.4},
-                              "sampling": {"estimator": "radiometric", "n_rays": TRUTH_RAYS}})
+                              "sampling": {"estimator": "radiometric", "mode": "rule",
+                                           "n_rays": TRUTH_RAYS}})
     values = Simulation.from_config(truth).render_fringes(WIDTHS, ("x", "y"), SHIFTS).images
     sensor = Sensor.from_config(cfg.sensor)
     dn = sensor.capture(values).dn
