@@ -142,7 +142,8 @@ def fig3_specular_span() -> tuple:
 
 def fig3_pixel_bundle() -> tuple:
     """docs/fig3-geometry.md: the paper's pixel (1, 1) (row 0, column 0): where P lands,
-    how many of its rays hit the monitor and the range they span."""
+    how many of its rays hit the monitor (of how many; how many miss) and the range they
+    span."""
     import numpy as np
 
     sim = _fig3_simulation()
@@ -151,7 +152,7 @@ def fig3_pixel_bundle() -> tuple:
     u, v = np.asarray(u, float).ravel(), np.asarray(v, float).ravel()
     hit = np.isfinite(u) & np.isfinite(v)
     return (float(geo.specular_u[0, 0]), float(geo.specular_v[0, 0]), int(hit.sum()),
-            float(u[hit].min()), float(u[hit].max()), float(v[hit].min()), float(v[hit].max()))
+            u.size, int(u.size - hit.sum()), float(u[hit].min()), float(u[hit].max()), float(v[hit].min()), float(v[hit].max()))
 
 
 @functools.cache
@@ -206,7 +207,8 @@ CHECKS = [
           + NUMBER + r" \.\.\. " + NUMBER, fig3_specular_span, why="geometry, full camera"),
     Check("fig3-pixel-bundle", "docs/fig3-geometry.md",
           r"P lands at \(u, v\) = \(" + NUMBER + r", " + NUMBER + r"\); " + NUMBER
-          + r" of its 100 rays hit the[\s\S]*?The bundle spans u = " + NUMBER + r" \.\.\. "
+          + r" of its " + NUMBER + r" rays hit the\s+monitor, " + NUMBER
+          + r" leave it[\s\S]*?The bundle spans u = " + NUMBER + r" \.\.\. "
           + NUMBER + r", v = " + NUMBER + r" \.\.\. " + NUMBER, fig3_pixel_bundle,
           why="the paper's pixel (1, 1), its 100 rays"),
     Check("turning-ward", "docs/texture.md",
