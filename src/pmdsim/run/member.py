@@ -206,6 +206,8 @@ def compare(m: Member) -> None:
         off_monitor=m.off_monitor, phase_error=m.phase_error)
     m.decoded = None
     m.stats = chain.statistics(m.measured, cfg.name)
+    if m.fringes is not None and m.fringes.sampling:  # the rule rendered (order used)
+        m.stats["sampling"] = m.fringes.sampling
     m.ds = assign_to_dataset(m.ds, m.measured, m.stats)
 
 
