@@ -42,8 +42,8 @@ def scene_config(tilt_deg: float = 25.0, *, brdf=None, sampling=None, widths=(20
     d["monitor"]["pixel_model"] = pixel_model
     if brdf is not None:
         d["brdf"] = brdf
-    if sampling is not None:
-        d["sampling"] = sampling
+    if sampling is not None:  # over the base's (mode "stratified": ray 0 is P)
+        d["sampling"] = {**d["sampling"], **sampling}
     if frame is not None:
         d["anisotropy"] = frame
     d["patterns"] = {"fringes": {"widths_px": list(widths), "shifts": shifts}}

@@ -191,7 +191,7 @@ def test_ward1992_phase_bias_follows_its_first_order_closed_form():
                         look_at_mm=[0.0, 0.0, 0.0], pixel_model="continuous",
                         resolution=[600, 500])
     d["brdf"] = {"model": "ward", "alpha_x": 0.003, "alpha_y": 0.03, "rho_s": 0.4}
-    d["sampling"] = {"n_rays": 64, "theta_max_deg": 1.0}
+    d["sampling"] = {"n_rays": 64, "theta_max_deg": 1.0, "mode": "stratified"}
     d["patterns"] = {"fringes": {"widths_px": [40.0], "shifts": 4, "directions": ["y"]}}
     cfg = parse_config(d)
     res = convergence_study(cfg, n_values=(1024,), estimators=("radiometric",),

@@ -360,7 +360,7 @@ def test_rendered_dot_moments_follow_the_lobe():
                         look_at_mm=[0.0, 0.0, 0.0], pixel_model="continuous")
     ax, ay = 0.008, 0.016
     d["brdf"] = {"model": "ward", "alpha_x": ax, "alpha_y": ay, "rho_s": 0.4}
-    d["sampling"] = {"n_rays": 4096, "estimator": "radiometric"}
+    d["sampling"] = {"n_rays": 4096, "estimator": "radiometric", "mode": "stratified"}
     cfg = parse_config(d)
     u0, v0, size = 300.0, 200.0, 30.0
     img = Simulation.from_config(cfg).render_dots([Dot(u0, v0, size)])[0].astype(np.float64)

@@ -54,6 +54,8 @@ SKIPPED = [
                         "tests/test_warmup.py runs it)"),
     (r"^python benchmarks/", "a timed benchmark (run on an idle machine, not in the tests)"),
     (r"^pmdsim decode cam/", "a placeholder for the reader's camera images"),
+    (r"^pmdsim converge ", "about 100 renders even on a reduced camera (its N x theta x "
+                           "estimator grid); tests/test_converge.py runs the command"),
     (r"^pmdsim fit CONFIG IMAGES", "a synopsis with placeholders (tests/test_fit.py runs it)"),
 ]
 

@@ -383,8 +383,7 @@ def _tile_body(fill, phase1, lobe):
                 r1 = 0.0 if shared else rotation[p, 0]
                 r2 = 0.0 if shared else rotation[p, 1]
                 fill(model, (u1, u2, r1, r2, sp, prm, aux, d, off))
-            nray = npad if _PADDED[model] != 0 and not lobe else n
-            ftot, fhit = phase1(model, (g, d, nray, prm, aux, wr, wm, hm, ubuf, vbuf, iubuf,
+            ftot, fhit = phase1(model, (g, d, npad, prm, aux, wr, wm, hm, ubuf, vbuf, iubuf,
                                         ivbuf, fbuf))
             if mon_corr is not None:
                 fhit = monitor_correction(g, mon_corr, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)

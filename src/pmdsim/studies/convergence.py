@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from dataclasses import replace as dc_replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -44,7 +45,6 @@ from ..measure.decode import phase_shift
 from ..measure.deviation import wrap
 from ..render import Simulation
 from ..scene import Scene
-from ..scene.sampling import ConeSampling
 
 DEFAULT_N = (25, 50, 100, 200, 400, 800, 1600)
 DEFAULT_THETA_DEG = (0.5, 1.0, 2.0, 4.0, 8.0)
@@ -189,7 +189,8 @@ def convergence_study(
         for th in theta_values:
             for n in n_values:
                 scene = base.replace(
-                    sampling=ConeSampling(n, math.radians(th), samp.scheme, samp.mode, samp.seed),
+                    sampling=dc_replace(samp, n_rays=n, theta_max=math.radians(th),
+                                        target_error=None),
                     estimator="paper")
                 t0 = time.perf_counter()
                 ph, mod = _decode(sim_of(scene).render_fringes(widths, directions, shifts).images)
@@ -197,8 +198,8 @@ def convergence_study(
                 say(f"cone theta_max = {th:g} deg, N = {n}")
     if "radiometric" in estimators:
         for n in n_values:
-            scene = base.replace(sampling=ConeSampling(n, samp.theta_max, samp.scheme, samp.mode,
-                                                       samp.seed), estimator="radiometric")
+            scene = base.replace(sampling=dc_replace(samp, n_rays=n, target_error=None),
+                                 estimator="radiometric")
             t0 = time.perf_counter()
             ph, mod = _decode(sim_of(scene).render_fringes(widths, directions, shifts).images)
             runs.append((["radiometric"], None, n, ph, mod, time.perf_counter() - t0))
