@@ -3,9 +3,9 @@
 One case per (BRDF model, kernel, phase-2 mode) plus the optional inputs (display
 correction ``mon_corr``, per-pixel parameters ``brdf_px``), built from the configurations
 of ``conftest``. ``tests/data/kernel_outputs.npz`` holds the outputs of these cases as the
-kernels computed them before they were generated from one body per phase (issue 23,
-written by ``python tests/kernel_cases.py``); ``test_kernel_variants.py`` compares the
-kernels against them.
+kernels computed them before per-ray weights (written by ``python tests/kernel_cases.py``
+from that tree); ``test_kernel_variants.py`` compares the kernels against them, so that a
+restructuring of the kernels (issue 23) can be checked variant by variant.
 """
 
 from __future__ import annotations

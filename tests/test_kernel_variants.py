@@ -1,11 +1,11 @@
-"""Every variant of the bundle kernels against their stored outputs from before issue 23.
+"""Every variant of the bundle kernels against their stored outputs.
 
 ``tests/kernel_cases.py`` lists one case per BRDF model (Ward's three normalisations,
 Beckmann with and without Smith shadowing, the mirror, the slope table, the grating
 orders), kernel (cone, lobe) and phase-2 mode (tables, harmonic with powers, images,
 dots, transport), plus the display correction and per-pixel parameters;
-``tests/data/kernel_outputs.npz`` holds what the kernels computed for them before they
-were generated from one body per phase (and before per-ray weights). With all weights 1
+``tests/data/kernel_outputs.npz`` holds what the kernels computed for them before
+per-ray weights were added. With all weights 1
 every output must agree to 1e-12 of its column's largest magnitude (measured on the
 machine that wrote the file: bit for bit), with NaN in the same places. The physics of
 each variant is tested against independent references elsewhere (test_kernels,

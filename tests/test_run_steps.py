@@ -150,3 +150,36 @@ def test_writing_runs_behind_the_chain_and_the_manifest_comes_last(tmp_path, mon
     assert seen["images"] and len(res.image_paths) == 2 * 3 * 4
     assert json.loads(final.attrs["statistics_json"]) == json.loads(
         (res.outdir / "statistics.json").read_text())
+
+
+def test_a_fork_inside_paused_never_copies_a_held_dask_lock(tmp_path, monkeypatch):
+    """A part being written holds Dask's tokenize lock; a figure process forked then would
+    wait for it forever (it did, on a loaded machine). Forks happen inside
+    ``writer.paused()``, which waits for the part: the child tokenizes at once."""
+    import multiprocessing as mp
+    import time
+
+    import dask.tokenize as dt
+
+    from pmdsim.run import writing
+
+    started = threading.Event()
+
+    def slow_part(ds, path, create):
+        with dt.tokenize_lock:
+            started.set()
+            time.sleep(1.0)
+
+    monkeypatch.setattr(writing, "_write_part", slow_part)
+    writer = writing.DatasetWriter(tmp_path / "s.zarr")
+    writer.offer(_dataset(np.random.default_rng(3)))
+    assert started.wait(30)
+    with writer.paused():
+        child = mp.get_context("fork").Process(target=dt.tokenize, args=(1,))
+        child.start()
+    child.join(60)
+    hung = child.is_alive()
+    if hung:
+        child.kill()
+    writer.close()
+    assert not hung and child.exitcode == 0

@@ -5,9 +5,8 @@ plane, z = normal), with ``i`` pointing from the surface to the camera and ``o``
 surface to the monitor, samples outgoing directions from unit-square points the caller
 passes in (``sample``: deterministic, so testable and seedable outside), gives the density
 of those samples per solid angle (``pdf``), and exposes a parameter vector for the compiled
-kernels (``pmdsim.kernels.bundle.B_*``). Adding a model is one new file here plus its
-weight functions in ``pmdsim.kernels.models`` and one row of the kernels' table
-``pmdsim.kernels.bundle.MODELS`` (docs/render-kernels.md).
+kernels (``pmdsim.kernels.bundle.B_*``). Adding a model is one new file here plus its case
+in the kernels' weight loops (cone: ``_phase1``; radiometric: ``_phase1_lobe``).
 
 The NumPy methods here are the reference the compiled kernels are tested against.
 """

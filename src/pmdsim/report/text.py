@@ -23,7 +23,21 @@ def summary_text(stats: dict, timings: dict | None = None) -> str:
              f"K = {stats['shifts']} shifts; deviation of the finest width "
              f"({stats['finest_width_px']:g} px) from the ideal specular reference",
              f"pixels masked when the modulation ratio < {stats['min_modulation_ratio']:g} "
-             "(counted below, never hidden)", ""]
+             "(counted below, never hidden)"]
+    smp = stats.get("sampling")
+    if smp:
+        line = f"sampling: {smp.get('mode')}, {smp.get('rule')} ({smp.get('nodes')} nodes"
+        if smp.get("error") == "embedded":
+            line += f"; numerical error from the embedded {smp.get('embedded_rule')}"
+        elif smp.get("error") == "replicates":
+            line += f"; numerical error from {smp.get('passes')} replicates"
+        line += ")"
+        if smp.get("target_error_mrad") is not None:
+            line += (f"; target {smp['target_error_mrad']:g} mrad "
+                     f"{'met' if smp.get('target_met') else 'NOT met'} at n_rays = "
+                     f"{smp.get('n_rays')} (P95 {_num(smp.get('achieved_p95_mrad'), 3)} mrad)")
+        lines.append(line)
+    lines.append("")
     head = f"{'dir':<4}{'deviation':<20}{'mean':>11}{'RMS':>11}{'P95':>11}{'max':>11}"
     lines.append(head)
     lines.append("-" * len(head))

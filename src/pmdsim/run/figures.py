@@ -407,14 +407,18 @@ class FigureSchedule:
     offer whose dataset holds what it needs (:data:`FIGURES`): the set-up and fringe
     figures once the images exist, the chain's once the deviation exists, the
     reconstruction's once the surface is reconstructed. ``before_fork`` is called before
-    the first start (the run waits there for the reference's reconstruction thread).
+    the first start (the run waits there for the reference's reconstruction thread);
+    every start runs inside ``fork_guard()`` (a context manager: the run's dataset writer
+    pauses, so that no thread holds a lock the forked process needs).
     :meth:`paths` waits for them; :meth:`close` ends them (an error or an interrupt)."""
 
     def __init__(self, which, decoding: bool, folder: Path, run_name: str,
-                 description: str, sim, workers: int | None = None, before_fork=None):
+                 description: str, sim, workers: int | None = None, before_fork=None,
+                 fork_guard=None):
         self.planned = planned_names(which, decoding)
         self.folder, self.run_name, self.description = Path(folder), run_name, description
         self.sim, self.workers, self.before_fork = sim, workers, before_fork
+        self.fork_guard = fork_guard or contextlib.nullcontext
         self.started: list[str] = []
         self.drawings: list[Drawing] = []
 
@@ -429,8 +433,9 @@ class FigureSchedule:
             self.before_fork()
             self.before_fork = None
         self.started += names
-        self.drawings += start_drawings(names, self.folder, self.run_name, self.description,
-                                        ds, self.sim, self.workers)
+        with self.fork_guard():
+            self.drawings += start_drawings(names, self.folder, self.run_name,
+                                            self.description, ds, self.sim, self.workers)
         return names
 
     def paths(self, notes: list) -> list[Path]:

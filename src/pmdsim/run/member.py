@@ -206,6 +206,8 @@ def compare(m: Member) -> None:
         off_monitor=m.off_monitor, phase_error=m.phase_error)
     m.decoded = None
     m.stats = chain.statistics(m.measured, cfg.name)
+    if m.fringes is not None and m.fringes.sampling:  # the rule rendered (order used)
+        m.stats["sampling"] = m.fringes.sampling
     m.ds = assign_to_dataset(m.ds, m.measured, m.stats)
 
 
@@ -318,19 +320,21 @@ def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder
             m.figures = FigureSchedule(
                 cfg.output.figure_set, reference is not None and cfg.patterns.fringes is not None,
                 folder / "figures", cfg.name, description(cfg), sim, cfg.output.figure_workers,
-                # no fork while the reference's reconstruction thread runs
-                before_fork=None if reference is None else reference.settle)
+                # no fork while the reference's reconstruction thread runs, nor while the
+                # dataset writer writes a part (it holds Dask's locks)
+                before_fork=None if reference is None else reference.settle,
+                fork_guard=m.writer.paused)
             stack.callback(m.figures.close)
         offered = None
         for step, timing in STEPS:
             t = time.perf_counter()
             step(m)
             m.timings[timing] += time.perf_counter() - t
-            if m.ds is not offered and step is not write:  # something new to write or draw
+            if m.ds is not offered and step is not write:  # something new to draw or write
                 offered = m.ds
-                m.writer.offer(m.ds)
-                if m.figures is not None:
+                if m.figures is not None:  # first: a fork waits for a part being written
                     m.figures.offer(m.ds)
+                m.writer.offer(m.ds)
     return result(m), m.ds
 
 

@@ -17,6 +17,7 @@ written: the writer knows no names.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -69,6 +70,7 @@ class DatasetWriter:
         self._written: set = set()
         self._futures: list[Future] = []
         self._lock = threading.Lock()
+        self._busy = threading.Lock()  # held while a part is written
 
     def offer(self, ds) -> None:
         """Queue the variables of ``ds`` that the store does not hold yet. ``ds`` is
@@ -77,7 +79,21 @@ class DatasetWriter:
             self._latest = ds.copy(deep=False)
         self._futures.append(self._pool.submit(self._write_new))
 
+    @contextlib.contextmanager
+    def paused(self):
+        """No part is being written inside this block (it waits for the current one).
+
+        A run forks its figure processes inside it: a fork copies the locks other threads
+        hold, and a part being written holds Dask's (``dask.tokenize``'s lock): a child
+        forked then waits for it forever."""
+        with self._busy:
+            yield
+
     def _write_new(self) -> None:
+        with self._busy:
+            self._write_new_part()
+
+    def _write_new_part(self) -> None:
         with self._lock:
             ds = self._latest
         new = [n for n in ds.data_vars if n not in self._written]

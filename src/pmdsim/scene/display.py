@@ -9,7 +9,7 @@ Response: a pattern level ``x`` in [0, 1] (what the fringe formula asks for) bec
 3. luminance ``black + (white - black) r(d)``, ``r(d) = d^gamma`` or the measured table
    (CSV rows ``drive, luminance``; linear interpolation, normalised to r(0) = 0, r(1) = 1).
 
-Geometry (applied per scattered ray in :func:`pmdsim.kernels.display.monitor_correction`;
+Geometry (applied per scattered ray in :func:`pmdsim.kernels.bundle.monitor_correction`;
 NumPy references here): the configured monitor plane is the *nominal* plane. The emitting
 surface lies ``h(x, y) = sum c_ij x^i y^j`` mm in front of it; a cover glass of thickness
 ``t`` and index ``n`` lies in front of the pixels: a ray at incidence ``theta`` reaches them
