@@ -240,7 +240,7 @@ MALFORMED = {
     "image files as one string": FIG3 + '\n[patterns.images]\nfiles = "a.png"\n',
     "images as a number": FIG3 + "\n[patterns]\nimages = 3\n",
     "a NUL in a file name": FIG3 + '\n[patterns.images]\nfiles = ["a\\u0000b.png"]\n',
-    "n_rays a boolean": FIG3.replace("n_rays = 100", "n_rays = true"),
+    "n_rays a boolean": FIG3.replace("n_rays = 256", "n_rays = true"),
     "gamma NaN": FIG3.replace("gamma = 1.0", "gamma = nan"),
     "position inf": FIG3.replace("position_mm = [-845.236523481399", "position_mm = [-inf"),
 }

@@ -447,9 +447,15 @@ def test_load_image_stack_tiff_and_png(tmp_path):
     tifffile.imwrite(tmp_path / "a.tif", a)
     tifffile.imwrite(tmp_path / "b.tiff", b)
     Image.fromarray(c).save(tmp_path / "c.png")
-    stack = dec.load_image_stack([tmp_path / "a.tif", str(tmp_path / "b.tiff"), tmp_path / "c.png"])
-    assert stack.shape == (4, 6, 9) and stack.dtype == np.float64
-    np.testing.assert_array_equal(stack, np.concatenate([a[None], b, c[None]]).astype(float))
+    stack = dec.load_image_stack([tmp_path / "a.tif", str(tmp_path / "b.tiff")])
+    assert stack.shape == (3, 6, 9) and stack.dtype == np.float64
+    np.testing.assert_array_equal(stack, np.concatenate([a[None], b]).astype(float))
+    png = dec.load_image_stack([tmp_path / "c.png"])
+    assert png.shape == (1, 6, 9)
+    np.testing.assert_array_equal(png[0], c.astype(float))
+    # frames of one sequence come from one camera setting: 16-bit TIFFs and an 8-bit PNG mixed
+    with pytest.raises(ValueError, match="c.png.*uint8.*uint16"):
+        dec.load_image_stack([tmp_path / "a.tif", tmp_path / "c.png"])
 
     with pytest.raises(FileNotFoundError, match="missing.tif"):
         dec.load_image_stack([tmp_path / "a.tif", tmp_path / "missing.tif"])
