@@ -32,7 +32,7 @@ def tiny_config_dict(**patterns) -> dict:
         "surface": {"type": "flat", "size_mm": [300.0, 200.0]},
         "anisotropy": {"frame": "fixed", "x_direction": [1, 0, 0]},
         "brdf": {"model": "ward", "alpha_x": 0.025, "alpha_y": 0.002, "rho_s": 0.4},
-        "sampling": {"n_rays": 10, "theta_max_deg": 1.0},
+        "sampling": {"n_rays": 10, "theta_max_deg": 1.0, "mode": "stratified"},  # the lattice: its diagnostics are tested here
         "patterns": patterns or {"fringes": {"widths_px": [8, 32], "shifts": 4}},
         "compute": {"tile_rows": 16},
         "output": {"figures": False},
@@ -60,6 +60,7 @@ alpha_x = 0.025
 alpha_y = 0.002
 [sampling]
 n_rays = 10
+mode = "stratified"
 [patterns.fringes]
 widths_px = [8.0]
 shifts = 4
@@ -482,7 +483,7 @@ def test_diagnostics_of_variants(tmp_path):
     d = tiny_config_dict()
     d["variants"] = [
         {"name": "mirror", "brdf": {"model": "mirror"}},
-        {"name": "radiometric", "sampling": {"n_rays": 16, "estimator": "radiometric"}},
+        {"name": "radiometric", "sampling": {"n_rays": 16, "estimator": "radiometric", "mode": "stratified"}},
         {"name": "paper"},
     ]
     d["diagnostics"] = {"grid": [8, 6]}

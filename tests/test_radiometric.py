@@ -414,7 +414,7 @@ def test_radiometric_config_and_scene():
 
 # =========================================================================== physics
 def _facing_config(theta_i_deg, brdf, d_mm=500.0, n_rays=4096, estimator="radiometric",
-                   theta_max_deg=1.0, monitor_px=800, pitch_mm=0.1):
+                   theta_max_deg=1.0, monitor_px=800, pitch_mm=0.1, mode=None):
     """One camera pixel looking at the origin of a flat plate (normal +z) at incidence
     theta_i in the x-z plane; a continuous monitor at distance d on the mirrored side,
     facing the reflected ray (its u axis in the plane of incidence, v across it)."""
@@ -429,7 +429,8 @@ def _facing_config(theta_i_deg, brdf, d_mm=500.0, n_rays=4096, estimator="radiom
         "surface": {"type": "flat", "size_mm": [100.0, 100.0]},
         "anisotropy": {"frame": "fixed", "x_direction": [1.0, 0.0, 0.0]},
         "brdf": brdf,
-        "sampling": {"n_rays": n_rays, "estimator": estimator, "theta_max_deg": theta_max_deg},
+        "sampling": {"n_rays": n_rays, "estimator": estimator, "theta_max_deg": theta_max_deg}
+                    | ({} if mode is None else {"mode": mode}),
     })
 
 

@@ -239,8 +239,10 @@ def test_kinematic_dot_is_the_closed_form_top_hat():
     pixel land on the monitor (distance d) uniformly over a radial band of full width
     2 f d / r (a point-like dot scanned across it gives this top-hat)."""
     f_mm, r_mm, d = 0.03, 0.5, 500.0
+    # the stratified lattice: an equal-weight sample of the density (the default rule
+    # weights its nodes, so a histogram of rays would not be flat)
     cfg = _facing_config(0.0, _kinematic(30.0, r_mm, 1e-5, 0.0), d, n_rays=8192,
-                         monitor_px=2000)
+                         monitor_px=2000, mode="stratified")
     sim = Simulation.from_config(cfg)
     u, v, w, _, _ = sim.transport([0], [0])
     hit = np.isfinite(v[0])

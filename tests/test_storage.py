@@ -58,6 +58,9 @@ def full_run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("storage")
     Image.fromarray(np.full((120, 200), 200, np.uint8)).save(folder / "grey.png")
     cfg = parse_config(merge(base_dict(), {
+        # the default sampling (a rule with its embedded error pass): every documented
+        # variable, the numerical errors included
+        "sampling": {"mode": "rule"},
         "patterns": {"fringes": {"widths_px": [25.0, 200.0]},
                      "dots": {"positions_px": [[100.0, 60.0]], "size_px": 9},
                      "images": {"files": [str(folder / "grey.png")]}}}))

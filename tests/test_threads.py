@@ -69,7 +69,7 @@ def test_a_run_works_with_one_blas_thread(monkeypatch, tmp_path):
         seen.append(_blas_threads())
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(simulate, "plan_run", stop)
+    monkeypatch.setattr(simulate, "resolve_roi", stop)  # the first step of a run
     with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
         with pytest.raises(KeyboardInterrupt):
             simulate.run_simulation(None, tmp_path / "run")

@@ -101,15 +101,15 @@ def render(m: Member) -> None:
     if fr_cfg is not None:
         base = steps.done
         m.fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
-                                       progress=steps.tiles())
+                                       progress=steps.tiles(n_tiles))
         steps.finish_render(base, n_tiles)
     if dots:
         base = steps.done
-        m.dot_images = sim.render_dots(dots, progress=steps.tiles())
+        m.dot_images = sim.render_dots(dots, progress=steps.tiles(n_tiles))
         steps.finish_render(base, n_tiles)
     if levels is not None:
         base = steps.done
-        m.images = sim.render_images(levels, progress=steps.tiles())
+        m.images = sim.render_images(levels, progress=steps.tiles(n_tiles))
         steps.finish_render(base, n_tiles)
     # nothing empty is written as if it were a result; bundles off the monitor are flagged
     coverage.check_rendered(None if m.fringes is None else m.fringes.images, m.dot_images)

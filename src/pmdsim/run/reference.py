@@ -82,7 +82,7 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     t = time.perf_counter()
     base = steps.done
     decoded, distance = chain.decode_specular_reference(cfg, sim, geometry,
-                                                        progress=steps.tiles())
+                                                        progress=steps.tiles(n_tiles))
     steps.finish_render(base, n_tiles)
     notes = []
     for d, res in decoded.items():

@@ -91,14 +91,19 @@ class _Steps:
         if self.progress is not None:
             self.progress(min(self.done, self.total), self.total)
 
-    def tiles(self) -> ProgressFn | None:
-        """A callback for one render call: reports its tiles on top of the steps so far."""
+    def tiles(self, n_tiles: int | None = None) -> ProgressFn | None:
+        """A callback for one render call: reports its tiles on top of the steps so far.
+        With ``n_tiles`` (the steps the plan gave the call) the call's own count is scaled
+        to it: a render of several passes (an embedded rule, rqmc replicates) reports more
+        tasks than tiles, and the count must never run past the call's share and back."""
         if self.progress is None:
             return None
         base = self.done
         seen = [0]
 
         def cb(done: int, total: int) -> None:
+            if n_tiles is not None and total > 0:
+                done = (done * n_tiles) // total
             if done > seen[0]:
                 self.done = base + done
                 seen[0] = done

@@ -42,7 +42,9 @@ _BASE = {
     "sampling": {"n_rays": 8},
     "patterns": {"fringes": {"widths_px": [50.0, 400.0, 3200.0]},
                  "dots": {"positions_px": [[960.0, 540.0]], "size_px": 241}},
-    "diagnostics": {"grid": [3, 2]},
+    # the runs only compile the kernels: 8 rays on a 24 x 20 camera decode few pixels,
+    # which is no result but no error either here
+    "diagnostics": {"grid": [3, 2], "allow_no_valid_pixels": True},
     "output": {"write_images": False, "figures": False},
 }
 
