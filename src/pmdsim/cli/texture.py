@@ -72,6 +72,11 @@ def texture(
                           pixel_pitch_mm=pitch_mm)
     except ValueError as err:
         _fail(str(err))
+    _print_report(res)
+
+
+def _print_report(res) -> None:
+    """The text table of ``pmdsim texture`` (either source) and the files it wrote."""
     console = _console()
     console.print(res.text, markup=False)
     if res.json is not None:
@@ -105,12 +110,7 @@ def _texture_from(path, spacing_um, height_unit, radial_axis, level, fill, wavel
                              fill=fill, wavelength_nm=wavelength_nm, incidence_deg=incidence_deg)
     except (InputError, ValueError) as err:
         _fail(str(err).replace("surface.file", "--from"))
-    console = _console()
-    console.print(res.text, markup=False)
-    if res.json is not None:
-        console.print(f"table  {res.json}")
-    if res.figure is not None:
-        console.print(f"figure {res.figure}")
+    _print_report(res)
 
 
 def fit(

@@ -13,6 +13,16 @@ from .base import (Coord, Float, Int, Length, MAX_LENGTH_MM, PositiveFloat, Vec3
     _nonzero_vector, _unit)
 
 
+def _check_axes(surface) -> None:
+    """A surface pose's ``normal`` and ``x_axis``: unit-normalisable and not parallel."""
+    _unit("normal", surface.normal)
+    _unit("x_axis", surface.x_axis)
+    n = np.asarray(surface.normal) / np.linalg.norm(surface.normal)
+    x = np.asarray(surface.x_axis) / np.linalg.norm(surface.x_axis)
+    if abs(n @ x) > 1 - 1e-9:
+        raise ValueError("x_axis must not be parallel to normal")
+
+
 class FlatSurfaceConfig(_Model):
     """A flat rectangle of ``size_mm`` = (along x_axis, along normal x x_axis)."""
 
@@ -26,12 +36,7 @@ class FlatSurfaceConfig(_Model):
 
     @model_validator(mode="after")
     def _check(self) -> "FlatSurfaceConfig":
-        _unit("normal", self.normal)
-        _unit("x_axis", self.x_axis)
-        n = np.asarray(self.normal) / np.linalg.norm(self.normal)
-        x = np.asarray(self.x_axis) / np.linalg.norm(self.x_axis)
-        if abs(n @ x) > 1 - 1e-9:
-            raise ValueError("x_axis must not be parallel to normal")
+        _check_axes(self)
         return self
 
 
@@ -110,12 +115,7 @@ class _SagSurfaceBase(_Model):
 
     @model_validator(mode="after")
     def _check_pose(self):
-        _unit("normal", self.normal)
-        _unit("x_axis", self.x_axis)
-        n = np.asarray(self.normal) / np.linalg.norm(self.normal)
-        x = np.asarray(self.x_axis) / np.linalg.norm(self.x_axis)
-        if abs(n @ x) > 1 - 1e-9:
-            raise ValueError("x_axis must not be parallel to normal")
+        _check_axes(self)
         _aperture_fits(self)
         return self
 

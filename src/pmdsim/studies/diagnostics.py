@@ -460,18 +460,9 @@ def ray_sums(u, v, weights, widths, directions, nearest: bool) -> np.ndarray:
 
 def ray_phases(u, v, weights, widths, directions, nearest: bool) -> np.ndarray:
     """``arg sum_p w_p exp(i k c_p)`` (n_directions, n_widths, K) of the rays of K pixels
-    (the phase the renderer's fringe sums decode to, gamma 1)."""
-    w = np.asarray(weights, np.float64)
-    out = np.full((len(directions), len(widths), w.shape[0]), np.nan)
-    for di, d in enumerate(directions):
-        c = np.asarray(u if d == "x" else v, np.float64)
-        c = np.where(np.isfinite(c), c, 0.0)
-        if nearest:
-            c = np.floor(c + 0.5)
-        for wi, width in enumerate(widths):
-            z = (w * np.exp(1j * 2 * np.pi * c / width)).sum(-1)
-            out[di, wi] = np.where(np.abs(z) > 0, np.angle(z), np.nan)
-    return out
+    (the phase the renderer's fringe sums decode to, gamma 1; NaN where the sum is 0)."""
+    z = ray_sums(u, v, weights, widths, directions, nearest)
+    return np.where(np.abs(z) > 0, np.angle(z), np.nan)
 
 
 # ----------------------------------------------------------------------------- report
