@@ -110,20 +110,27 @@ def budget(
     truth: str = typer.Option("centre", "--truth", help="Ground truth of the system rows: "
                               "'centre' (the chief ray through each pixel centre) or "
                               "'footprint' (averaged over the pixel's vision rays)."),
+    target_error_mrad: float | None = typer.Option(
+        None, "--target-error-mrad",
+        help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
+        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Error budget: the chain with each system effect of CONFIG alone and all together on
     the ideal mirror, the surface's scattering minus that mirror, and the calibration
     errors (sensitivity x uncertainty); per effect the reconstructed slope error (urad X/Y)
     and height error (nm RMS/PV/P95 after [budget] removal), per direction the deviation from
     the exact reflection points in mrad, monitor px, mm and urad. Writes OUT/budget.csv,
-    heights.csv, zernike.csv, budget.json, budget.png (docs/system.md)."""
-    from ..config import ConfigError, load_config
+    heights.csv, zernike.csv, budget.json, budget.png (docs/system.md). Every row is
+    "value ± numerical error"; the surface is rendered with the radiometric estimator unless
+    CONFIG names one."""
+    from ..config import ConfigError, load_config, physical_estimator, with_target_error
     from ..report.budget import budget_text
     from ..run.budget import run_budget
 
     console = _console()
     try:
-        cfg = load_config(config)
+        cfg = with_target_error(physical_estimator(load_config(config)), target_error_mrad)
         t0 = time.perf_counter()
         with console.status(f"error budget of {cfg.name}") as status:
             result = run_budget(cfg, output, figure=not no_figure, overwrite=overwrite,
@@ -157,6 +164,11 @@ def sweep(
     overwrite: bool = typer.Option(False, "--overwrite",
                                    help="Start again when OUTDIR holds a different sweep."),
     no_figures: bool = typer.Option(False, "--no-figures", help="Do not draw the figures."),
+    target_error_mrad: float | None = typer.Option(
+        None, "--target-error-mrad",
+        help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
+        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Run the measurement chain at every point of the configuration's [sweep] (grid, zip or
     random design over any configuration fields) into one Zarr store with a dimension per
@@ -169,13 +181,13 @@ def sweep(
     except OutputBusy as err:
         _fail(str(err))
     _output_folder(output)
-    from ..config import ConfigError, load_config
+    from ..config import ConfigError, load_config, physical_estimator, with_target_error
     from ..run.sweep import run_sweep
     from ..studies.sweep import plan_sweep
 
     console = _console()
     try:
-        cfg = load_config(config)
+        cfg = with_target_error(physical_estimator(load_config(config)), target_error_mrad)
         plan = plan_sweep(cfg)
     except (ConfigError, FileNotFoundError, ValueError) as err:
         _fail(str(err))

@@ -7,7 +7,7 @@ from typing import Annotated
 
 from pydantic import Field, model_validator
 
-from .base import _Model
+from .base import ConfigError, _Model
 from .camera import CameraConfig
 from .monitor import MonitorConfig
 from .surface import SurfaceConfig
@@ -94,6 +94,46 @@ class RunConfig(_Model):
             out.append((v.name, self.model_copy(update=dict(changes, variants=(), name=v.name))))
         return out
 
+
+
+#: The estimator of ``budget``, ``sweep`` and ``fit`` when the configuration names none: the
+#: rendering integral (the physical answer); ``simulate`` keeps ``SamplingConfig``'s default
+#: (the paper's cone estimator, to reproduce the paper).
+PHYSICAL_ESTIMATOR = "radiometric"
+
+
+def physical_estimator(cfg: "RunConfig") -> "RunConfig":
+    """``cfg`` with ``sampling.estimator = "radiometric"`` unless its file (or its caller)
+    set ``sampling.estimator`` explicitly: the default of ``budget``, ``sweep`` and ``fit``.
+    Idempotent (the result names its estimator)."""
+    if "estimator" in cfg.sampling.model_fields_set:
+        return cfg
+    return with_sampling(cfg, estimator=PHYSICAL_ESTIMATOR)
+
+
+def with_sampling(cfg: "RunConfig", **changes) -> "RunConfig":
+    """``cfg`` with ``changes`` to ``[sampling]``, validated; the fields the configuration
+    set explicitly stay marked as set (:func:`physical_estimator` reads them)."""
+    given = set(cfg.sampling.model_fields_set) | set(changes)
+    full = type(cfg).model_validate({**cfg.model_dump(), "sampling": {**cfg.sampling.model_dump(),
+                                                                      **changes}})
+    samp = full.sampling.model_construct(_fields_set=given, **full.sampling.model_dump())
+    return full.model_copy(update={"sampling": samp})
+
+
+def with_target_error(cfg: "RunConfig", target_error_mrad: float | None) -> "RunConfig":
+    """``cfg`` with ``sampling.target_error_mrad`` (the ``--target-error-mrad`` option; None
+    leaves it); a field-named error when the target is not positive or the sampling mode
+    has no error estimate."""
+    if target_error_mrad is None:
+        return cfg
+    if not target_error_mrad > 0:
+        raise ConfigError(f"--target-error-mrad must be > 0 mrad, got {target_error_mrad}")
+    try:
+        return with_sampling(cfg, target_error_mrad=float(target_error_mrad))
+    except ValueError as err:
+        why = "; ".join(e["msg"] for e in err.errors()) if hasattr(err, "errors") else str(err)
+        raise ConfigError(f"--target-error-mrad: {why}") from None
 
 def _check_variation_model(brdf, where: str) -> None:
     if isinstance(brdf, dict) and "variation" in brdf and brdf.get("model") not in ("ward", "beckmann"):

@@ -12,22 +12,32 @@ def _g(v, scale=1.0) -> str:
     return "nan" if v is None or not math.isfinite(v) else f"{v * scale:.3g}"
 
 
+def _pm(r: dict, key: str, scale: float = 1.0) -> str:
+    """``"value ± numerical error"`` of ``r[key]`` (the value alone where the row states no
+    error: the numerical error rows themselves)."""
+    v, e = r.get(key), r.get(f"{key}_err")
+    if e is None or not math.isfinite(e) or v is None or not math.isfinite(v):
+        return _g(v, scale)
+    return f"{v * scale:.3g} ± {e * scale:.2g}"
+
+
 def height_text(height_rows: list[dict], settings: dict | None = None) -> str:
     """The metrologist's table: per effect, slope error X / Y (urad RMS, surface frame, from
     the reconstruction) and height error after the removal (nm RMS / PV / P95)."""
     if not height_rows:
         return ""
-    head = (f"{'part':11s} {'effect':52s} {'slope X urad':>12s} {'slope Y urad':>12s} "
-            f"{'RMS nm':>9s} {'PV nm':>9s} {'P95 nm':>9s}")
+    head = (f"{'part':11s} {'effect':52s} {'slope X urad':>17s} {'slope Y urad':>17s} "
+            f"{'RMS nm':>17s} {'PV nm':>17s} {'P95 nm':>17s}")
     lines = []
     if settings:
         lines.append(f"height error after: {settings.get('removed', '')}; estimator "
-                     f"{settings.get('estimator', '')}; slopes dz/dx, dz/dy RMS about zero")
+                     f"{settings.get('estimator', '')}; slopes dz/dx, dz/dy RMS about zero; "
+                     "value ± numerical error")
     lines += [head, "-" * len(head)]
     for r in height_rows:
-        lines.append(f"{r['part']:11s} {r['label'][:52]:52s} {_g(r['slope_rms_x_urad']):>12s} "
-                     f"{_g(r['slope_rms_y_urad']):>12s} {_g(r['height_rms_nm']):>9s} "
-                     f"{_g(r['height_pv_nm']):>9s} {_g(r['height_p95_nm']):>9s}")
+        lines.append(f"{r['part']:11s} {r['label'][:52]:52s} {_pm(r, 'slope_rms_x_urad'):>17s} "
+                     f"{_pm(r, 'slope_rms_y_urad'):>17s} {_pm(r, 'height_rms_nm'):>17s} "
+                     f"{_pm(r, 'height_pv_nm'):>17s} {_pm(r, 'height_p95_nm'):>17s}")
     if any(r["part"] == "calibration" for r in height_rows):
         lines.append("calibration rows: sensitivity x uncertainty (one reconstruction per "
                      "component off by +1 sigma; components and rows in quadrature)")
@@ -44,35 +54,60 @@ def budget_text(rows: list[dict], height_rows: list[dict] = (), settings: dict |
                 quantity: str = "urad") -> str:
     """Fixed-width tables: the height rows (:func:`height_text`) and one line per (effect,
     direction), RMS and P95 in every unit (slope: the 3-D conversion)."""
-    head = (f"{'part':8s} {'effect':44s} {'dir':3s} {'RMS mrad':>9s} {'P95 mrad':>9s} "
-            f"{'RMS px':>8s} {'P95 px':>8s} {'RMS um':>8s} {'P95 um':>8s} {'RMS urad':>9s} {'P95 urad':>9s}")
+    head = (f"{'part':9s} {'effect':44s} {'dir':3s} {'RMS mrad':>17s} {'P95 mrad':>17s} "
+            f"{'RMS px':>17s} {'P95 px':>17s} {'RMS um':>17s} {'RMS urad':>17s} {'P95 urad':>17s}")
     lines = [height_text(list(height_rows), settings)] if height_rows else []
-    lines += ["per fringe direction: decoded minus exact (system) or minus the mirror (surface)",
+    lines += ["per fringe direction: decoded minus exact (system) or minus the mirror (surface); "
+              "value ± numerical error",
               head, "-" * len(head)]
     for r in rows:
         def f(k, scale=1.0):
-            return _g(r[k], scale)
+            return _pm(r, k, scale)
         lines.append(
-            f"{r['part']:8s} {r['label'][:44]:44s} {r['direction'].upper():3s} {f('rms_mrad'):>9s} "
-            f"{f('p95_mrad'):>9s} {f('rms_px'):>8s} {f('p95_px'):>8s} {f('rms_mm', 1e3):>8s} "
-            f"{f('p95_mm', 1e3):>8s} {f('rms_urad'):>9s} {f('p95_urad'):>9s}")
+            f"{r['part']:9s} {r['label'][:44]:44s} {r['direction'].upper():3s} {f('rms_mrad'):>17s} "
+            f"{f('p95_mrad'):>17s} {f('rms_px'):>17s} {f('p95_px'):>17s} {f('rms_mm', 1e3):>17s} "
+            f"{f('rms_urad'):>17s} {f('p95_urad'):>17s}")
+    if settings and settings.get("sampling"):
+        for name, smp in settings["sampling"].items():
+            lines.append(f"{name}: {smp.get('mode')}, {smp.get('rule')}, n_rays = {smp.get('n_rays')}; "
+                         f"numerical error from {smp.get('error_from')}"
+                         + (f"; target {smp['target_error_mrad']:g} mrad "
+                            f"{'met' if smp.get('target_met') else 'NOT met'}"
+                            if smp.get("target_error_mrad") is not None else ""))
+    for w in (settings or {}).get("warnings", ()):
+        lines.append(f"warning: {w}")
     return "\n".join(lines) + "\n"
 
 
-_COLOURS = {"system": "tab:blue", "surface": "tab:orange", "calibration": "tab:green"}
+def _err(row, key) -> float:
+    e = None if row is None else row.get(f"{key}_err")
+    return float("nan") if e is None else float(e)
 
 
-def _bars(ax, labels, pairs, colours, xlabel, log=False):
-    """Two bars per row (``pairs``: (light, solid) arrays) with their values written."""
+_COLOURS = {"system": "tab:blue", "surface": "tab:orange", "calibration": "tab:green",
+            "numerical": "tab:gray"}
+
+
+def _bars(ax, labels, pairs, colours, xlabel, log=False, errs=None):
+    """Two bars per row (``pairs``: (light, solid) arrays) with their values written;
+    ``errs``: their numerical errors (error bars and "± e" where finite and > 0)."""
     y = np.arange(len(labels))
     (a_lab, a), (b_lab, b) = pairs
+    ea, eb = errs if errs is not None else (np.full(len(a), np.nan), np.full(len(b), np.nan))
     ax.barh(y - 0.2, a, 0.4, color=colours, alpha=0.45, label=a_lab)
     ax.barh(y + 0.2, b, 0.4, color=colours, label=b_lab)
-    for yi, (va, vb) in enumerate(zip(a, b)):
-        for val, off in ((va, -0.2), (vb, 0.2)):
+    for off, vals, es in ((-0.2, a, ea), (0.2, b, eb)):
+        ok = np.isfinite(es) & (es > 0) & np.isfinite(vals)
+        if ok.any():
+            ax.errorbar(vals[ok], y[ok] + off, xerr=es[ok], fmt="none", ecolor="black",
+                        elinewidth=0.8, capsize=2)
+    for yi in range(len(labels)):
+        for val, e, off in ((a[yi], ea[yi], -0.2), (b[yi], eb[yi], 0.2)):
             if math.isfinite(val):
-                ax.text(val, yi + off, f" {val:.3g}" if abs(val) >= 0.01 else " < 0.01",
-                        va="center", fontsize=7)
+                txt = f" {val:.3g}" if abs(val) >= 0.01 else " < 0.01"
+                if math.isfinite(e) and e > 0:
+                    txt += f" ± {e:.2g}"
+                ax.text(val, yi + off, txt, va="center", fontsize=7)
     ax.set_xlabel(xlabel)
     ax.grid(axis="x", alpha=0.3)
     fin = np.r_[a, b][np.isfinite(np.r_[a, b]) & (np.r_[a, b] > 0)]
@@ -116,7 +151,9 @@ def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quant
         rms = np.array([by[k][f"rms_{quantity}"] if k in by else np.nan for k in labels], float)
         p95 = np.array([by[k][f"p95_{quantity}"] if k in by else np.nan for k in labels], float)
         colours = [_COLOURS.get(k[0], "tab:gray") for k in labels]
-        _bars(ax, labels, (("P95 |dev|", p95), ("RMS", rms)), colours, unit)
+        errs = tuple(np.array([_err(by.get(k), f"{s}_{quantity}") for k in labels], float)
+                     for s in ("p95", "rms"))
+        _bars(ax, labels, (("P95 |dev|", p95), ("RMS", rms)), colours, unit, errs=errs)
         ax.set_title(f"{d.upper()} fringes, per pixel (3-D slope conversion)", fontsize=9)
         ax.set_yticklabels([f"{lab}  [{part}]" for part, lab in labels] if ax is axes[0] else [],
                            fontsize=8)
@@ -127,7 +164,9 @@ def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quant
         ax = fig.add_subplot(gs[1, 0])
         pv = np.array([r["height_pv_nm"] for r in height_rows], float)
         rms = np.array([r["height_rms_nm"] for r in height_rows], float)
-        _bars(ax, hl, (("PV", pv), ("RMS", rms)), colours, "height error, nm (log)", log=True)
+        _bars(ax, hl, (("PV", pv), ("RMS", rms)), colours, "height error, nm (log)", log=True,
+              errs=tuple(np.array([_err(r, k) for r in height_rows], float)
+                         for k in ("height_pv_nm", "height_rms_nm")))
         ax.set_yticklabels(hl, fontsize=8)
         ax.set_title("height error after: " + (settings or {}).get("removed", ""), fontsize=9)
         ax.legend(loc="lower right", fontsize=8)
@@ -135,13 +174,16 @@ def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quant
         sx = np.array([r["slope_rms_x_urad"] for r in height_rows], float)
         sy = np.array([r["slope_rms_y_urad"] for r in height_rows], float)
         _bars(ax2, hl, (("dz/dy RMS", sy), ("dz/dx RMS", sx)), colours,
-              "slope error of the reconstruction, urad RMS (log)", log=True)
+              "slope error of the reconstruction, urad RMS (log)", log=True,
+              errs=tuple(np.array([_err(r, k) for r in height_rows], float)
+                         for k in ("slope_rms_y_urad", "slope_rms_x_urad")))
         ax2.set_yticklabels([])
         ax2.set_title("reconstructed slopes (surface frame)", fontsize=9)
         ax2.legend(loc="lower right", fontsize=8)
     est = f"; estimator {settings['estimator']}" if settings and settings.get("estimator") else ""
     fig.suptitle(title + est + "\nlight: P95 or PV; blue: system (mirror decoded minus the exact point), "
-                 "orange: surface minus the mirror, green: calibration (sensitivity x uncertainty)",
+                 "orange: surface minus the mirror, green: calibration (sensitivity x uncertainty), "
+                 "grey: numerical error of the surface rows; bars: value ± numerical error",
                  fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.5 / fig.get_size_inches()[1]))
     fig.savefig(path, dpi=110)

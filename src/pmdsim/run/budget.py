@@ -55,8 +55,10 @@ def zernike_rows(height_rows) -> list[dict]:
 def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrite: bool = False,
                progress: Callable[[str], None] | None = None, truth: str = "centre") -> BudgetResult:
     """Compute :func:`pmdsim.studies.budget.budget` and write it into ``outdir``."""
+    from ..config import physical_estimator
+
     final = Path(outdir).absolute()
-    cfg = resolve_roi(cfg)  # camera.roi = "auto": the window that sees the part
+    cfg = resolve_roi(physical_estimator(cfg))  # the rendering integral unless cfg names one  # camera.roi = "auto": the window that sees the part
     check_resources(cfg)  # the budget's largest run, before anything is computed
     pio.check_output_dir(final, overwrite, MARKER)
     from ..scene import Scene
@@ -72,7 +74,9 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
             _csv(tmp / "zernike.csv", zernike_rows(result.height_rows),
                  ("effect", "part", "order", "index", "n", "m", "coefficient", "removed"))
         (tmp / "budget.json").write_text(json.dumps(
-            {"name": cfg.name, "truth": truth, "settings": result.settings, "rows": rows,
+            {"name": cfg.name, "truth": truth, "settings": result.settings,
+             "units": "every statistic X has its numerical error X_err (null: not stated)",
+             "rows": rows,
              "height_rows": result.height_rows, "config": cfg.model_dump(mode="json")},
             indent=2) + "\n")
         fig = None

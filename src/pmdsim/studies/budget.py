@@ -51,6 +51,8 @@ from ..measure.reconstruct import Reconstruction, reconstruct
 from ..render import Simulation
 from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
+from .budget_error import (HEIGHT_STATS, ROW_STATS, difference_error, error_stats, height_error_bounds,
+                           stat_error, unknown_share)
 
 QUANTITIES = ("mrad", "px", "mm", "urad")
 
@@ -137,19 +139,31 @@ def mirror(cfg: RunConfig) -> RunConfig:
 
 @dataclass(frozen=True, eq=False)
 class Decoded:
-    """Decoded monitor coordinates (monitor px) per direction and their validity."""
+    """Decoded monitor coordinates (monitor px) per direction and their validity;
+    ``error_px``: per direction the numerical error of the coordinates (monitor px, >= 0)
+    the render states (None where it states none); ``sampling``: what was rendered
+    (:attr:`pmdsim.render.FringeResult.sampling`, with the order a target error chose)."""
 
     coord: dict
     valid: dict
     seconds: float
+    error_px: dict | None = None
+    sampling: dict | None = None
 
 
 def decode_config(cfg: RunConfig, stream: int = 0) -> Decoded:
     """Render the fringes of ``cfg``, capture them with its sensor, decode every direction."""
+    from ..measure.numerical import finest_phase_error
+
     t0 = time.perf_counter()
     sim = Simulation.from_config(cfg)
     fr = cfg.patterns.fringes
     res = sim.render_fringes(fr.widths_px, fr.directions, fr.shifts)
+    error_px = None
+    if not sim.scene.brdf.is_delta and res.phase_error() is not None:
+        w = float(min(fr.widths_px))
+        error_px = {d: np.asarray(finest_phase_error(res, d), np.float64) * w / (2 * math.pi)
+                    for d in fr.directions}
     sensor = Sensor.from_config(cfg.sensor)
     level = None
     if sensor.enabled:
@@ -158,7 +172,32 @@ def decode_config(cfg: RunConfig, stream: int = 0) -> Decoded:
     dec = decode_fringes(res, cfg.monitor.resolution, cfg.decode, level)
     coord = {d: np.asarray(r.monitor_coord_px, np.float64) for d, r in dec.items()}
     valid = {d: np.asarray(r.valid, bool) for d, r in dec.items()}
-    return Decoded(coord, valid, time.perf_counter() - t0)
+    return Decoded(coord, valid, time.perf_counter() - t0, error_px, res.sampling)
+
+
+def second_estimate(cfg: RunConfig, n_rays: int, mode: str | None) -> tuple[RunConfig, str]:
+    """The render whose decoded difference states the numerical error of ``cfg``'s at
+    ``n_rays`` where the render states none: a randomised set (``rqmc``, ``random``) again
+    with an independent seed (the difference is about sqrt(2) times the error), a
+    deterministic one with half the nodes (the lower order's error, larger than the
+    rendered one's)."""
+    if mode in ("rqmc", "random"):
+        c = at_order(cfg, n_rays)
+        from ..config import with_sampling
+
+        seed = (cfg.sampling.seed + 7919) % 2**63
+        return with_sampling(c, seed=seed), f"decoded difference to an independent seed ({seed})"
+    lo = max(n_rays // 2, 1)
+    return at_order(cfg, lo), f"decoded difference to {lo} nodes"
+
+
+def at_order(cfg: RunConfig, n_rays: int) -> RunConfig:
+    """``cfg`` rendered with ``n_rays`` nodes and no target error (the order is given)."""
+    from ..config import with_sampling
+
+    s = cfg.sampling
+    n = max(int(n_rays), 2 * s.replicates) if s.mode == "rqmc" else int(n_rays)
+    return with_sampling(cfg, n_rays=n, target_error_mrad=None, max_rays=max(n, s.max_rays))
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,25 +235,64 @@ def ground_truth(cfg: RunConfig, truth: str = "centre") -> Truth:
                  SlopeGeometry(geo.points, sim.scene.camera.position, sim.scene.monitor))
 
 
-def _row(effect: str, label: str, part: str, direction: str, dev_px: np.ndarray, valid: np.ndarray,
-         truth: Truth, seconds: float) -> dict:
-    row = {"effect": effect, "label": label, "part": part, "direction": direction}
+def _unit_maps(direction: str, dev_px: np.ndarray, truth: Truth) -> dict:
+    """A monitor-coordinate map (px) in every unit of :data:`QUANTITIES`."""
     with np.errstate(invalid="ignore"):
         urad = slope_deviation_urad(direction, dev_px, truth.geometry, truth.slope_geometry,
                                     truth.distance_mm, truth.pitch_mm)
-    scales = {
-        "mrad": dev_px * (2 * math.pi / truth.finest_width_px) * 1e3,
-        "px": dev_px,
-        "mm": dev_px * truth.pitch_mm,
-        "urad": urad,
-    }
-    for q, m in scales.items():
+    return {"mrad": dev_px * (2 * math.pi / truth.finest_width_px) * 1e3, "px": dev_px,
+            "mm": dev_px * truth.pitch_mm, "urad": urad}
+
+
+def _error_maps(direction: str, dev_px: np.ndarray, err_px: np.ndarray, truth: Truth) -> dict:
+    """The per-pixel numerical error ``err_px`` (monitor px, >= 0) of a deviation ``dev_px``
+    in every unit; the slope's: the larger change of the 3-D conversion for ``+-err_px``."""
+    e = np.nan_to_num(np.abs(err_px), nan=0.0)
+    out = {"mrad": e * (2 * math.pi / truth.finest_width_px) * 1e3, "px": e, "mm": e * truth.pitch_mm}
+    s0 = _unit_maps(direction, dev_px, truth)["urad"]
+    with np.errstate(invalid="ignore"):
+        up = np.abs(_unit_maps(direction, dev_px + e, truth)["urad"] - s0)
+        dn = np.abs(_unit_maps(direction, dev_px - e, truth)["urad"] - s0)
+    out["urad"] = np.fmax(up, dn)
+    return out
+
+
+def _row(effect: str, label: str, part: str, direction: str, dev_px: np.ndarray, valid: np.ndarray,
+         truth: Truth, seconds: float, err_px: np.ndarray | None = None) -> dict:
+    """One deviation row: RMS and P95 of ``|dev_px|`` over ``valid`` in every unit, each with
+    its numerical error (``*_err``, :func:`pmdsim.studies.budget_error.stat_error`; 0 without
+    ``err_px``: the mirror's renders have no quadrature)."""
+    row = {"effect": effect, "label": label, "part": part, "direction": direction}
+    maps = _unit_maps(direction, dev_px, truth)
+    errs = None if err_px is None else _error_maps(direction, dev_px, err_px, truth)
+    for q, m in maps.items():
         s = deviation_stats(m, valid)
         row[f"rms_{q}"] = s.rms
         row[f"p95_{q}"] = s.p95
+        for k in ROW_STATS:
+            row[f"{k}_{q}_err"] = 0.0 if errs is None else stat_error(m, errs[q], valid, k)
     row["mean_px"] = deviation_stats(dev_px, valid).mean
     row["n_valid"] = int(np.count_nonzero(valid & np.isfinite(dev_px)))
     row["seconds"] = round(seconds, 2)
+    if err_px is not None:
+        row["error_unknown_share"] = unknown_share(err_px, valid & np.isfinite(dev_px))
+    return row
+
+
+def numerical_row(direction: str, err_px: np.ndarray, valid: np.ndarray, truth: Truth,
+                  dev_px: np.ndarray, label: str) -> dict:
+    """The budget's numerical error row of one direction: RMS and P95 of the per-pixel
+    numerical error ``err_px`` (monitor px) of a surface row, in every unit."""
+    row = {"effect": "numerical_error", "label": label, "part": "numerical",
+           "direction": direction}
+    for q, m in _error_maps(direction, dev_px, err_px, truth).items():
+        st = error_stats(m, valid)
+        row[f"rms_{q}"], row[f"p95_{q}"] = st["rms"], st["p95"]
+        for k in ROW_STATS:
+            row[f"{k}_{q}_err"] = None
+    row["mean_px"] = float("nan")
+    row["n_valid"] = int(np.count_nonzero(valid & np.isfinite(dev_px)))
+    row["seconds"] = 0.0
     return row
 
 
@@ -361,9 +439,17 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
            truth: str = "centre") -> Budget:
     """The error budget of ``cfg`` (module docstring). ``truth``: the ground truth of the
     system rows, ``centre`` (the chief ray through the pixel centre) or ``footprint``
-    (averaged over the pixel's vision rays)."""
+    (averaged over the pixel's vision rays). The surface is rendered with the radiometric
+    estimator unless ``cfg`` names one (:func:`pmdsim.config.physical_estimator`); with
+    ``sampling.target_error_mrad`` the ideal system's surface render raises the order until
+    its stated error meets the target, and the full system's render uses that order."""
+    import warnings
+
+    from ..config import physical_estimator
+
     if cfg.patterns.fringes is None:
         raise ValueError("patterns.fringes: the budget decodes fringes; configure some")
+    cfg = physical_estimator(cfg)
     say = progress or (lambda msg: None)
     heights = wants_heights(cfg)
     spec = form_spec(cfg)
@@ -371,12 +457,14 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
     truth = ground_truth(cfg, kind)
     rows: list[dict] = []
     hrows: list[dict] = []
+    notes: list[str] = []
     dirs = cfg.patterns.fringes.directions
     ideal = ideal_config(cfg)
     scene = Scene.from_config(mirror(ideal))
     disc = _zernike_disc(scene.surface)
     recs: dict = {}
     true_cache: dict = {}
+    target = cfg.sampling.target_error_mrad
 
     def rec_of(name, dec):
         t0 = time.perf_counter()
@@ -398,9 +486,10 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             rows.append(_row(name, label, "system", d, dec.coord[d] - truth.coord[d], ok, truth, dec.seconds))
         if heights:
             rec, sec = rec_of(name, dec)
-            hrows.append(height_row(name, label, "system",
-                                    height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc),
-                                    dec.seconds + sec, "reconstruction minus the true surface"))
+            r = height_row(name, label, "system",
+                           height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc),
+                           dec.seconds + sec, "reconstruction minus the true surface")
+            hrows.append({**r, **{f"{k}_err": 0.0 for k in HEIGHT_STATS}})
         return dec
 
     ideal_dec = system("ideal", "ideal system (reference)", ideal)
@@ -410,36 +499,101 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
     full = with_effects(cfg, [e.name for e in present])
     ref_full = system("all_system", "all system effects together", full)
 
+    numerical: dict = {}  # surface row -> direction -> (err_px, valid, dev_px)
+    numerical_h: dict = {}
+    sampling: dict = {}
+
     def surface(name, label, c, ref, ref_name):
         say(f"surface: {label}")
         dec = decode_config(c, stream=1)
+        err, how = dec.error_px, "the render's stated error (finest fringe)"
+        n_used = int((dec.sampling or {}).get("n_rays") or c.sampling.n_rays)
+        if err is None:  # no stated error: the same chain once more (budget_error)
+            other, how = second_estimate(c, n_used, (dec.sampling or {}).get("mode"))
+            say(f"surface: {label}, {how} (its numerical error)")
+            lo = decode_config(other, stream=1)
+            err = difference_error(dec.coord, dec.valid, lo.coord, lo.valid)
+        sampling[name] = {**(dec.sampling or {}), "n_rays": n_used, "error_from": how}
         for d in dirs:
             ok = dec.valid[d] & ref.valid[d]
-            rows.append(_row(name, label, "surface", d, dec.coord[d] - ref.coord[d], ok, truth,
-                             dec.seconds))
+            dev = dec.coord[d] - ref.coord[d]
+            rows.append(_row(name, label, "surface", d, dev, ok, truth, dec.seconds, err[d]))
+            numerical.setdefault(name, {})[d] = (err[d], ok, dev)
         if heights:
             rec, sec = rec_of(name, dec)
-            hrows.append(height_row(name, label, "surface",
-                                    height_error(SurfaceMaps.of(rec), SurfaceMaps.of(recs[ref_name]),
-                                                 spec, disc),
-                                    dec.seconds + sec, "surface's reconstruction minus the mirror's"))
+            base = SurfaceMaps.of(recs[ref_name])
+            row = height_row(name, label, "surface", height_error(SurfaceMaps.of(rec), base, spec, disc),
+                             dec.seconds + sec, "surface's reconstruction minus the mirror's")
+            shifted, diffs = [], []
+            for sign in (1.0, -1.0):
+                moved = Decoded({d: dec.coord[d] + sign * np.nan_to_num(err[d], nan=0.0) for d in dirs},
+                                dec.valid, 0.0)
+                rm = reconstruct_decoded(cfg, scene, moved)
+                shifted.append(height_row(name, label, "surface",
+                                          height_error(SurfaceMaps.of(rm), base, spec, disc)))
+                diffs.append(height_row(name, label, "numerical",
+                                        height_error(SurfaceMaps.of(rm), SurfaceMaps.of(rec), spec, disc)))
+            hrows.append({**row, **height_error_bounds(row, shifted)})
+            numerical_h[name] = diffs
+        return n_used
 
     if not cfg.brdf.model == "mirror":
-        surface("surface_ideal", "surface scattering, ideal system", ideal, ideal_dec, "ideal")
+        n_ideal = surface("surface_ideal", "surface scattering, ideal system", ideal, ideal_dec, "ideal")
+        if target is not None:  # the order the ideal system's render chose
+            full = at_order(full, n_ideal)
         surface("surface", "surface scattering, through the full system", full, ref_full, "all_system")
-    settings = {"truth": kind, "estimator": cfg.sampling.estimator,
-                "brdf": cfg.brdf.model, "removed": spec.describe()}
+        for name, label in (("surface_ideal", "ideal system"), ("surface", "full system")):
+            label = f"numerical error of the surface row ({label}; quadrature)"
+            for d in dirs:
+                e, ok, dev = numerical[name][d]
+                rows.append({**numerical_row(d, e, ok, truth, dev, label),
+                             "effect": f"numerical_{name}"})
+            if heights:
+                up, dn = numerical_h[name]
+                hrows.append({**up, **{k: max(up[k], dn[k]) for k in HEIGHT_STATS},
+                              "effect": f"numerical_{name}", "label": label, "part": "numerical",
+                              "zernike_noll_nm": [], "zernike_fringe_nm": [],
+                              "how": "reconstruction with the decoded coordinates moved by "
+                                     "their numerical error (the larger of both signs) minus "
+                                     "the reconstruction"})
+        if target is not None:
+            for name, smp in sampling.items():
+                worst_mrad = max(r["p95_mrad"] for r in rows if r["effect"] == f"numerical_{name}")
+                if smp.get("target_met") is False or (smp.get("target_met") is None
+                                                      and not worst_mrad <= target):
+                    msg = (f"sampling.target_error_mrad = {target:g}: the {name} row's numerical "
+                           f"error is {worst_mrad:.3g} mrad (P95 of its rows) at n_rays = "
+                           f"{smp['n_rays']}: raise sampling.max_rays or accept the error")
+                    notes.append(msg)
+                    warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    settings = {"truth": kind, "estimator": estimator_label(cfg.sampling),
+                "brdf": cfg.brdf.model, "removed": spec.describe(), "sampling": sampling,
+                "target_error_mrad": target, "warnings": notes}
     if heights and cfg.budget.calibration_rows:
         from .calibration import calibration_rows
 
         say("calibration rows")
-        hrows += calibration_rows(cfg, scene, ideal_dec, recs["ideal"], spec, disc)
+        # the ideal mirror's decoding: no quadrature, no numerical error
+        hrows += [{**{f"{k}_err": 0.0 for k in HEIGHT_STATS}, **r}
+                  for r in calibration_rows(cfg, scene, ideal_dec, recs["ideal"], spec, disc)]
         settings["calibration"] = cfg.budget.calibration.model_dump()
     return Budget(rows, hrows, settings)
 
 
-TABLE_COLUMNS = ("effect", "part", "direction", "rms_mrad", "p95_mrad", "rms_px", "p95_px",
-                 "rms_mm", "p95_mm", "rms_urad", "p95_urad", "mean_px", "n_valid", "seconds", "label")
-HEIGHT_COLUMNS = ("effect", "part", "slope_rms_x_urad", "slope_rms_y_urad", "slope_p95_x_urad",
-                  "slope_p95_y_urad", "height_rms_nm", "height_pv_nm", "height_p95_nm", "n_nodes",
-                  "rim_excluded", "removed", "seconds", "label", "how")
+def estimator_label(sampling) -> str:
+    """The estimator as tables and figures name it; the cone (``theta_max_deg``) only for
+    the cone estimators, which use it."""
+    if sampling.estimator == "radiometric":
+        return "radiometric (the rendering integral over the whole lobe)"
+    return f"{sampling.estimator} (cone {sampling.theta_max_deg:g} deg)"
+
+
+TABLE_COLUMNS = ("effect", "part", "direction", "rms_mrad", "rms_mrad_err", "p95_mrad",
+                 "p95_mrad_err", "rms_px", "rms_px_err", "p95_px", "p95_px_err", "rms_mm",
+                 "rms_mm_err", "p95_mm", "p95_mm_err", "rms_urad", "rms_urad_err", "p95_urad",
+                 "p95_urad_err", "mean_px", "n_valid", "seconds", "label")
+HEIGHT_COLUMNS = ("effect", "part", "slope_rms_x_urad", "slope_rms_x_urad_err", "slope_rms_y_urad",
+                  "slope_rms_y_urad_err", "slope_p95_x_urad", "slope_p95_x_urad_err",
+                  "slope_p95_y_urad", "slope_p95_y_urad_err", "height_rms_nm", "height_rms_nm_err",
+                  "height_pv_nm", "height_pv_nm_err", "height_p95_nm", "height_p95_nm_err",
+                  "n_nodes", "rim_excluded", "removed", "seconds", "label", "how")

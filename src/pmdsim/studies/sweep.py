@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..measure.chain import QUANTITIES, STATISTICS, decode_problem
-from ..config import ConfigError, RunConfig, SweepConfig, SweepRange, parse_config
+from ..config import ConfigError, RunConfig, SweepConfig, SweepRange, parse_config, physical_estimator
 from ..config.resources import check_sweep_size
 
 #: Variables of a point: name -> (dimensions after the sweep's own, dtype, attributes).
@@ -208,6 +208,7 @@ def plan_sweep(cfg: RunConfig, sweep: SweepConfig | None = None) -> SweepPlan:
     if sweep is None:
         raise ConfigError("no [sweep] table in the configuration: add one naming the fields "
                           "to sweep (see docs/sweeps.md)")
+    cfg = physical_estimator(cfg)  # the rendering integral unless the configuration names one
     base = cfg.model_copy(update={"sweep": sweep})
     check_sweep_size(base)  # before planning (validating) every point
     dump = cfg.model_dump(mode="json", exclude={"sweep"})
