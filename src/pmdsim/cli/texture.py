@@ -128,6 +128,12 @@ def fit(
                                  help="Most rays per pixel when the fit refines its model (x4 "
                                  "steps from sampling.n_rays) to bound its numerical error."),
     no_figure: bool = typer.Option(False, "--no-figure", help="Do not draw the figure."),
+    target_error_mrad: float | None = typer.Option(
+        None, "--target-error-mrad",
+        help="Raise the quadrature rule's order (n_rays) at the start values until the stated "
+        "numerical phase error (P95 over pixels, every fringe) is below this "
+        "(sampling.target_error_mrad); the fit starts from that order (reported in fit.json "
+        "model.target), a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Images to parameters: fit alpha_x/alpha_y (tangential/radial) and a brightness scale
     of the configured BRDF to fringe images at several widths (closed-form start from the
@@ -141,7 +147,9 @@ def fit(
     console = _console()
     with _guard():
         check_fit_output(output, overwrite)  # before reading or computing anything
-        cfg = load_config(config)
+        from ..config import with_target_error
+
+        cfg = with_target_error(load_config(config), target_error_mrad)
         from ..config import check_resources
 
         check_resources(cfg)  # one simulation of the fit, before the first one runs

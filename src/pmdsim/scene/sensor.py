@@ -118,12 +118,17 @@ class Sensor:
         return 1.0 + self.prnu * g, self.dsnu_electrons * h
 
     # ------------------------------------------------------------------ capture
-    def capture(self, values, *, stream: int = 0, reference: float | None = None) -> Capture:
+    def capture(self, values, *, stream: int = 0, reference: float | None = None,
+                coupled: bool = False) -> Capture:
         """Capture a stack of camera values ``(..., H, W)`` (every leading index is one frame).
 
         ``reference``: the value that gets the exposure (default: the largest finite value of
         ``values``). ``stream`` separates independent captures with the same seed (e.g. the
-        surface and its reference mirror). Input is not modified.
+        surface and its reference mirror). ``coupled``: draw the shot noise by inverting the
+        Poisson distribution function at fixed uniforms (the same distribution), so that a
+        slightly different signal changes a pixel's draw by at most the signal's change on
+        average (``numpy``'s sampler would draw anew: ``pmdsim budget`` compares two orders
+        of the same render). Input is not modified.
         """
         x = np.asarray(values, np.float64)
         if x.ndim < 2:
@@ -146,7 +151,12 @@ class Sensor:
         for f in range(frames.shape[0]):
             rng = np.random.default_rng([self.seed, 1, int(stream), f])
             mu = np.where(np.isfinite(frames[f]), np.maximum(frames[f], 0.0), 0.0) * e_per_x * prnu
-            e = rng.poisson(mu).astype(np.float64) if self.shot_noise else mu
+            if self.shot_noise and coupled:
+                from scipy.stats import poisson
+
+                e = np.maximum(poisson.ppf(rng.random(shape), mu), 0.0)
+            else:
+                e = rng.poisson(mu).astype(np.float64) if self.shot_noise else mu
             e = e + self.dark_signal_electrons + dsnu
             if self.dark_noise_electrons > 0:
                 e = e + self.dark_noise_electrons * rng.standard_normal(shape)
@@ -163,6 +173,7 @@ class Sensor:
         return Capture(dn, sat, e_per_x)
 
 
-def capture_dn(sensor: Sensor, values, stream: int) -> np.ndarray:
-    """Digital numbers (float32) of a stack of camera values (NaN where no surface)."""
-    return sensor.capture(values, stream=stream).dn.astype(np.float32)
+def capture_dn(sensor: Sensor, values, stream: int, coupled: bool = False) -> np.ndarray:
+    """Digital numbers (float32) of a stack of camera values (NaN where no surface);
+    ``coupled``: :meth:`Sensor.capture`'s."""
+    return sensor.capture(values, stream=stream, coupled=coupled).dn.astype(np.float32)

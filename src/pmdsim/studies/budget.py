@@ -46,13 +46,15 @@ from ..config import MirrorConfig, RunConfig
 from ..measure.chain import SlopeGeometry, decode_fringes, slope_deviation_urad, surface_to_monitor_mm
 from ..measure.deviation import deviation_stats
 from ..measure.form import FormSpec, remove_form
+from ..measure.numerical import exceeds
 from ..measure.integrate import height_stats
 from ..measure.reconstruct import Reconstruction, reconstruct
 from ..render import Simulation
 from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
-from .budget_error import (HEIGHT_STATS, ROW_STATS, difference_error, error_stats, height_error_bounds,
-                           stat_error, unknown_share)
+from .budget_error import (HEIGHT_STATS, ROW_STATS, at_order, difference_error, error_stats,
+                           height_error_bounds, node_errors, second_estimate, stat_error,
+                           unknown_share)
 
 QUANTITIES = ("mrad", "px", "mm", "urad")
 
@@ -167,37 +169,13 @@ def decode_config(cfg: RunConfig, stream: int = 0) -> Decoded:
     sensor = Sensor.from_config(cfg.sensor)
     level = None
     if sensor.enabled:
-        res = replace(res, images=capture_dn(sensor, res.images, stream))
+        # coupled shot noise: two orders of one render differ by the render, not a new draw
+        res = replace(res, images=capture_dn(sensor, res.images, stream, coupled=True))
         level = sensor.saturation_dn
     dec = decode_fringes(res, cfg.monitor.resolution, cfg.decode, level)
     coord = {d: np.asarray(r.monitor_coord_px, np.float64) for d, r in dec.items()}
     valid = {d: np.asarray(r.valid, bool) for d, r in dec.items()}
     return Decoded(coord, valid, time.perf_counter() - t0, error_px, res.sampling)
-
-
-def second_estimate(cfg: RunConfig, n_rays: int, mode: str | None) -> tuple[RunConfig, str]:
-    """The render whose decoded difference states the numerical error of ``cfg``'s at
-    ``n_rays`` where the render states none: a randomised set (``rqmc``, ``random``) again
-    with an independent seed (the difference is about sqrt(2) times the error), a
-    deterministic one with half the nodes (the lower order's error, larger than the
-    rendered one's)."""
-    if mode in ("rqmc", "random"):
-        c = at_order(cfg, n_rays)
-        from ..config import with_sampling
-
-        seed = (cfg.sampling.seed + 7919) % 2**63
-        return with_sampling(c, seed=seed), f"decoded difference to an independent seed ({seed})"
-    lo = max(n_rays // 2, 1)
-    return at_order(cfg, lo), f"decoded difference to {lo} nodes"
-
-
-def at_order(cfg: RunConfig, n_rays: int) -> RunConfig:
-    """``cfg`` rendered with ``n_rays`` nodes and no target error (the order is given)."""
-    from ..config import with_sampling
-
-    s = cfg.sampling
-    n = max(int(n_rays), 2 * s.replicates) if s.mode == "rqmc" else int(n_rays)
-    return with_sampling(cfg, n_rays=n, target_error_mrad=None, max_rays=max(n, s.max_rays))
 
 
 @dataclass(frozen=True, eq=False)
@@ -508,11 +486,16 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
         dec = decode_config(c, stream=1)
         err, how = dec.error_px, "the render's stated error (finest fringe)"
         n_used = int((dec.sampling or {}).get("n_rays") or c.sampling.n_rays)
-        if err is None:  # no stated error: the same chain once more (budget_error)
-            other, how = second_estimate(c, n_used, (dec.sampling or {}).get("mode"))
-            say(f"surface: {label}, {how} (its numerical error)")
+        if err is None or c.sensor.enabled:  # the same chain once more (budget_error)
+            other, how2 = second_estimate(c, n_used, (dec.sampling or {}).get("mode"))
+            say(f"surface: {label}, {how2} (its numerical error)")
             lo = decode_config(other, stream=1)
-            err = difference_error(dec.coord, dec.valid, lo.coord, lo.valid)
+            diff = difference_error(dec.coord, dec.valid, lo.coord, lo.valid)
+            if err is None:
+                err, how = diff, how2
+            else:  # the sensor's discrete electrons and DN: the larger of the two
+                err = {d: np.fmax(err[d], diff[d]) for d in dirs}
+                how = f"the larger of {how} and the {how2} (through the sensor)"
         sampling[name] = {**(dec.sampling or {}), "n_rays": n_used, "error_from": how}
         for d in dirs:
             ok = dec.valid[d] & ref.valid[d]
@@ -522,19 +505,19 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
         if heights:
             rec, sec = rec_of(name, dec)
             base = SurfaceMaps.of(recs[ref_name])
-            row = height_row(name, label, "surface", height_error(SurfaceMaps.of(rec), base, spec, disc),
-                             dec.seconds + sec, "surface's reconstruction minus the mirror's")
-            shifted, diffs = [], []
+            herr = height_error(SurfaceMaps.of(rec), base, spec, disc)
+            row = height_row(name, label, "surface", herr, dec.seconds + sec,
+                             "surface's reconstruction minus the mirror's")
+            shifted = []
             for sign in (1.0, -1.0):
                 moved = Decoded({d: dec.coord[d] + sign * np.nan_to_num(err[d], nan=0.0) for d in dirs},
                                 dec.valid, 0.0)
                 rm = reconstruct_decoded(cfg, scene, moved)
-                shifted.append(height_row(name, label, "surface",
-                                          height_error(SurfaceMaps.of(rm), base, spec, disc)))
-                diffs.append(height_row(name, label, "numerical",
-                                        height_error(SurfaceMaps.of(rm), SurfaceMaps.of(rec), spec, disc)))
-            hrows.append({**row, **height_error_bounds(row, shifted)})
-            numerical_h[name] = diffs
+                shifted.append(height_error(SurfaceMaps.of(rm), base, spec, disc))
+            hrows.append({**row, **height_error_bounds(herr, shifted)})
+            ne = node_errors(herr, shifted)
+            numerical_h[name] = HeightError(ne["slope_x_urad"], ne["slope_y_urad"], ne["height_nm"],
+                                            herr.form)
         return n_used
 
     if not cfg.brdf.model == "mirror":
@@ -549,13 +532,19 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
                 rows.append({**numerical_row(d, e, ok, truth, dev, label),
                              "effect": f"numerical_{name}"})
             if heights:
-                up, dn = numerical_h[name]
-                hrows.append({**up, **{k: max(up[k], dn[k]) for k in HEIGHT_STATS},
-                              "effect": f"numerical_{name}", "label": label, "part": "numerical",
+                hrows.append({**height_row(f"numerical_{name}", label, "numerical", numerical_h[name]),
                               "zernike_noll_nm": [], "zernike_fringe_nm": [],
-                              "how": "reconstruction with the decoded coordinates moved by "
-                                     "their numerical error (the larger of both signs) minus "
-                                     "the reconstruction"})
+                              "how": "per node, the larger change of the row's slope and height "
+                                     "errors when the decoded coordinates move by their "
+                                     "numerical error (both signs)"})
+        for r in rows:  # a deviation whose numerical error is > 10 % of it is not converged
+            num = next((n for n in rows if n["effect"] == f"numerical_{r['effect']}"
+                        and n["direction"] == r["direction"]), None)
+            if num is not None and exceeds(r["rms_px"], num["rms_px"]):
+                notes.append(f"{r['effect']} {r['direction'].upper()}: the numerical error "
+                             f"({num['rms_px']:.2g} px RMS) is more than 10 % of the row "
+                             f"({r['rms_px']:.2g} px): raise sampling.n_rays or set "
+                             "sampling.target_error_mrad")
         if target is not None:
             for name, smp in sampling.items():
                 worst_mrad = max(r["p95_mrad"] for r in rows if r["effect"] == f"numerical_{name}")

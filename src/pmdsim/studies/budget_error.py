@@ -13,17 +13,24 @@ the rendering integral, whose per-pixel error the budget carries to every statis
   difference (:func:`difference_error`): for a randomised set (``rqmc``: the nearest-pixel
   monitor) with an independent seed at the same order (about sqrt(2) times the error of
   either), for a deterministic rule with half the nodes (the lower order's error, larger
-  than the rendered one's) (:func:`pmdsim.studies.budget.second_estimate`);
+  than the rendered one's) (:func:`second_estimate`). Through a sensor the same decoded
+  difference is taken as well and the larger of the two is the error: the shot noise is
+  drawn coupled (:meth:`pmdsim.scene.sensor.Sensor.capture`), but a signal change of a
+  fraction of an electron still moves some pixels by one electron or one DN, a discrete
+  change of about the square root of the signal change that the render's error, linear in
+  it, does not contain;
 - **RMS and P95 of a row** (:func:`stat_error`): a statistic ``S`` of ``|d|`` that grows
   with every ``|d_i|`` (RMS, percentiles) lies between ``S(max(|d| - e, 0))`` and
   ``S(|d| + e)`` whatever the errors' signs; the row states the larger distance of ``S(|d|)``
   to those bounds. For the RMS this is at most the RMS of ``e`` (Minkowski);
 - **height rows** (:func:`height_error_bounds`): the decoding is reconstructed again with
-  every coordinate moved by ``+e`` and by ``-e`` (x and y together), and each statistic
-  states the larger change (the reconstruction is linear in small coordinate errors, and a
-  coherent shift is the one that integrates to the largest height);
-- the **numerical error row** of the budget states the error maps themselves (RMS and P95 of
-  ``e`` in every unit; heights: the larger of the two shifted reconstructions' differences).
+  every coordinate moved by ``+e`` and by ``-e`` (x and y together); the larger change of
+  each node's slope errors and height error (after removal) is that node's error
+  (:func:`node_errors`: the reconstruction is linear in small coordinate errors, and the
+  quadrature's errors vary smoothly across pixels), carried to RMS/P95 by the same interval
+  bound and to the PV by the widest range it allows;
+- the **numerical error rows** of the budget state the error maps themselves (RMS and P95
+  of ``e`` in every unit; heights: RMS, PV and P95 of the nodes' errors).
 """
 
 from __future__ import annotations
@@ -31,6 +38,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from ..config import RunConfig, with_sampling
 
 #: Statistics of a row that carry an error (the deviation rows: per quantity).
 ROW_STATS = ("rms", "p95")
@@ -92,13 +101,59 @@ HEIGHT_STATS = ("slope_rms_x_urad", "slope_rms_y_urad", "slope_p95_x_urad", "slo
                 "height_rms_nm", "height_pv_nm", "height_p95_nm")
 
 
-def height_error_bounds(row: dict, shifted_rows) -> dict:
-    """{statistic + "_err"}: the larger change of each of :data:`HEIGHT_STATS` between
-    ``row`` and the rows of the decodings moved by ``+e`` and ``-e``."""
+def node_errors(err, shifted) -> dict:
+    """Per reconstruction node, the numerical error of the slope errors (urad) and of the
+    height error after removal (nm): the larger change between ``err`` and the
+    :class:`~pmdsim.studies.budget.HeightError` of each decoding moved by ``+-e``."""
     out = {}
-    for k in HEIGHT_STATS:
-        v = row.get(k)
-        ch = [abs(r[k] - v) for r in shifted_rows
-              if v is not None and math.isfinite(v) and math.isfinite(r.get(k, math.nan))]
-        out[f"{k}_err"] = max(ch) if ch else float("nan")
+    for key in ("slope_x_urad", "slope_y_urad", "height_nm"):
+        base = getattr(err, key)
+        ch = [np.abs(getattr(h, key) - base) for h in shifted]
+        out[key] = np.fmax.reduce(ch) if ch else np.full_like(base, np.nan)
     return out
+
+
+def height_error_bounds(err, shifted) -> dict:
+    """{statistic + "_err"} of :data:`HEIGHT_STATS`: the per-node errors of
+    :func:`node_errors` carried to each statistic by :func:`stat_error` (RMS and P95 about
+    zero for the slopes, about the mean for the height, as the row's statistics are), the
+    PV's by the widest range the per-node errors allow."""
+    e = node_errors(err, shifted)
+    out = {}
+    for k in ("x", "y"):
+        a, ea = getattr(err, f"slope_{k}_urad"), e[f"slope_{k}_urad"]
+        m = np.isfinite(a)
+        out[f"slope_rms_{k}_urad_err"] = stat_error(a, ea, m, "rms")
+        out[f"slope_p95_{k}_urad_err"] = stat_error(a, ea, m, "p95")
+    h, eh = err.height_nm, e["height_nm"]
+    m = np.isfinite(h)
+    if not m.any():
+        return out | {"height_rms_nm_err": float("nan"), "height_p95_nm_err": float("nan"),
+                      "height_pv_nm_err": float("nan")}
+    d = np.where(m, h - np.mean(h[m]), np.nan)
+    out["height_rms_nm_err"] = stat_error(d, eh, m, "rms")
+    out["height_p95_nm_err"] = stat_error(d, eh, m, "p95")
+    ehm = np.nan_to_num(eh[m], nan=0.0)
+    out["height_pv_nm_err"] = float(np.max(h[m] + ehm) - np.min(h[m] - ehm) - np.ptp(h[m]))
+    return out
+
+
+def second_estimate(cfg: RunConfig, n_rays: int, mode: str | None) -> tuple[RunConfig, str]:
+    """The render whose decoded difference states the numerical error of ``cfg``'s at
+    ``n_rays`` where the render states none: a randomised set (``rqmc``, ``random``) again
+    with an independent seed (the difference is about sqrt(2) times the error), a
+    deterministic one with half the nodes (the lower order's error, larger than the
+    rendered one's)."""
+    if mode in ("rqmc", "random"):
+        c = at_order(cfg, n_rays)
+        seed = (cfg.sampling.seed + 7919) % 2**63
+        return with_sampling(c, seed=seed), f"decoded difference to an independent seed ({seed})"
+    lo = max(n_rays // 2, 1)
+    return at_order(cfg, lo), f"decoded difference to {lo} nodes"
+
+
+def at_order(cfg: RunConfig, n_rays: int) -> RunConfig:
+    """``cfg`` rendered with ``n_rays`` nodes and no target error (the order is given)."""
+    s = cfg.sampling
+    n = max(int(n_rays), 2 * s.replicates) if s.mode == "rqmc" else int(n_rays)
+    return with_sampling(cfg, n_rays=n, target_error_mrad=None, max_rays=max(n, s.max_rays))

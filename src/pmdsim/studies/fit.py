@@ -37,10 +37,12 @@ or ``slope_density`` with the Gaussian density) and a brightness scale:
 The brightness ``scale`` multiplies the simulated camera values (it absorbs ``rho_s``, the
 exposure and the sensor gain, which images alone cannot separate). The model's sampling
 settings are the configuration's, except that the estimator is ``radiometric`` (the
-rendering integral: the physical answer) and the sample set the ``stratified`` lattice
-unless the configuration sets ``sampling.estimator``/``mode`` explicitly
-(:func:`fit_config`; the Gauss rule, ``mode = "rule"``, converges faster but at 100 nodes
-missed lobes cut by the monitor's edge in the coverage study). Use ``monitor.pixel_model = "continuous"``: a nearest-pixel monitor
+rendering integral: the physical answer) unless the configuration sets
+``sampling.estimator`` explicitly (:func:`fit_config`); the sample set is the
+configuration's (default: the Gauss rule). With ``sampling.target_error_mrad`` (``pmdsim fit
+--target-error-mrad``) the rule's order is raised at the start values until its stated phase
+error meets the target, and the fit starts from that order (``model["target"]``). Use
+``monitor.pixel_model = "continuous"``: a nearest-pixel monitor
 makes the model piecewise constant on the scale of a ray crossing a pixel edge.
 """
 
@@ -52,7 +54,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..brdf import equivalent_alphas
-from ..config import ConfigError, InputError, RunConfig
+from ..config import ConfigError, InputError, RunConfig, with_sampling
 from ..render import Simulation
 from .fit_stats import (NoiseModel, fringe_signal_ratio, harmonic_noise_variance,
                         parameter_covariance)
@@ -173,19 +175,15 @@ def median_modulation(images) -> np.ndarray:
 
 
 def fit_config(cfg: RunConfig) -> RunConfig:
-    """The configuration the fit renders with: ``sampling.estimator = "radiometric"`` and
-    ``sampling.mode = "stratified"`` unless the configuration sets them explicitly; the
-    rule's embedded error estimate off unless set (the fit estimates its model's error by
-    refinement); no variants."""
+    """The configuration the fit renders with: ``sampling.estimator = "radiometric"`` unless
+    the configuration sets it explicitly, the sampling mode the configuration's (default:
+    the Gauss rule); the rule's embedded error estimate off unless set or a target error
+    needs it (the fit estimates its model's error by refinement); no variants."""
     d = cfg.model_dump()
     given = cfg.sampling.model_fields_set
     if "estimator" not in given:
         d["sampling"]["estimator"] = "radiometric"
-    if "mode" not in given:
-        # the lattice, not the Gauss rule: measured on the coverage study, the rule at 100
-        # nodes misses lobes cut by the monitor's edge (chi-square 1.27, k = 2 missed)
-        d["sampling"]["mode"] = "stratified"
-    if "error_estimate" not in given:
+    if "error_estimate" not in given and cfg.sampling.target_error_mrad is None:
         d["sampling"]["error_estimate"] = False  # the fit estimates its model's error itself
     d["variants"] = []
     return RunConfig.model_validate(d)
@@ -451,6 +449,15 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
     lo, hi = ALPHA_BOUNDS
     start = tuple(float(np.clip(s, lo * 1.01, hi / 1.01)) for s in start)
 
+    target = None
+    if cfg.sampling.target_error_mrad is not None:
+        # the order that meets the target at the start, then fixed (the fit refines it x4)
+        fr = Simulation.from_config(_with_alphas(cfg, *start)).render_fringes(widths, directions, shifts)
+        target = {k: (fr.sampling or {}).get(k) for k in
+                  ("target_error_mrad", "achieved_p95_mrad", "n_rays", "target_met")}
+        cfg = with_sampling(cfg, n_rays=int(target["n_rays"]), target_error_mrad=None,
+                            error_estimate=False)
+
     def render(ax, ay, n_rays=None):
         sim = Simulation.from_config(_with_alphas(cfg, ax, ay, n_rays))
         return sim.render_fringes(widths, directions, shifts).images.astype(np.float64)
@@ -538,7 +545,7 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
                   "method": ("the change of the fitted values from the last refinement (rays "
                              f"x{REFINE_FACTOR})" if shift is not None else
                              "not estimated (max_rays reached at the start)"),
-                  "converged": refined, "pixels": edge_rule,
+                  "converged": refined, "pixels": edge_rule, "target": target,
                   "pixels_fitted": int(valid[0, 0, 0].sum()),
                   "pixels_seen": int(seen[0, 0, 0].sum())}
     noise_info |= signal
