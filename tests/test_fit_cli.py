@@ -137,3 +137,20 @@ def test_bad_input_exits_2_before_the_fit(case):
     assert existing.read_text() == "keep me\n"
     for text in (off.stderr, small.stderr, p.stderr):
         assert "Traceback" not in text
+
+
+def test_target_error_sets_the_fits_order(case):
+    """``--target-error-mrad``: the fit starts from the rule's order that meets the target at
+    the start values, reports it in fit.json, and still covers the truth."""
+    cfg = case["root"] / "rule.toml"
+    _write_toml(cfg, _dict(sampling={"mode": "rule", "n_rays": 64}))
+    out = case["root"] / "out-target"
+    p = _fit(cfg, case["good"], out, "--target-error-mrad", "0.5", "--max-rays", "1024")
+    assert p.returncode == 0, p.stdout + p.stderr
+    res = json.loads((out / "fit.json").read_text())
+    t = res["model"]["target"]
+    assert t["target_error_mrad"] == 0.5 and 64 <= t["n_rays"] <= 1024  # capped by --max-rays
+    assert (t["achieved_p95_mrad"] <= 0.5) == t["target_met"]
+    assert res["model"]["ladder"][0]["n_rays"] == t["n_rays"]  # the fit starts there
+    bad = _fit(cfg, case["good"], case["root"] / "out-bad", "--target-error-mrad", "-1")
+    assert bad.returncode == 2 and "target-error-mrad" in bad.stderr

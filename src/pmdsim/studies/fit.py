@@ -35,15 +35,11 @@ or ``slope_density`` with the Gaussian density) and a brightness scale:
    still returned in full (its numbers are not results).
 
 The brightness ``scale`` multiplies the simulated camera values (it absorbs ``rho_s``, the
-exposure and the sensor gain, which images alone cannot separate). The model's sampling
-settings are the configuration's, except that the estimator is ``radiometric`` (the
-rendering integral: the physical answer) unless the configuration sets
-``sampling.estimator`` explicitly (:func:`fit_config`); the sample set is the
-configuration's (default: the Gauss rule). With ``sampling.target_error_mrad`` (``pmdsim fit
---target-error-mrad``) the rule's order is raised at the start values until its stated phase
-error meets the target, and the fit starts from that order (``model["target"]``). Use
-``monitor.pixel_model = "continuous"``: a nearest-pixel monitor
-makes the model piecewise constant on the scale of a ray crossing a pixel edge.
+exposure and the sensor gain, which images alone cannot separate). Sampling: the config's
+(default the Gauss rule), estimator ``radiometric`` unless set (:func:`fit_config`); with
+``sampling.target_error_mrad`` from the order meeting it (``model["target"]``).
+Use ``monitor.pixel_model = "continuous"``: a nearest-pixel monitor makes the model
+piecewise constant on the scale of a ray crossing a pixel edge.
 """
 
 from __future__ import annotations
@@ -176,9 +172,8 @@ def median_modulation(images) -> np.ndarray:
 
 def fit_config(cfg: RunConfig) -> RunConfig:
     """The configuration the fit renders with: ``sampling.estimator = "radiometric"`` unless
-    the configuration sets it explicitly, the sampling mode the configuration's (default:
-    the Gauss rule); the rule's embedded error estimate off unless set or a target error
-    needs it (the fit estimates its model's error by refinement); no variants."""
+    set explicitly; the embedded error estimate off unless set or a target error needs it
+    (the fit estimates its model's error by refinement); no variants."""
     d = cfg.model_dump()
     given = cfg.sampling.model_fields_set
     if "estimator" not in given:
@@ -450,13 +445,12 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
     start = tuple(float(np.clip(s, lo * 1.01, hi / 1.01)) for s in start)
 
     target = None
-    if cfg.sampling.target_error_mrad is not None:
-        # the order that meets the target at the start, then fixed (the fit refines it x4)
-        fr = Simulation.from_config(_with_alphas(cfg, *start)).render_fringes(widths, directions, shifts)
-        target = {k: (fr.sampling or {}).get(k) for k in
-                  ("target_error_mrad", "achieved_p95_mrad", "n_rays", "target_met")}
-        cfg = with_sampling(cfg, n_rays=int(target["n_rays"]), target_error_mrad=None,
-                            error_estimate=False)
+    if cfg.sampling.target_error_mrad is not None:  # the order meeting it at the start, then fixed
+        cap = with_sampling(cfg, max_rays=max(cfg.sampling.n_rays, min(cfg.sampling.max_rays, max_rays)))
+        fr = Simulation.from_config(_with_alphas(cap, *start)).render_fringes(widths, directions, shifts)
+        target = {k: fr.sampling.get(k) for k in ("target_error_mrad", "achieved_p95_mrad", "n_rays", "target_met")}
+        cfg = with_sampling(cfg, n_rays=target["n_rays"], target_error_mrad=None, error_estimate=False,
+                            max_rays=max(cfg.sampling.max_rays, REFINE_FACTOR * target["n_rays"]))
 
     def render(ax, ay, n_rays=None):
         sim = Simulation.from_config(_with_alphas(cfg, ax, ay, n_rays))
