@@ -186,6 +186,57 @@ def _turning_readme() -> tuple:
                  for v in ("ward_equivalent", "kinematic", "diffractive") for d in ("x", "y"))
 
 
+@functools.cache
+def _realistic_budget() -> dict:
+    """``pmdsim budget examples/realistic_system.toml`` (tens of minutes on two cores): its
+    rows by (effect, direction) and height rows by effect. ``PMDSIM_BUDGET_JSON`` may name
+    the ``budget.json`` of that command's run to check (or ``--update``) from instead; it
+    must hold the example's configuration as it is now."""
+    import json
+    import os
+
+    from pmdsim.config import load_config
+    from pmdsim.run.budget import run_budget
+
+    cfg = load_config(ROOT / "examples" / "realistic_system.toml")
+    path = os.environ.get("PMDSIM_BUDGET_JSON")
+    if path:
+        data = json.loads(Path(path).read_text())
+        from pmdsim.config import physical_estimator
+        from pmdsim.scene import resolve_roi
+
+        now = resolve_roi(physical_estimator(cfg)).model_dump(mode="json")
+        if data["config"] != json.loads(json.dumps(now)):
+            raise SystemExit(f"PMDSIM_BUDGET_JSON={path}: not a budget of the example as it is now")
+    else:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            res = run_budget(cfg, Path(tmp) / "budget", figure=False)
+            data = {"rows": res.rows, "height_rows": list(res.height_rows)}
+    rows = {(r["effect"], r.get("direction")): r for r in data["rows"]}
+    rows.update({(r["effect"], "height"): r for r in data["height_rows"]})
+    return rows
+
+
+def budget_scattering() -> tuple:
+    """README.md: the realistic example's scattering row through the ideal system."""
+    b = _realistic_budget()
+    x, y, h = b[("surface_ideal", "x")], b[("surface_ideal", "y")], b[("surface_ideal", "height")]
+    return (x["rms_px"], x["rms_px_err"], y["rms_px"], x["rms_urad"], x["rms_urad_err"],
+            y["rms_urad"], h["height_rms_nm"], h["height_rms_nm_err"], h["height_pv_nm"],
+            h["height_pv_nm_err"])
+
+
+def budget_numerical() -> tuple:
+    """README.md: the numerical error rows of the realistic example's budget."""
+    b = _realistic_budget()
+    ix, fx, fy = b[("numerical_surface_ideal", "x")], b[("numerical_surface", "x")], b[("numerical_surface", "y")]
+    ih = b[("numerical_surface_ideal", "height")]
+    return (ix["rms_px"], ix["rms_urad"], ih["height_rms_nm"], ih["height_pv_nm"],
+            fx["rms_px"], fy["rms_px"], fx["rms_urad"], fy["rms_urad"])
+
+
 # ----------------------------------------------------------------------------- the table
 _ROW = r" \| " + NUMBER + r" / " + NUMBER
 CHECKS = [
@@ -226,6 +277,17 @@ CHECKS = [
           + r" mrad with the kinematic density[\s\S]*?and\s+" + NUMBER + r" / " + NUMBER
           + r" mrad with the diffractive orders", _turning_readme, fast=False,
           why="the full example run"),
+    Check("budget-scattering", "README.md",
+          r"\| \*\*surface scattering \(ideal system\)\*\* \| " + NUMBER + r" ± " + NUMBER + r" / "
+          + NUMBER + r" \| " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER
+          + r" ± " + NUMBER + r" / " + NUMBER + r" ± " + NUMBER + r" \|", budget_scattering,
+          fast=False, why="the full example's budget (deterministic rule, no sensor)"),
+    Check("budget-numerical", "README.md",
+          r"\| numerical error of that row \| " + NUMBER + r" / < 1e-12 \| " + NUMBER
+          + r" / < 1e-11 \| " + NUMBER + r" / " + NUMBER + r" \|[\s\S]*?\| numerical error of "
+          r"that row \(not converged: the budget warns\) \| " + NUMBER + r" / " + NUMBER + r" \| "
+          + NUMBER + r" / " + NUMBER + r" \|", budget_numerical, rel_tol=0.05, fast=False,
+          why="the full example's budget; the full system's row is rqmc (seeded)"),
 ]
 
 

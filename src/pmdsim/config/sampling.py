@@ -40,7 +40,8 @@ class SamplingConfig(_Model):
     max_rays: Annotated[Int, Field(ge=1, le=MAX_RAYS)] = 65536
     estimator: Literal["paper", "weighted_mean", "radiometric"] = Field(
         "paper",
-        description="paper: (1/N) sum f I over the cone (the paper); weighted_mean: "
+        description="unset: paper for simulate, radiometric for budget, sweep and fit "
+        "(pmdsim.config.physical_estimator). paper: (1/N) sum f I over the cone (the paper); weighted_mean: "
         "sum f I / sum f over the cone; radiometric: (1/N) sum f I cos_o / pdf over N "
         "directions importance-sampled from the whole lobe (no cone: theta_max_deg and "
         "scheme are not used, P is not added; see docs/physics.md)",

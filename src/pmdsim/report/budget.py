@@ -182,10 +182,10 @@ def plot_budget(rows: list[dict], path: Path, title: str = "error budget", quant
         ax2.legend(loc="lower right", fontsize=8)
     est = f"; estimator {settings['estimator']}" if settings and settings.get("estimator") else ""
     fig.suptitle(title + est + "\nlight: P95 or PV; blue: system (mirror decoded minus the exact point), "
-                 "orange: surface minus the mirror, green: calibration (sensitivity x uncertainty), "
-                 "grey: numerical error of the surface rows; bars: value ± numerical error",
+                 "orange: surface minus the mirror,\ngreen: calibration (sensitivity x uncertainty), "
+                 "grey: numerical error of the surface rows; error bars and ± : numerical error",
                  fontsize=9)
-    fig.tight_layout(rect=(0, 0, 1, 1 - 0.5 / fig.get_size_inches()[1]))
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.7 / fig.get_size_inches()[1]))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
