@@ -130,3 +130,28 @@ def test_rows_change_less_than_their_error_when_the_order_doubles(orders, which)
     for k in ("slope_rms_x_urad", "slope_rms_y_urad", "height_rms_nm"):
         assert abs(a[k] - b[k]) <= a[f"{k}_err"], k
     assert lo[(f"numerical_{which}", "h")]["height_rms_nm"] < 0.1 * a["height_rms_nm"]
+
+
+def test_sweep_plans_the_physical_estimator_and_commands_take_a_target(tmp_path):
+    from typer.testing import CliRunner
+
+    from pmdsim.cli import app
+    from pmdsim.studies.sweep import plan_sweep
+    from test_budget import _write_toml
+
+    d = merge(base_dict(), {"sampling": {"__replace__": {"n_rays": 16}},
+                            "patterns": {"fringes": {"widths_px": [24.0, 200.0]}},
+                            "sweep": {"parameters": {"brdf.alpha_x": [0.01, 0.02]}}})
+    plan = plan_sweep(parse_config(d))
+    assert {p.config.sampling.estimator for p in plan.points} == {"radiometric"}
+    named = plan_sweep(parse_config(merge(d, {"sampling": {"estimator": "paper"}})))
+    assert {p.config.sampling.estimator for p in named.points} == {"paper"}
+    cfg = tmp_path / "c.toml"
+    _write_toml(cfg, d)
+    for cmd in (["budget", str(cfg), "-o", str(tmp_path / "b")],
+                ["sweep", str(cfg), "-o", str(tmp_path / "s")]):
+        res = CliRunner().invoke(app, cmd + ["--target-error-mrad", "-1"])
+        assert res.exit_code == 2 and "--target-error-mrad must be > 0" in res.output, res.output
+    res = CliRunner().invoke(app, ["sweep", str(cfg), "-o", str(tmp_path / "s2"), "--target-error-mrad",
+                                   "0.5"])  # accepted: the plan is made, the sweep runs
+    assert res.exit_code == 0, res.output
