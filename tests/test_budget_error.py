@@ -153,5 +153,5 @@ def test_sweep_plans_the_physical_estimator_and_commands_take_a_target(tmp_path)
         res = CliRunner().invoke(app, cmd + ["--target-error-mrad", "-1"])
         assert res.exit_code == 2 and "--target-error-mrad must be > 0" in res.output, res.output
     res = CliRunner().invoke(app, ["sweep", str(cfg), "-o", str(tmp_path / "s2"), "--target-error-mrad",
-                                   "0.5"])  # accepted: the plan is made, the sweep runs
+                                   "5"])  # accepted: the plan is made, the sweep runs
     assert res.exit_code == 0, res.output
