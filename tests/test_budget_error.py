@@ -155,3 +155,26 @@ def test_sweep_plans_the_physical_estimator_and_commands_take_a_target(tmp_path)
     res = CliRunner().invoke(app, ["sweep", str(cfg), "-o", str(tmp_path / "s2"), "--target-error-mrad",
                                    "5"])  # accepted: the plan is made, the sweep runs
     assert res.exit_code == 0, res.output
+
+
+def test_coupled_shot_noise_is_the_poisson_quantile_and_moves_with_the_signal():
+    """The budget's coupled capture inverts the Poisson distribution function (equal to
+    SciPy's ppf, also at mu = 0 and small mu), so a signal 1e-5 brighter changes a pixel's
+    electrons by at most 1 and on average by the signal's change (numpy's sampler consumes
+    a varying number of uniforms, so a change can shift every later pixel's draw)."""
+    from scipy import stats
+
+    from pmdsim.scene.sensor import Sensor, poisson_inverse
+
+    rng = np.random.default_rng(11)
+    mu = np.concatenate([rng.uniform(0, 9000, 4000), rng.uniform(0, 15, 2000), np.zeros(5)])
+    u = rng.random(mu.size)
+    assert np.array_equal(poisson_inverse(u, mu), np.maximum(stats.poisson.ppf(u, mu), 0.0))
+    s = Sensor(enabled=True, exposure_electrons=8000.0, full_well_electrons=10000.0,
+               dark_noise_electrons=0.0, bit_depth=16, seed=4)
+    img = rng.uniform(0.2, 1.0, (1, 40, 30))
+    img[0, 0, 0] = 1.0  # the exposure's reference stays the same
+    a = s.capture(img, coupled=True).dn / s.gain
+    b = s.capture(img * (1 + 1e-5), coupled=True).dn / s.gain
+    assert np.abs(b - a).max() <= 1.0 + 1e-6 + 2 / s.gain  # one electron (and its DN rounding)
+    assert np.mean(b - a) == pytest.approx(np.mean(img * 1e-5 * 8000.0), abs=0.05)

@@ -152,9 +152,7 @@ class Sensor:
             rng = np.random.default_rng([self.seed, 1, int(stream), f])
             mu = np.where(np.isfinite(frames[f]), np.maximum(frames[f], 0.0), 0.0) * e_per_x * prnu
             if self.shot_noise and coupled:
-                from scipy.stats import poisson
-
-                e = np.maximum(poisson.ppf(rng.random(shape), mu), 0.0)
+                e = poisson_inverse(rng.random(shape), mu)
             else:
                 e = rng.poisson(mu).astype(np.float64) if self.shot_noise else mu
             e = e + self.dark_signal_electrons + dsnu
@@ -171,6 +169,29 @@ class Sensor:
         dn[nan] = np.nan
         sat[nan] = False
         return Capture(dn, sat, e_per_x)
+
+
+def poisson_inverse(u: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """The Poisson quantile (float64): the smallest k with ``P(K <= k; mu) >= u`` (what
+    ``scipy.stats.poisson.ppf`` returns, 0 where ``u`` or ``mu`` is 0), found from the
+    Cornish-Fisher start ``mu + sqrt(mu) z + (z^2 - 1) / 6`` by stepping k against the
+    distribution function (one or two steps per value; ppf itself is ~10x slower)."""
+    from scipy.special import ndtri, pdtr
+
+    u = np.asarray(u, np.float64)
+    mu = np.broadcast_to(np.asarray(mu, np.float64), u.shape)
+    z = ndtri(np.clip(u, 1e-300, 1.0 - 1e-16))
+    k = np.maximum(np.floor(mu + np.sqrt(mu) * z + (z * z - 1.0) / 6.0), 0.0)
+    k = np.where((u <= 0) | (mu <= 0), 0.0, k)
+    todo = np.flatnonzero((u > 0) & (mu > 0))
+    while todo.size:
+        kk, uu, mm = k.flat[todo], u.flat[todo], mu.flat[todo]
+        up = pdtr(kk, mm) < uu
+        down = ~up & (kk > 0) & (pdtr(kk - 1.0, mm) >= uu)
+        k.flat[todo[up]] += 1.0
+        k.flat[todo[down]] -= 1.0
+        todo = todo[up | down]
+    return k
 
 
 def capture_dn(sensor: Sensor, values, stream: int, coupled: bool = False) -> np.ndarray:
