@@ -99,6 +99,8 @@ def converge(
         console.print(f"figure {result.figure}")
     for w in result.warnings:
         _console(stderr=True).print(f"warning: {w.message}", style="yellow", markup=False)
+    for note in result.notes:
+        _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
 
 
 def budget(
@@ -197,6 +199,8 @@ def sweep(
     except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
             NotADirectoryError, ValueError) as err:
         _fail(str(err))
+    for note in result.notes:
+        _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
     console.print(f"computed {len(result.computed)} points, {len(result.skipped)} were already "
                   f"done, in {result.seconds:.1f} s")
     console.print(f"store: {result.store}")

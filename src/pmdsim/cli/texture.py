@@ -157,6 +157,8 @@ def fit(
     console.print(f"table  {res.json}")
     if res.figure is not None:
         console.print(f"figure {res.figure}")
+    for note in res.notes:
+        _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
     if not res.result.success:
         _console(stderr=True).print(f"error: the fit failed: {res.result.reason} (files "
                                     f"written to {res.outdir}, marked failed)",

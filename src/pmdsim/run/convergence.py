@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..config import RunConfig
+from ..scene.sanity import check_physics
 from ..studies.convergence import (ALL_ESTIMATORS, COLUMNS, DEFAULT_N, DEFAULT_THETA_DEG,
                                    convergence_study)
 from . import files as pio
@@ -37,6 +38,7 @@ class ConvergenceResult:
     figure: Path | None
     warnings: list = field(default_factory=list)
     diagnostics: dict = field(default_factory=dict)
+    notes: tuple = ()
 
 
 
@@ -62,6 +64,7 @@ def run_convergence(
     ``convergence.png``; the other parameters are the study's."""
     final = Path(outdir).absolute()
     pio.check_output_dir(final, overwrite, MARKER)
+    notes = check_physics(cfg)  # a sensor/display/BRDF that leaves no signal, before the work
     study = convergence_study(cfg, n_values, theta_values, estimators, camera_size, widths,
                               directions, shifts, progress, diagnostics)
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
@@ -81,4 +84,4 @@ def run_convergence(
             fig_path = final / "convergence.png"
         (tmp / MARKER).write_text(json.dumps(study.meta, indent=2) + "\n")
     return ConvergenceResult(study.rows, final, final / "convergence.csv", fig_path,
-                             study.warnings, study.diagnostics)
+                             study.warnings, study.diagnostics, tuple(notes))

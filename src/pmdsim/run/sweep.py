@@ -38,7 +38,7 @@ import json
 import os
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -69,6 +69,7 @@ class SweepResult:
     total: int
     seconds: float
     files: tuple = ()
+    notes: tuple = ()
 
 
 # ----------------------------------------------------------------------------- the store
@@ -228,6 +229,20 @@ def remove_stale_stores(outdir: str | Path) -> list[Path]:
     return removed
 
 
+def _labels(plan: SweepPlan) -> list[str]:
+    return [f"sweep point {p.index} (" + ", ".join(f"{k} = {v!r}" for k, v in p.values.items())
+            + ")" for p in plan.points]
+
+
+def check_sweep_physics(plan: SweepPlan) -> list[str]:
+    """The physics sanity of every point (:func:`pmdsim.scene.sanity.check_each`), before
+    anything is created: a sensor, display or BRDF that leaves no signal is refused naming
+    the point, its values and the field; returns the notes, each naming its point."""
+    from ..scene.sanity import check_each
+
+    return check_each([p.config for p in plan.points], _labels(plan))
+
+
 def check_sweep_resources(plan: SweepPlan, scheduler: str, num_workers: int | None,
                           local: bool = True):
     """Refuse, before anything is created, a sweep whose largest point does not fit this
@@ -366,11 +381,13 @@ def run_sweep(cfg: RunConfig | str | Path, outdir: str | Path, *, scheduler: str
                           "'processes' or a scheduler address such as tcp://host:8786")
     outdir = Path(outdir)
     check_sweep_resources(plan, scheduler, num_workers, local=client is None and not is_address)
+    notes = check_sweep_physics(plan)  # every point's sensor, display and BRDF, named
     remote = connect_scheduler(scheduler) if client is None and is_address else None
     try:
         with claim_sweep(outdir):
-            return _run_claimed(plan, outdir, overwrite, client or remote, scheduler,
-                                num_workers, progress, figures, t0)
+            result = _run_claimed(plan, outdir, overwrite, client or remote, scheduler,
+                                  num_workers, progress, figures, t0)
+            return replace(result, notes=tuple(notes))
     finally:
         if remote is not None:
             remote.close()
