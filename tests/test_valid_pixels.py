@@ -49,3 +49,53 @@ def test_a_lobe_off_the_monitor_is_refused_naming_that_stage(tmp_path):
     considered = res.statistics["directions"]["x"]["pixels"]["lobe_off_monitor"]
     assert share == pytest.approx(100 * considered / off.size, abs=0.05)
     assert off.sum() >= considered > 0
+
+
+def test_a_sweep_point_without_valid_pixels_is_not_a_result(tmp_path):
+    """The sweep computes and stores the point (NaN statistics) but exits 1 naming it and
+    the directions; with diagnostics.allow_no_valid_pixels the same store is complete."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from conftest import base_dict, merge
+    from pmdsim.cli import app
+    from pmdsim.config import parse_config
+    from pmdsim.run.sweep import empty_points, load_sweep
+    from pmdsim.studies.sweep import plan_sweep
+
+    # washed out: the scattering keeps at most ~45 % of the mirror's modulation at the
+    # finer widths, below the asked-for 99 % (the sweep's points mask by modulation)
+    data = merge(base_dict(), {"camera": {"resolution": [16, 12], "focal_length_px": 32.0},
+                               "brdf": {"alpha_x": 1.0, "alpha_y": 1.0},
+                               "sampling": {"n_rays": 8, "theta_max_deg": 4.0},
+                               "patterns": {"fringes": {"widths_px": [3.0, 24.0, 200.0]}},
+                               "decode": {"min_modulation_ratio": 0.99}})
+    lines = []
+    for section, body in data.items():
+        if isinstance(body, dict):
+            flat = {k: v for k, v in body.items() if not isinstance(v, dict)}
+            lines += [f"[{section}]"] + [f"{k} = {json.dumps(v)}" for k, v in flat.items()]
+            for sub, inner in body.items():
+                if isinstance(inner, dict):
+                    lines += [f"[{section}.{sub}]"] + [f"{k} = {json.dumps(v)}"
+                                                       for k, v in inner.items()]
+        else:
+            lines.insert(0, f"{section} = {json.dumps(body)}")
+    lines += ["[sweep]", "decimation = 0", "[sweep.parameters]", '"brdf.alpha_y" = [1.0]']
+    cfg = tmp_path / "sweep.toml"
+    cfg.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "sweep"
+    result = CliRunner().invoke(app, ["sweep", str(cfg), "-o", str(out), "--no-figures"])
+    assert result.exit_code == 1, result.output
+    text = " ".join(result.output.split())
+    assert "sweep point 0 (brdf.alpha_y = 1.0): no valid pixel in the x and y fringes" in text
+    assert "allow_no_valid_pixels" in text
+    ds = load_sweep(out)
+    assert bool(ds["done"].values.all())  # stored, and visibly empty
+    n_valid = ds["deviation_stats"].sel(quantity="phase_mrad", statistic="n_valid").values
+    assert (n_valid == 0).all()
+    allowed = parse_config(merge(data, {"diagnostics": {"allow_no_valid_pixels": True},
+                                        "sweep": {"decimation": 0,
+                                                  "parameters": {"brdf.alpha_y": [1.0]}}}))
+    assert empty_points(plan_sweep(allowed), ds) == ()

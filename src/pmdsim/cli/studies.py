@@ -206,3 +206,10 @@ def sweep(
     console.print(f"store: {result.store}")
     for f in result.files:
         console.print(f"wrote {f}")
+    if result.empty:  # a point without a valid pixel is not a result (unless asked for)
+        _console(stderr=True).print(
+            "error: " + "; ".join(result.empty) + f" (their statistics are NaN in "
+            f"{result.store} and points.csv; run such a point alone with pmdsim simulate to "
+            "see which stage removed the pixels, or set diagnostics.allow_no_valid_pixels = "
+            "true to accept them)", style="bold red", markup=False)
+        raise typer.Exit(1)

@@ -71,10 +71,9 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
             _csv(tmp / "heights.csv", result.height_rows, HEIGHT_COLUMNS)
             _csv(tmp / "zernike.csv", zernike_rows(result.height_rows),
                  ("effect", "part", "order", "index", "n", "m", "coefficient", "removed"))
-        (tmp / "budget.json").write_text(json.dumps(
-            {"name": cfg.name, "truth": truth, "settings": result.settings, "rows": rows,
-             "height_rows": result.height_rows, "config": cfg.model_dump(mode="json")},
-            indent=2) + "\n")
+        pio.write_json(tmp / "budget.json", {
+            "name": cfg.name, "truth": truth, "settings": result.settings, "rows": rows,
+            "height_rows": result.height_rows, "config": cfg.model_dump(mode="json")})
         fig = None
         if figure:
             from ..report.budget import plot_budget

@@ -82,6 +82,6 @@ def run_convergence(
                              cfg.sampling.theta_max_deg,
                              title=f"{cfg.name}: convergence ({w} x {h} px camera)")
             fig_path = final / "convergence.png"
-        (tmp / MARKER).write_text(json.dumps(study.meta, indent=2) + "\n")
+        pio.write_json(tmp / MARKER, study.meta)
     return ConvergenceResult(study.rows, final, final / "convergence.csv", fig_path,
                              study.warnings, study.diagnostics, tuple(notes))

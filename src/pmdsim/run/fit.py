@@ -98,9 +98,9 @@ def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwri
         text += f"\n{saturated} saturated values left out"
     fig = None
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
-        (tmp / "fit.json").write_text(json.dumps(
-            res.as_dict() | {"model_name": cfg.brdf.model, "frame": cfg.anisotropy.frame,
-                             "saturated_values": saturated}, indent=2) + "\n")
+        pio.write_json(tmp / "fit.json", res.as_dict() | {
+            "model_name": cfg.brdf.model, "frame": cfg.anisotropy.frame,
+            "saturated_values": saturated})
         (tmp / "fit.txt").write_text(text + "\n")
         if figure:
             from ..report.texture import plot_fit

@@ -59,8 +59,9 @@ ProgressFn = Callable[[int, int], None]
 @dataclass(frozen=True)
 class SweepResult:
     """What :func:`run_sweep` did: the store, the points it computed now (flat indices), the
-    points it found done, the wall time and the files written beside the store
-    (``points.csv``, figures)."""
+    points it found done, the wall time, the files written beside the store
+    (``points.csv``, figures), the physics checks' notes and the ``empty`` points (one line
+    each: a fringe direction without a valid pixel, :func:`empty_points`)."""
 
     outdir: Path
     store: Path
@@ -70,6 +71,7 @@ class SweepResult:
     seconds: float
     files: tuple = ()
     notes: tuple = ()
+    empty: tuple = ()
 
 
 # ----------------------------------------------------------------------------- the store
@@ -435,7 +437,27 @@ def _run_claimed(plan: SweepPlan, outdir: Path, overwrite: bool, client, schedul
 
         files += sweep_figures(ds, outdir / "figures")
     return SweepResult(outdir, store, tuple(sorted(computed)), skipped, len(plan.points),
-                       time.perf_counter() - t0, tuple(files))
+                       time.perf_counter() - t0, tuple(files), empty=empty_points(plan, ds))
+
+
+def empty_points(plan: SweepPlan, ds) -> tuple[str, ...]:
+    """One line per finished point with a fringe direction without a valid pixel (its
+    statistics are NaN in the store), unless its ``diagnostics.allow_no_valid_pixels``
+    says that is wanted: a sweep with such points is not a complete result (the command
+    line exits 1 naming them)."""
+    valid = ds["deviation_stats"].sel(quantity="phase_mrad", statistic="n_valid").load()
+    done = ds["done"].values
+    out = []
+    for p in plan.points:
+        if not done[p.position] or p.config.diagnostics.allow_no_valid_pixels:
+            continue
+        n = valid.isel(dict(zip(plan.dims, p.position)))
+        dirs = [str(d) for d, v in zip(ds["direction"].values, n.values) if not v > 0]
+        if dirs:
+            shown = ", ".join(f"{k} = {v!r}" for k, v in p.values.items())
+            out.append(f"sweep point {p.index} ({shown}): no valid pixel in the "
+                       f"{' and '.join(dirs)} fringes")
+    return tuple(out)
 
 
 def load_sweep(path: str | Path):
