@@ -71,17 +71,7 @@ def test_a_sweep_point_without_valid_pixels_is_not_a_result(tmp_path):
                                "sampling": {"n_rays": 8, "theta_max_deg": 4.0},
                                "patterns": {"fringes": {"widths_px": [3.0, 24.0, 200.0]}},
                                "decode": {"min_modulation_ratio": 0.99}})
-    lines = []
-    for section, body in data.items():
-        if isinstance(body, dict):
-            flat = {k: v for k, v in body.items() if not isinstance(v, dict)}
-            lines += [f"[{section}]"] + [f"{k} = {json.dumps(v)}" for k, v in flat.items()]
-            for sub, inner in body.items():
-                if isinstance(inner, dict):
-                    lines += [f"[{section}.{sub}]"] + [f"{k} = {json.dumps(v)}"
-                                                       for k, v in inner.items()]
-        else:
-            lines.insert(0, f"{section} = {json.dumps(body)}")
+    lines = [_toml_of(data)]
     lines += ["[sweep]", "decimation = 0", "[sweep.parameters]", '"brdf.alpha_y" = [1.0]']
     cfg = tmp_path / "sweep.toml"
     cfg.write_text("\n".join(lines) + "\n")
@@ -99,3 +89,76 @@ def test_a_sweep_point_without_valid_pixels_is_not_a_result(tmp_path):
                                         "sweep": {"decimation": 0,
                                                   "parameters": {"brdf.alpha_y": [1.0]}}}))
     assert empty_points(plan_sweep(allowed), ds) == ()
+
+
+def _toml_of(data: dict) -> str:
+    import json
+
+    out = [f"{k} = {json.dumps(v)}" for k, v in data.items() if not isinstance(v, dict)]
+    for section, body in data.items():
+        if not isinstance(body, dict):
+            continue
+        flat = {k: v for k, v in body.items() if not isinstance(v, dict)}
+        out += [f"[{section}]"] + [f"{k} = {json.dumps(v)}" for k, v in flat.items()]
+        for sub, inner in body.items():
+            if isinstance(inner, dict):
+                out += [f"[{section}.{sub}]"] + [f"{k} = {json.dumps(v)}" for k, v in inner.items()]
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize("command", ["budget", "converge"])
+def test_budget_and_converge_rows_without_valid_pixels_are_refused(tmp_path, monkeypatch,
+                                                                   command):
+    """A row with n_valid = 0 (here: the study's result replaced, budget's wholly, so that
+    the wiring is tested without a long run) makes the command exit 2 naming the row, nothing written;
+    with diagnostics.allow_no_valid_pixels it is kept with a note."""
+    from dataclasses import replace as dc_replace
+
+    from typer.testing import CliRunner
+
+    from conftest import base_dict, merge
+    from pmdsim.cli import app
+    import pmdsim.run.budget as rb
+    import pmdsim.run.convergence as rc
+
+    if command == "budget":
+        from pmdsim.studies.budget import TABLE_COLUMNS, Budget
+
+        def fake(cfg, progress=None, truth="centre"):
+            row = dict.fromkeys(TABLE_COLUMNS, 1.0) | {"part": "system", "label": "ideal"}
+            return Budget([row | {"effect": "ideal", "direction": d, "n_valid": 0}
+                           for d in "xy"] + [row | {"effect": "sensor", "direction": "x",
+                                                    "n_valid": 9}])
+
+        monkeypatch.setattr(rb, "budget", fake)
+        args = ["--no-figure"]
+        says = "budget: no valid pixel in 2 of 3 rows: ideal x; ideal y"
+    else:
+        real = rc.convergence_study
+
+        def fake(*a, **k):
+            res = real(*a, **k)
+            return dc_replace(res, rows=[dict(r, n_valid=0) if r["estimator"] == "radiometric"
+                                         else r for r in res.rows])
+
+        monkeypatch.setattr(rc, "convergence_study", fake)
+        args = ["--camera", "10x8", "--n-values", "8", "--theta", "2", "--no-figure",
+                "--no-diagnostics", "--estimators", "paper,radiometric"]
+        says = "converge: no valid pixel in 4 of 8 rows: radiometric N = 8 x 10 px"
+    small = {"camera": {"resolution": [10, 8], "focal_length_px": 20.0},
+             "sampling": {"n_rays": 8},
+             "patterns": {"fringes": {"widths_px": [10.0, 200.0]}}}
+    for allow in (False, True):
+        cfg = tmp_path / f"{allow}.toml"
+        cfg.write_text(_toml_of(merge(base_dict(), merge(small, {"diagnostics": {
+            "allow_no_valid_pixels": allow}}) if allow else small)))
+        out = tmp_path / f"out-{allow}"
+        result = CliRunner().invoke(app, [command, str(cfg), "-o", str(out), *args])
+        text = " ".join(result.output.split())
+        if not allow:
+            assert result.exit_code == 2, result.output
+            assert "diagnostics.allow_no_valid_pixels: " + says in text, text
+            assert not out.exists()
+        else:
+            assert result.exit_code == 0, result.output
+            assert "note: " + says in text and out.is_dir()

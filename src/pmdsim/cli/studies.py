@@ -141,6 +141,8 @@ def budget(
     console.print(f"table  {result.table}")
     if result.figure is not None:
         console.print(f"figure {result.figure}")
+    for note in result.notes:
+        _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
 
 
 def sweep(

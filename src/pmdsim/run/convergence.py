@@ -12,6 +12,7 @@ from typing import Callable, Sequence
 
 from ..config import RunConfig
 from ..scene.sanity import check_physics
+from ..studies.valid_pixels import check_rows
 from ..studies.convergence import (ALL_ESTIMATORS, COLUMNS, DEFAULT_N, DEFAULT_THETA_DEG,
                                    convergence_study)
 from . import files as pio
@@ -42,6 +43,11 @@ class ConvergenceResult:
 
 
 
+def _row_name(r: dict) -> str:
+    theta = "" if r["theta_max_deg"] != r["theta_max_deg"] else f" theta_max {r['theta_max_deg']:g} deg"
+    return f"{r['estimator']} N = {r['n_rays']}{theta} {r['direction']} {r['width_px']:g} px"
+
+
 @single_blas
 def run_convergence(
     cfg: RunConfig,
@@ -67,6 +73,8 @@ def run_convergence(
     notes = check_physics(cfg)  # a sensor/display/BRDF that leaves no signal, before the work
     study = convergence_study(cfg, n_values, theta_values, estimators, camera_size, widths,
                               directions, shifts, progress, diagnostics)
+    notes += check_rows(study.rows, cfg.diagnostics.allow_no_valid_pixels, "converge",
+                        _row_name)
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
         with open(tmp / "convergence.csv", "w", newline="") as fh:
             wr = csv.DictWriter(fh, fieldnames=COLUMNS)
