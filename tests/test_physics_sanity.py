@@ -332,3 +332,50 @@ def test_fit_refuses_a_display_without_signal_before_reading_the_images(tmp_path
     assert result.exit_code == 2, result.output
     assert field in result.output and "missing.tif" not in result.output
     assert not out.exists()
+
+
+def _strict_json(path):
+    import json
+
+    def refuse(name):
+        raise AssertionError(f"{path.name} holds {name}")
+
+    return json.loads(path.read_text(), parse_constant=refuse)
+
+
+def test_a_coarse_precompensated_display_gives_clipped_images_and_strict_statistics(tmp_path):
+    """Issue 21's case through simulate: a continuous monitor, gamma 2.2 pre-compensated,
+    a 2-bit drive. The camera values in run.zarr stay >= 0 and statistics.json (and the
+    manifest) hold no NaN/Infinity: a strict parser reads them."""
+    from pmdsim import load_run
+    from pmdsim.cli import app
+
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(_toml(merge(base_dict(), {
+        "camera": {"resolution": [16, 12], "focal_length_px": 32.0},
+        "monitor": {"pixel_model": "continuous", "gamma": 2.2, "bit_depth": 2,
+                    "precompensate_gamma": True},
+        "sampling": {"n_rays": 8},
+        "patterns": {"fringes": {"widths_px": [50.0, 400.0]}}})))
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["simulate", str(cfg), "-o", str(out), "--no-figures"])
+    assert result.exit_code == 0, result.output
+    stats = _strict_json(out / "statistics.json")
+    assert stats["directions"]["x"]["pixels"]["valid"] > 0
+    for f in out.glob("*.json"):
+        _strict_json(f)
+    img = np.asarray(load_run(out)["fringes"].values, np.float64)
+    assert np.nanmin(img) >= 0.0
+
+
+def test_result_json_is_strict():
+    """NaN and infinities become null, NumPy scalars plain numbers, nested anywhere."""
+    import json
+
+    from pmdsim.run.files import json_safe
+
+    data = {"a": float("nan"), "b": [np.float32(1.5), np.inf, {"c": -np.inf}],
+            "d": np.int64(3), "e": np.bool_(True), "f": (1, "x")}
+    text = json.dumps(json_safe(data), allow_nan=False)
+    assert json.loads(text) == {"a": None, "b": [1.5, None, {"c": None}], "d": 3, "e": True,
+                                "f": [1, "x"]}
