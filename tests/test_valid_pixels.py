@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from conftest import make_config
-from pmdsim.config import ConfigError
 from pmdsim.studies.valid_pixels import check_valid, removed_by_stage
 
 WIDE = {"brdf": {"alpha_x": 1.0, "alpha_y": 1.0},
@@ -33,11 +32,18 @@ def test_a_lobe_off_the_monitor_is_refused_naming_that_stage(tmp_path):
     from pmdsim import load_run
     from pmdsim.run import run_simulation
 
-    cfg = make_config(**WIDE)
-    with pytest.raises(ConfigError) as info:
-        run_simulation(cfg, tmp_path / "refused", figures=False, diagnostics=False)
-    msg = str(info.value)
-    assert msg.splitlines()[1].strip().startswith("brdf:")
+    from typer.testing import CliRunner
+
+    from conftest import base_dict, merge
+    from pmdsim.cli import app
+
+    toml = tmp_path / "wide.toml"
+    toml.write_text(_toml_of(merge(base_dict(), WIDE)))
+    result = CliRunner().invoke(app, ["simulate", str(toml), "-o", str(tmp_path / "refused"),
+                                      "--no-figures", "--no-diagnostics"])
+    assert result.exit_code == 2, result.output
+    msg = " ".join(result.output.split())
+    assert "error: invalid set-up: brdf:" in msg, msg
     assert "lobe off the monitor" in msg and "0 of 1,280 camera pixels valid" in msg
     assert not (tmp_path / "refused").exists()
     allowed = make_config(**WIDE, diagnostics={"allow_no_valid_pixels": True})
