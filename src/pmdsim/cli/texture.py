@@ -15,7 +15,7 @@ def texture(
     nose_radius_mm: float | None = typer.Option(None, "--nose-radius-mm",
                                                 help="Tool nose radius r, mm."),
     from_file: Path | None = typer.Option(
-        None, "--from", help="A measured topography (X3P, .sur, .plu, .vk4, ...; or .npy/.csv/"
+        None, "--from", help="A measured topography (X3P, .sur, .sdf, .al3d, ...; or .npy/.csv/"
         ".tif with --spacing-um): slope density, PSD, Sq, Sdq, correlation lengths, regime "
         "instead of the machining."),
     spacing_um: tuple[float, float] | None = typer.Option(
