@@ -168,3 +168,25 @@ def test_budget_and_converge_rows_without_valid_pixels_are_refused(tmp_path, mon
         else:
             assert result.exit_code == 0, result.output
             assert "note: " + says in text and out.is_dir()
+
+
+def test_a_sweep_point_masks_lobes_off_the_monitor_as_simulate_does():
+    """Ward alphas of 1 (radiometric): simulate finds no valid pixel (above); a sweep point
+    of the same set-up must not count those pixels as valid either."""
+    from pmdsim.measure.chain import QUANTITIES, STATISTICS
+    from pmdsim.studies.sweep import measure_point
+
+    cfg = make_config(**merge_small(WIDE))
+    stats = measure_point(cfg, 0)["deviation_stats"]
+    n_valid = stats[:, list(QUANTITIES).index("phase_mrad"), STATISTICS.index("n_valid")]
+    assert (n_valid == 0).all(), n_valid
+    narrow = make_config(**merge_small({"sampling": WIDE["sampling"],
+                                        "patterns": WIDE["patterns"]}))
+    stats = measure_point(narrow, 0)["deviation_stats"]
+    assert (stats[:, list(QUANTITIES).index("phase_mrad"), STATISTICS.index("n_valid")] > 0).all()
+
+
+def merge_small(changes: dict) -> dict:
+    from conftest import merge
+
+    return merge({"camera": {"resolution": [16, 12], "focal_length_px": 32.0}}, changes)
