@@ -137,7 +137,9 @@ def describe_error(sampling: dict | None) -> str:
     s = sampling or {}
     if s.get("error") == "embedded":
         return (f"{s.get('rule')} against the embedded {s.get('embedded_rule')}: the phase "
-                "difference of the two rules plus 0.1 |dS|/|S| (a bound)")
+                "difference to the first embedded rule plus 0.1 |dS|/|S| (its error, a bound), "
+                "scaled where the rule is asymptotic by the convergence factor observed "
+                "against the second (times 10 on the phase difference)")
     if s.get("error") == "replicates":
         return (f"t(0.975) standard error of the mean of {s.get('passes')} scrambled Sobol "
                 f"replicates of {s.get('nodes')} points (95 % per pixel)")
