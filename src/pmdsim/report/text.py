@@ -127,7 +127,7 @@ def diagnostics_text(name: str, d: dict) -> str:
                      f"min {_fmt(d['ess_min'], '.1f')} of {d['n_rays']} rays")
     if "phase_se_rad" in d:
         how = {"seeds": "spread over independent rotations of the sample set",
-               "rule": "the stated error of the rule rendered (embedded rule or replicates)",
+               "rule": "the stated error of the rule rendered (embedded rules or replicates)",
                }.get(d["phase_se_method"], "N independent rays, an upper bound for the lattice")
         lines.append(f"phase standard error ({d['phase_se_method']} method: {how}), mrad, "
                      "median / P95; fringe modulation:")
