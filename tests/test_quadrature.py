@@ -257,6 +257,32 @@ def test_nearest_monitor_uses_rqmc_and_its_error_bounds_the_true_one():
     assert np.median(stated) < 20 * np.median(true)  # an error statement, not a blanket
 
 
+def test_dots_and_images_return_their_rqmc_error():
+    """Dots and monitor images (step integrands: the default rule renders rqmc) return
+    their values' numerical error with ``with_error=True``: 95 % half-widths that bound
+    the difference to a converged reference of another method (the randomised lattice,
+    64 x the rays) in >= 90 % of the values (measured: dots 100 %, images 97 %), and are
+    not a blanket (median stated / true below 20)."""
+    from pmdsim import patterns
+
+    sim = Simulation.from_config(make_config(sampling={"n_rays": 256, "mode": "rule"}))
+    ref = Simulation.from_config(make_config(sampling={"n_rays": 16384, "mode": "random",
+                                                       "seed": 5}))
+    dots = patterns.dot_grid(sim.scene.monitor.shape, grid=(2, 2), size=40)
+    levels = np.random.default_rng(0).random((2,) + sim.scene.monitor.shape)
+    for got, want in ((sim.render_dots(dots, with_error=True), ref.render_dots(dots)),
+                      (sim.render_images(levels, with_error=True), ref.render_images(levels))):
+        (img, err), ok = got, np.isfinite(got[0]) & np.isfinite(want)
+        ok &= want > 0.05 * np.nanmax(want)
+        true = np.abs(img - want)[ok]
+        assert ok.sum() > 200 and err.shape == img.shape
+        assert np.mean(err[ok] >= true) >= 0.9
+        assert np.median(err[ok]) < 20 * np.median(true)
+    assert sim.render_dots(dots).shape == (4,) + img.shape[1:]  # default: the images alone
+    lattice = Simulation.from_config(make_config(sampling={"mode": "stratified"}))
+    assert lattice.render_dots(dots, with_error=True)[1] is None
+
+
 def test_modes_keep_their_earlier_meaning():
     """Mode 'stratified' is the earlier default (P + lattice, equal weights, no error)."""
     cfg = make_config(sampling={"mode": "stratified"})

@@ -105,6 +105,23 @@ def worst_phase_error(fr, min_modulation: float = 0.05) -> float | None:
     return worst
 
 
+def value_error(err, cols: slice, norm: np.ndarray, values: np.ndarray | None = None,
+                ftot_col: int | None = None) -> np.ndarray | None:
+    """(H, W, Q) numerical error of estimator values ``sum_cols * norm`` from the render's
+    error (:meth:`pmdsim.render.Simulation._render`: the rqmc half-widths, or the
+    differences to the embedded rules, of which the first, as a magnitude, is taken).
+    ``ftot_col``: the value is a ratio ``sum / f_total`` (``weighted_mean``): the error of
+    ``f_total`` adds ``|value| e_ftot / f_total`` (first order, half-widths added: a bound).
+    None without an error."""
+    if err is None:
+        return None
+    e = np.abs(err[0] if isinstance(err, tuple) else err)
+    out = e[..., cols] * np.abs(norm)[..., None]
+    if ftot_col is not None and values is not None:
+        out = out + np.abs(values) * (e[..., ftot_col] * np.abs(norm))[..., None]
+    return out
+
+
 @dataclass(frozen=True)
 class FringeResult:
     """Camera fringe images and the sums they come from.

@@ -43,7 +43,7 @@ from ..scene.brdf_variation import with_params
 from ..kernels.synth import shifted_images
 from ..scene.quadrature import convergence_exponent
 from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, convergence_factor,  # noqa: F401
-                      phase_error, worst_phase_error)
+                      phase_error, value_error, worst_phase_error)
 from .rows import (local_scheduler, reduce_subrays, scene_geometry_rows,  # noqa: F401
                    vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels
@@ -514,11 +514,16 @@ class Simulation:
         return FringeResult(directions, widths, deltas, images, sums, f_total, f_hit, sums_err,
                             info, convergence)
 
-    def render_images(self, levels: np.ndarray, progress: ProgressFn | None = None) -> np.ndarray:
+    def render_images(self, levels: np.ndarray, progress: ProgressFn | None = None,
+                      with_error: bool = False):
         """Camera images (Q, H, W) float32 of monitor images ``levels`` (Q, Hm, Wm) in [0, 1].
 
         The monitor shows each level as luminance (gamma, black/white); each monitor pixel is
         a flat square emitter (the ray takes the value of the pixel it lands in).
+        ``with_error``: (images, their numerical error (Q, H, W) float32 or None): the
+        ``rqmc`` replicates' ``t(0.975, R - 1) s / sqrt(R)`` per value (the default ``rule``
+        renders ``rqmc`` here: the monitor's pixels make the integrand a step function;
+        :func:`~pmdsim.render.results.value_error`); None for modes without an error.
         """
         levels = np.asarray(levels)
         if levels.ndim == 2:
@@ -529,23 +534,43 @@ class Simulation:
                 f"levels: monitor images must be (Q, {mon.height}, {mon.width}), got {levels.shape}"
             )
         lum = np.ascontiguousarray(mon.luminance(levels), dtype=np.float32)
-        out, _ = self._render(kb.MODE_IMAGES, kb.OUT_FIRST + lum.shape[0], smooth=False,
-                              images=lum, progress=progress)
+        out, err = self._render(kb.MODE_IMAGES, kb.OUT_FIRST + lum.shape[0], smooth=False,
+                                images=lum, progress=progress)
         norm = self._normalise(out)
-        return np.moveaxis(out[..., kb.OUT_FIRST:] * norm[..., None], -1, 0).astype(np.float32)
+        vals = out[..., kb.OUT_FIRST:] * norm[..., None]
+        images = np.moveaxis(vals, -1, 0).astype(np.float32)
+        if not with_error:
+            return images
+        e = value_error(err, slice(kb.OUT_FIRST, None), norm, vals, self._ratio_col())
+        return images, None if e is None else np.moveaxis(e, -1, 0).astype(np.float32)
 
-    def render_dots(self, dots: Sequence[Dot], progress: ProgressFn | None = None) -> np.ndarray:
-        """Camera images (Q, H, W) float32 of white square dots on a black monitor."""
+    def _ratio_col(self) -> int | None:
+        """The f_total column when the estimator is a ratio (``weighted_mean``)."""
+        return kb.OUT_FTOTAL if self.scene.estimator == "weighted_mean" else None
+
+    def render_dots(self, dots: Sequence[Dot], progress: ProgressFn | None = None,
+                    with_error: bool = False):
+        """Camera images (Q, H, W) float32 of white square dots on a black monitor;
+        ``with_error``: (images, their numerical error (Q, H, W) or None), as
+        :meth:`render_images`."""
         if len(dots) == 0:
             raise ValueError("dots: give at least one dot")
         rows = np.array([d.as_row() for d in dots])
         mon = self.scene.monitor
-        out, _ = self._render(kb.MODE_DOTS, kb.OUT_FIRST + len(dots), smooth=False, dots=rows,
-                              progress=progress)
+        out, err = self._render(kb.MODE_DOTS, kb.OUT_FIRST + len(dots), smooth=False, dots=rows,
+                                progress=progress)
         norm = self._normalise(out)
         hit = out[..., kb.OUT_FIRST:]
         lum = mon.black_level * out[..., kb.OUT_FHIT][..., None] + (mon.white_level - mon.black_level) * hit
-        return np.moveaxis(lum * norm[..., None], -1, 0).astype(np.float32)
+        vals = lum * norm[..., None]
+        images = np.moveaxis(vals, -1, 0).astype(np.float32)
+        if not with_error:
+            return images
+        e = value_error(err, slice(kb.OUT_FIRST, None), norm, vals, self._ratio_col())
+        if e is not None:  # luminance: black x f_hit + (white - black) x the dot's hits
+            e = abs(mon.white_level - mon.black_level) * e + abs(mon.black_level) * value_error(
+                err, slice(kb.OUT_FHIT, kb.OUT_FHIT + 1), norm)
+        return images, None if e is None else np.moveaxis(e, -1, 0).astype(np.float32)
 
     def transport(self, rows: Sequence[int], cols: Sequence[int], directions: bool = True):
         """The scattered rays of selected pixels (``directions=False``: without the world
