@@ -477,22 +477,22 @@ class Simulation:
         info = self.describe_sampling(self.fringes_smooth())
         if linear and err is not None:  # the error of every normalised complex sum
             diffs = err if isinstance(err, tuple) else (err,)
+            cols = {(di, wi): base[d] + wi * per_width for di, d in enumerate(directions)
+                    for wi in range(nw)}
 
-            def complex_sums(e):
-                z = np.empty((nd, nw, h, w_), np.complex128)
-                for di, d in enumerate(directions):
-                    for wi in range(nw):
-                        col = base[d] + wi * per_width
-                        z[di, wi] = (e[..., col] + 1j * e[..., col + 1]) * np.abs(norm)
-                return z
+            def fringe_sum(e, di, wi):
+                return (e[..., cols[di, wi]] + 1j * e[..., cols[di, wi] + 1]) * np.abs(norm)
 
-            sums_err = complex_sums(diffs[0])
-            if len(diffs) > 1:  # the observed convergence from the second embedded rule
-                convergence = convergence_factor(
-                    sums, sums_err, complex_sums(diffs[1]),
-                    convergence_exponent(tuple(info["order"])))
-                if convergence is not None:
-                    info["convergence"] = [[round(float(c), 6) for c in r] for r in convergence]
+            sums_err = np.empty((nd, nw, h, w_), np.complex128)
+            for di, wi in cols:
+                sums_err[di, wi] = fringe_sum(diffs[0], di, wi)
+            kexp = convergence_exponent(tuple(info["order"])) if len(diffs) > 1 else None
+            if kexp is not None:  # the observed convergence from the second embedded rule
+                convergence = np.ones((nd, nw))  # fringe by fringe: one (H, W) copy at a time
+                for di, wi in cols:
+                    convergence[di, wi] = convergence_factor(
+                        sums[di, wi], sums_err[di, wi], fringe_sum(diffs[1], di, wi), kexp)
+                info["convergence"] = [[round(float(c), 6) for c in r] for r in convergence]
             del diffs, err
         for di, d in enumerate(directions if not linear else ()):
             for wi in range(nw):
