@@ -231,8 +231,10 @@ def test_fig3_radiometric_gauss_hermite_within_0p1_mrad(brdf):
         err = np.concatenate([np.angle(fr.sums[0, 1:, r, c] / sx), np.angle(fr.sums[1, :, r, c] / sy)])
         assert np.abs(err).max() * 1e3 < 0.1, err
         stated = np.concatenate([fr.phase_error()[0, 1:, r, c], fr.phase_error()[1, :, r, c]])
-        # bounded, or both at round-off (Gauss-Hermite is all but exact here)
-        assert np.mean((stated >= np.abs(err)) | (np.abs(err) < 1e-9)) >= 0.8
+        # bounded, or below the reference's own tolerance (Gauss-Hermite is all but exact
+        # here: 16 x 16 agrees with 64 x 64 to 4e-12 rad; the statement's floor is 1e-9 rad)
+        assert np.all(stated >= 1e-9)
+        assert np.mean((stated >= np.abs(err)) | (np.abs(err) < 1e-9)) >= 0.95
 
 
 # ----------------------------------------------------------------------------- nearest monitor

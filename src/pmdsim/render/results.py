@@ -19,7 +19,7 @@ def phase_error(sums: np.ndarray, sums_err: np.ndarray, kind: str | None,
     rule's); where ``convergence`` (per fringe, the leading axes of ``sums`` without the
     pixel axes: :func:`convergence_factor`) is ``q < 1``, the rule is in its asymptotic
     regime and the statement is ``SAFETY q |Im(dS conj S)| / |S|^2 + FLOOR q |dS| / |S|``
-    (:data:`CONVERGENCE_SAFETY`)."""
+    (:data:`CONVERGENCE_SAFETY`). Never below :data:`ROUNDOFF_PHASE`."""
     mag = np.abs(sums)
     with np.errstate(divide="ignore", invalid="ignore"):
         if kind == "replicates":
@@ -36,7 +36,15 @@ def phase_error(sums: np.ndarray, sums_err: np.ndarray, kind: str | None,
                 fast = q < 1.0
                 out = np.where(fast, CONVERGENCE_SAFETY * q * across + EMBEDDED_FLOOR * q * rel,
                                across + EMBEDDED_FLOOR * rel)
+        out = np.maximum(out, ROUNDOFF_PHASE)
     return np.where(mag > 0, out, np.nan)
+
+
+#: The smallest phase error stated (rad): the kernels' arithmetic (fast exp and sincos with
+#: relative errors below 1e-11, sums over up to 10^5 rays) leaves phases uncertain by about
+#: 1e-12 rad (Gauss-Hermite 8 x 8 to 32 x 32 on Fig. 3's radiometric fringes all agree with
+#: 64 x 64 to 4e-12 rad), where the rules' differences can be smaller still.
+ROUNDOFF_PHASE = 1e-9
 
 
 #: The share of the relative sum difference ``|delta S| / |S|`` added to the embedded
