@@ -117,6 +117,22 @@ def test_orders_and_embedded_orders():
     assert [p.rule(False).order for p in s.error_passes()] == [(8, 32), (6, 24), (4, 16)]
 
 
+def test_rays_traced_count_the_embedded_rules():
+    """A run's rays_traced counts every pass: the 3 x 16 rule of n_rays = 48 renders its
+    2 x 12 and 1 x 8 embedded rules too (80 nodes per bundle); rqmc's replicates share
+    n_rays; error_estimate = false renders the rule alone."""
+    from pmdsim.run.member import _passes_share
+
+    def share(**sampling):
+        return _passes_share(Simulation.from_config(make_config(
+            sampling={"n_rays": 48, "mode": "rule", **sampling},
+            monitor={"pixel_model": "continuous"})), True)
+
+    assert share() == pytest.approx((48 + 24 + 8) / 48)
+    assert share(error_estimate=False) == 1.0
+    assert share(mode="rqmc") == 1.0
+
+
 def test_convergence_factor_follows_a_geometric_error():
     """Differences of a geometrically converging sequence: S_L = S + c rho^L (c complex,
     varying over the pixels) at L = 16, 12, 8 give q = rho^4 = E(16) / E(12); fringes whose
