@@ -115,12 +115,12 @@ def _draw(fig, ds, values, x, hue, ylabel, title, logy=False):
             if c is not None:
                 fig.colorbar(sc, ax=ax, label=hue)
         if _log_scale(ds[x].values):
-            from matplotlib.ticker import NullFormatter
+            from matplotlib.ticker import NullLocator
 
             ax.set_xscale("log")
-            if grid:  # the swept values as ticks, plainly written
+            if grid:  # the swept values as ticks, plainly written; no unlabelled minor ticks
                 ax.set_xticks(xs, [f"{t:g}" for t in xs])
-                ax.xaxis.set_minor_formatter(NullFormatter())
+                ax.xaxis.set_minor_locator(NullLocator())
         if logy:
             ax.set_yscale("log")
         ax.set_xlabel(x)
