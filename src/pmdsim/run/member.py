@@ -264,7 +264,7 @@ def write(m: Member) -> None:
     m.writer.finish(m.ds)
     (m.folder / CONFIG_NAME).write_text(m.cfg.model_dump_json(indent=2) + "\n")
     if m.statistics:
-        (m.folder / "statistics.json").write_text(json.dumps(m.statistics, indent=2) + "\n")
+        pio.write_json(m.folder / "statistics.json", m.statistics)
         (m.folder / "summary.txt").write_text(summary_text_of(m.statistics))
     m.image_paths = m.images_written.result() if m.images_written is not None else []
     m.steps.advance()
