@@ -163,15 +163,15 @@ def dataset(m: Member) -> None:
             f"diagnostics.max_off_monitor_fraction = {cfg.diagnostics.max_off_monitor_fraction:g}"
             " of its weight off the monitor (never valid; counted)"})
     m.phase_error = None
-    if m.fringes is not None and m.fringes.phase_error() is not None:
+    pe = None if m.fringes is None else m.fringes.phase_error()  # computed, not stored: once
+    if pe is not None:
         from ..measure.numerical import finest_phase_error
 
-        pe = m.fringes.phase_error()
         ds["fringe_phase_error"] = (("direction", "width", "row", "col"), pe.astype("float32"), {
             "units": "rad", "description": "numerical (quadrature) error of the phase each "
             "fringe sum decodes to, per direction and width: "
             + describe_error(m.fringes.sampling)})
-        m.phase_error = {d: finest_phase_error(m.fringes, d) for d in m.fringes.directions}
+        m.phase_error = {d: finest_phase_error(m.fringes, d, pe) for d in m.fringes.directions}
     m.ds = ds
     if m.fringes is not None and m.fringes.sums is not None:
         # the dataset holds the sums' real and imaginary parts: free the complex copy

@@ -410,9 +410,9 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
                                  geometry.points, sim.scene.camera.position, sim.scene.monitor),
                              off_monitor=off)
     dcs = [measured.directions[d] for d in fr_cfg.directions]
-    stats = np.array([[[np.nan if (x := chain.direction_quantity_stats(dc)[q][s]) is None
-                        else x for s in STATISTICS] for q in QUANTITIES] for dc in dcs],
-                     np.float64)
+    per_direction = [chain.direction_quantity_stats(dc) for dc in dcs]  # once each
+    stats = np.array([[[np.nan if (x := st[q][s]) is None else x for s in STATISTICS]
+                       for q in QUANTITIES] for st in per_direction], np.float64)
 
     def median(a, where):
         a = np.asarray(a, np.float64)[where]
