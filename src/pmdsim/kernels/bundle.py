@@ -21,12 +21,13 @@ one ray loop (:func:`_phase1`) into which the source of directions (the cone, or
 micro-normals drawn from the lobe: :func:`_cone_ray_of`, :func:`_lobe_ray_of`) and the
 model put the ray, and what differs between BRDF models and pattern kinds are small
 functions listed in two tables, ``MODELS`` (per-pixel constants, ray weight, micro-normal
-draw) and ``PATTERNS`` (one phase-2 function per ``MODE_*``). :func:`tile_kernel` compiles one copy of
-:func:`_tile` per (source, model, pattern) with that row's functions bound as globals and
-inlined: each variant holds its whole pixel loop and allocates its buffers itself, so LLVM
-knows they do not overlap and vectorises the ray loops as in a hand-written kernel, and a
-run compiles only the variants it uses. A new BRDF model or pattern kind is its functions
-and one table row.
+draw) and ``PATTERNS`` (one phase-2 function per ``MODE_*``, dispatched by an if-chain made
+from the table, :func:`_pattern_dispatch`). :func:`tile_kernel` compiles one copy of
+:func:`_tile` per source and model with that row's functions bound as globals and inlined:
+each variant holds its whole pixel loop and allocates its buffers itself, so LLVM knows
+they do not overlap and vectorises the ray loops as in a hand-written kernel, and a run
+compiles only the models it uses. A new BRDF model or pattern kind is its functions and one
+table row.
 
 Speed (issue 13; docs/render-kernels.md): the pixel loops use reference-count-free views
 (:func:`~._jit.borrow`: Numba's atomic incref/decref per array per pixel cost more than
@@ -1085,18 +1086,59 @@ PATTERNS = {
     MODE_TRANSPORT: ("transport", _pattern_transport),
 }
 
+
+def _specialise(template, name, inline=False, **names):
+    """A compiled copy of ``template`` named ``name`` whose globals ``names`` are bound to
+    the given values (functions, constants: compile-time constants for Numba, inlined when
+    they are ``inline="always"``). The name keys the disk cache: one file per copy."""
+    fn = types.FunctionType(template.__code__, dict(template.__globals__, **names), name)
+    fn.__qualname__ = name
+    fn.__doc__ = template.__doc__
+    return fastjit(fn, inline="always") if inline else fastjit(fn)
+
+
+def _pattern_case(mode, p, n, npad, ubuf, vbuf, iubuf, ivbuf, fbuf, pat, out, out_u, out_v,
+                  out_f):
+    """One link of the phase-2 dispatch: ``_CASE`` for ``_CASE_MODE``, else the next."""
+    if mode == _CASE_MODE:
+        _CASE(p, n, npad, ubuf, vbuf, iubuf, ivbuf, fbuf, pat, out, out_u, out_v, out_f)
+    else:
+        _CASE_NEXT(mode, p, n, npad, ubuf, vbuf, iubuf, ivbuf, fbuf, pat, out, out_u, out_v,
+                   out_f)
+
+
+@fastjit(inline="always")
+def _no_pattern(mode, p, n, npad, ubuf, vbuf, iubuf, ivbuf, fbuf, pat, out, out_u, out_v,
+                out_f):
+    """The end of the dispatch (unknown modes are refused before the kernel runs)."""
+    return
+
+
+def _pattern_dispatch():
+    """phase2(mode, ...): the ``PATTERNS`` rows as an if-chain, each case inlined."""
+    nxt = _no_pattern
+    for mode, (name, fn) in reversed(list(PATTERNS.items())):
+        nxt = _specialise(_pattern_case, f"_phase2_{name}", inline=True, _CASE_MODE=mode,
+                          _CASE=fn, _CASE_NEXT=nxt)
+    return nxt
+
+
+_phase2 = _pattern_dispatch()
+
 # What one compiled tile kernel is specialised for (set per copy by :func:`tile_kernel`;
 # these module values are never compiled).
 _LOBE = _PAD = _DRAW_PER_PIXEL = False
-_DRAW = _SETUP = _RAY_OF = _CENTRES = _PREP = _RAY = _PATTERN = None
+_DRAW = _SETUP = _RAY_OF = _CENTRES = _PREP = _RAY = None
+_CASE_MODE = -1  # one link of the phase-2 dispatch (:func:`_pattern_case`)
+_CASE = _CASE_NEXT = None
 
 
 def _tile(geo, brdf, u1, u2, rotation, scheme, theta_max, include_principal, monitor_shape,
-          table_u, table_v, k_u, k_v, images, dots, out, out_u, out_v, out_f, mon_corr, brdf_px,
-          w_ray):
+          mode, table_u, table_v, k_u, k_v, images, dots, out, out_u, out_v, out_f, mon_corr,
+          brdf_px, w_ray):
     """The one tile body of every kernel variant (compiled per variant by
     :func:`tile_kernel`, which binds ``_DRAW`` ... ``_PATTERN`` to the variant's
-    functions); arguments as :func:`render_tile`, ``mode`` bound."""
+    functions); arguments as :func:`render_tile`."""
     npix = geo.shape[0]
     n = u1.shape[0] + (1 if include_principal else 0)
     npad = (n + RAY_BLOCK - 1) // RAY_BLOCK * RAY_BLOCK if _PAD else n
@@ -1105,7 +1147,9 @@ def _tile(geo, brdf, u1, u2, rotation, scheme, theta_max, include_principal, mon
     umax = wm - 0.5  # a ray hits the monitor at -0.5 <= u < umax, -0.5 <= v < vmax
     vmax = hm - 0.5
     shared = rotation.shape[0] == 0
-    per_pixel = _DRAW_PER_PIXEL or not shared or (_LOBE and brdf_px is not None)
+    varying = brdf_px.shape[0] > 0  # per-pixel parameters (else (0, 3))
+    corrected = mon_corr.shape[0] > 0  # display geometry and falloff (else empty)
+    per_pixel = _DRAW_PER_PIXEL or not shared or (_LOBE and varying)
     dp = (scheme, theta_max, math.cos(theta_max), include_principal)
     nord = _n_orders(brdf)
     wr_own = _ray_weights(w_ray, n, npad)
@@ -1142,7 +1186,7 @@ def _tile(geo, brdf, u1, u2, rotation, scheme, theta_max, include_principal, mon
                 out_v[p, j] = np.nan
                 out_f[p, j] = 0.0
             continue
-        if brdf_px is not None:  # spatially varying parameters: the pixel's own vector
+        if varying:  # spatially varying parameters: the pixel's own vector
             pix[B_RHO] = brdf_px[p, 0]
             pix[B_AX] = brdf_px[p, 1]
             pix[B_AY] = brdf_px[p, 2]
@@ -1153,11 +1197,12 @@ def _tile(geo, brdf, u1, u2, rotation, scheme, theta_max, include_principal, mon
             _DRAW(u1, u2, r1, r2, dp, pix, aux, wsum, d0, d1, d2, d3)
         ftot, fhit = _phase1(_SETUP, _RAY_OF, _PREP, _RAY, g, d0, d1, d2, d3, npad, pix, aux,
                              wsum, wr, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
-        if mon_corr is not None:
+        if corrected:
             fhit = monitor_correction(g, mon_corr, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
         out[p, OUT_FTOTAL] = ftot
         out[p, OUT_FHIT] = fhit
-        _PATTERN(p, n, npad, ubuf, vbuf, iubuf, ivbuf, fbuf, pat, out, out_u, out_v, out_f)
+        _phase2(mode, p, n, npad, ubuf, vbuf, iubuf, ivbuf, fbuf, pat, out, out_u, out_v,
+                out_f)
     _keep_alive(wr_own, ord_own, ocum_own, d_own, buf_own, ibuf_own, table_ut_own, table_vt_own,
                 plan_own, z_own, pix_own)
 
@@ -1166,44 +1211,53 @@ _KERNELS: dict = {}
 _KERNELS_LOCK = threading.Lock()
 
 
-def tile_kernel(lobe: bool, model: int, mode: int):
+def _optional(mon_corr, brdf_px, w_ray, n):
+    """The optional arguments as arrays, empty where omitted (one compiled variant serves
+    both): no display correction, no per-pixel parameters, weights of one."""
+    return (np.zeros(0) if mon_corr is None else mon_corr,
+            np.zeros((0, 3)) if brdf_px is None else brdf_px,
+            np.ones(n) if w_ray is None else w_ray)
+
+
+def tile_kernel(lobe: bool, model: int):
     """The compiled tile kernel of one source of directions (``lobe``: the radiometric
-    estimator's draw from the lobe, else the cone), BRDF model (``MODEL_*``) and pattern
-    kind (``MODE_*``): :func:`_tile` with the model's and the pattern's functions bound
-    as its globals, so that each variant is one function holding its whole pixel loop
-    (LLVM sees that the buffers it allocates do not overlap) and compiles only its own
-    model and pattern. Made on first use, cached on disk under its own name."""
-    key = (bool(lobe), int(model), int(mode))
+    estimator's draw from the lobe, else the cone) and BRDF model (``MODEL_*``):
+    :func:`_tile` with the model's functions bound as its globals and inlined, so that
+    each variant is one function holding its whole pixel loop (LLVM sees that the buffers
+    it allocates do not overlap) and compiles only its own model; the pattern kinds are
+    one inlined if-chain (:func:`_pattern_dispatch`; compiling a copy per pattern kind as
+    well cost more compile time in all than it saved). Made on first use, cached on disk
+    under its own name."""
+    key = (bool(lobe), int(model))
     kern = _KERNELS.get(key)
     if kern is not None:
         return kern
     spec = MODELS.get(key[1])
     if spec is None:
         raise ValueError(f"brdf[B_MODEL]: unknown BRDF model {model} (known: {sorted(MODELS)})")
-    if key[2] not in PATTERNS:
-        raise ValueError(f"mode: unknown phase-2 mode {mode} (known: {sorted(PATTERNS)})")
     if lobe and spec.lobe_draw is None:
         raise ValueError(f"render_tile_lobe: the {spec.name} has no lobe to sample; use "
                          "render_tile")
-    pname, pattern = PATTERNS[key[2]]
     names = dict(_LOBE=key[0], _PAD=spec.pad and not lobe, _CENTRES=spec.centres,
-                 _PATTERN=pattern, _DRAW_PER_PIXEL=lobe and spec.draw_per_pixel)
+                 _DRAW_PER_PIXEL=lobe and spec.draw_per_pixel)
     if lobe:
         names.update(_DRAW=spec.lobe_draw, _SETUP=_lobe_setup, _RAY_OF=_lobe_ray_of,
                      _PREP=spec.lobe_prep, _RAY=spec.lobe_ray)
     else:
         names.update(_DRAW=_draw_cone, _SETUP=_cone_setup, _RAY_OF=_cone_ray_of,
                      _PREP=spec.cone_prep, _RAY=spec.cone_ray)
-    name = f"_tile_{'lobe' if lobe else 'cone'}_{spec.name}_{pname}"
     with _KERNELS_LOCK:
         kern = _KERNELS.get(key)
         if kern is None:
-            glob = dict(_tile.__globals__, **names)
-            fn = types.FunctionType(_tile.__code__, glob, name)
-            fn.__qualname__ = name  # the disk cache's file name: one per variant
-            fn.__doc__ = _tile.__doc__
-            kern = _KERNELS[key] = fastjit(fn)
+            name = f"_tile_{'lobe' if lobe else 'cone'}_{spec.name}"
+            kern = _KERNELS[key] = _specialise(_tile, name, **names)
     return kern
+
+
+def _check_mode(mode):
+    if int(mode) not in PATTERNS:
+        raise ValueError(f"mode: unknown phase-2 mode {mode} (known: {sorted(PATTERNS)})")
+    return int(mode)
 
 
 def render_tile(geo, brdf, u1, u2, rotation, scheme, theta_max, include_principal, monitor_shape,
@@ -1258,10 +1312,11 @@ def render_tile(geo, brdf, u1, u2, rotation, scheme, theta_max, include_principa
         every pattern sum) is multiplied by ``w_ray[j]``; omitted = all ones. The
         estimators' normalisation (1/N or 1/sum f) stays with the caller.
     """
-    tile_kernel(False, int(brdf[B_MODEL]), mode)(
+    n = u1.shape[0] + (1 if include_principal else 0)
+    tile_kernel(False, int(brdf[B_MODEL]))(
         geo, brdf, u1, u2, rotation, int(scheme), float(theta_max), bool(include_principal),
-        monitor_shape, table_u, table_v, k_u, k_v, images, dots, out, out_u, out_v, out_f,
-        mon_corr, brdf_px, w_ray)
+        monitor_shape, _check_mode(mode), table_u, table_v, k_u, k_v, images, dots, out, out_u,
+        out_v, out_f, *_optional(mon_corr, brdf_px, w_ray, n))
 
 
 def render_tile_lobe(geo, brdf, u1, u2, rotation, monitor_shape, mode, table_u, table_v, k_u,
@@ -1291,6 +1346,7 @@ def render_tile_lobe(geo, brdf, u1, u2, rotation, monitor_shape, mode, table_u, 
     ``(u1[j], u2[j])``) is multiplied by ``w_ray[j]``. The mirror (no lobe) is not accepted:
     render it with :func:`render_tile`.
     """
-    tile_kernel(True, int(brdf[B_MODEL]), mode)(
-        geo, brdf, u1, u2, rotation, SCHEME_POLAR, 0.0, False, monitor_shape, table_u, table_v,
-        k_u, k_v, images, dots, out, out_u, out_v, out_f, mon_corr, brdf_px, w_ray)
+    tile_kernel(True, int(brdf[B_MODEL]))(
+        geo, brdf, u1, u2, rotation, SCHEME_POLAR, 0.0, False, monitor_shape, _check_mode(mode),
+        table_u, table_v, k_u, k_v, images, dots, out, out_u, out_v, out_f,
+        *_optional(mon_corr, brdf_px, w_ray, u1.shape[0]))
