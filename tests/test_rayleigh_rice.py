@@ -6,7 +6,9 @@ slope density against the exact BRDF, and a rendered smooth finish (Sq 3 nm)."""
 from __future__ import annotations
 
 import cmath
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -75,22 +77,48 @@ def test_q_is_the_fresnel_reflectance_at_the_specular_direction():
         assert float(m.q(i, o)) == pytest.approx(float(rr.fresnel_unpolarised(eps, math.cos(th))), rel=1e-12)
 
 
-def test_brdf_matches_pyscatmech():
+REFERENCE = Path(__file__).parent / "data" / "pyscatmech_rayleigh_rice.json"
+
+
+def _reference_cases():
+    return json.loads(REFERENCE.read_text())["cases"]
+
+
+def _ours(case):
+    """pmdsim's Rayleigh-Rice model for a stored case: SCATMECH's ABC PSD A / (1 + (B f)^2)^(C/2)
+    (um) is the K-correlation with b = B (in mm) and c = C - 1."""
+    b = case["B"] * 1e-3
+    psd = KCorrelation(case["sigma_nm"] * 1e-6, b, b, case["C"] - 1)
+    return psd, rr.RayleighRice(psd, psd.sigma, case["lambda_um"] * 1e-3, rr.permittivity(tuple(case["nk"])))
+
+
+@pytest.mark.parametrize("case", _reference_cases(), ids=lambda c: c["name"])
+def test_brdf_matches_pyscatmech(case):
     """pySCATMECH's Microroughness_BRDF_Model (first-order vector perturbation, NIST) at 20
-    points within 1 %: an isotropic K-correlation PSD (SCATMECH's ABC_PSD_Function,
-    A / (1 + (B f)^2)^(C'/2) in um, so C' = C + 1), unpolarised incident light, all
-    polarisations detected (the Mueller matrix's M00)."""
+    points per case within 1 %: two metals and wavelengths, an isotropic K-correlation PSD
+    (SCATMECH has no anisotropic one), unpolarised incident light, all polarisations detected
+    (the Mueller matrix's M00). The values were computed by pySCATMECH 0.1.10 with
+    ``tools/pyscatmech_reference.py`` (it builds from C++ source, too long for CI);
+    ``test_stored_values_are_pyscatmech`` re-evaluates them where it is installed."""
+    psd, ours = _ours(case)
+    assert psd.a * 1e12 == pytest.approx(case["A"], rel=1e-12)  # the same PSD normalisation
+    rel = []
+    for (ti, ts, ps), want in zip(case["points_rad"], case["brdf_per_sr"]):
+        i, o = _local(ti, ts, ps)
+        rel.append(float(ours.evaluate(i, o)) / want - 1)
+    assert len(rel) == 20 and max(abs(r) for r in rel) < 0.01, rel
+
+
+def test_stored_values_are_pyscatmech():
     pytest.importorskip("pySCATMECH")
     from pySCATMECH.brdf import BRDF_Model
 
-    psd = KCorrelation(3e-6, 2 * math.pi * 5e-3, 2 * math.pi * 5e-3, 2.3)
-    ours = rr.RayleighRice(psd, psd.sigma, LAM, rr.permittivity(ALUMINIUM))
-    theirs = BRDF_Model("Microroughness_BRDF_Model", {
-        "lambda": LAM * 1e3, "substrate": f"({ALUMINIUM[0]},{ALUMINIUM[1]})",
-        "psd": "ABC_PSD_Function", "psd.A": psd.a * 1e12, "psd.B": psd.bx * 1e3, "psd.C": psd.c + 1})
-    for ti, ts, ps in _points():
-        i, o = _local(ti, ts, ps)
-        assert float(ours.evaluate(i, o)) == pytest.approx(theirs.BRDF(ti, ts, ps), rel=0.01)
+    for case in _reference_cases():
+        theirs = BRDF_Model("Microroughness_BRDF_Model", {
+            "lambda": case["lambda_um"], "substrate": f"({case['nk'][0]},{case['nk'][1]})",
+            "psd": "ABC_PSD_Function", "psd.A": case["A"], "psd.B": case["B"], "psd.C": case["C"]})
+        for (ti, ts, ps), want in zip(case["points_rad"], case["brdf_per_sr"]):
+            assert theirs.BRDF(ti, ts, ps) == pytest.approx(want, rel=1e-12)
 
 
 @pytest.mark.parametrize("theta_i_deg", [0.0, 30.0])
