@@ -450,3 +450,28 @@ def test_dot_moments_table_and_figures(tmp_path):
     m = image_moments(img, 0.05 * np.nanmax(img))
     assert ds["dot_sigma_major"].values[q] == pytest.approx(m.sigma_major)
     assert ds["dot_centroid_col"].values[q] == pytest.approx(m.centroid[0])
+
+
+def test_numerical_error_reuses_the_slope_at_the_deviation():
+    """``propagate(..., slope_at_coord=)`` (the chain passes the slope deviation it has)
+    gives the slope error of two conversions where the coordinate is finite, and NaN
+    where it is not (masked by the chain anyway)."""
+    from pmdsim.measure.numerical import propagate
+
+    rng = np.random.default_rng(2)
+    pe = rng.uniform(1e-5, 1e-3, (5, 7))
+    coord = rng.normal(0.0, 0.3, (5, 7))
+    coord[1, 2] = np.nan
+
+    def slope(c):  # nonlinear, so that where it is evaluated matters
+        return np.arctan(0.01 * c) * 1e6 + 3.0 * c * c
+
+    both = propagate(pe, 50.0, 0.25, slope, coord)
+    reused = propagate(pe, 50.0, 0.25, slope, coord, slope_at_coord=slope(coord))
+    finite = np.isfinite(coord)
+    assert np.array_equal(reused["slope_urad"][finite], both["slope_urad"][finite])
+    assert np.isnan(reused["slope_urad"][~finite]).all()
+    expected = np.abs(slope(coord + pe * 50.0 / (2 * math.pi)) - slope(coord))
+    np.testing.assert_allclose(reused["slope_urad"][finite], expected[finite], rtol=1e-12)
+    for k in ("phase_mrad", "coord_px", "coord_mm"):
+        assert np.array_equal(reused[k], both[k])

@@ -309,3 +309,75 @@ def test_dot_shape_figure_has_labelled_axes(tmp_path, recorded):
     table = dot_table(images, dots, "a")
     plot_dot_shapes({"a": images}, {"a": table}, tmp_path / "dot_shapes.png", centre_px=(27.5, 19.5))
     assert recorded == {"dot_shapes.png": []}
+
+
+def test_deviation_figures_print_value_pm_numerical_error(decoded_run, tmp_path, monkeypatch):
+    """Issue 18: every RMS/P95 a deviation figure prints (titles, histogram legends) carries
+    the run's numerical error of that statistic as "value ± error" where the run states one
+    (the coordinate against the exact point: the decoded coordinate's error); the tiny run
+    renders the lattice (no error), so its statistics get one here."""
+    import json
+    import re
+
+    from pmdsim.report import chain as plot_chain
+
+    ds = pipeline.load_run(decoded_run.outdir).load()
+    st = json.loads(ds.attrs["statistics_json"])
+    errors = {}
+    for i, (d, s) in enumerate(st["directions"].items()):
+        errors[d] = {q: {"rms": 0.0123 + i, "p95": 0.0456 + i, "max": 0.1}
+                     for q in ("phase_mrad", "coord_px", "coord_mm", "slope_urad")}
+        s["numerical_error"] = errors[d]
+    ds.attrs["statistics_json"] = json.dumps(st)
+    texts: dict = {}
+    save = Figure.savefig
+
+    def savefig(self, fname, *args, **kwargs):
+        from pathlib import Path
+
+        found = [self._suptitle.get_text()] if self._suptitle else []
+        for ax in self.axes:
+            found.append(ax.get_title())
+            leg = ax.get_legend()
+            found += [t.get_text() for t in leg.get_texts()] if leg else []
+        texts[Path(fname).name] = found
+        save(self, fname, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    plot_chain.plot_overview(ds, tmp_path / "overview.png")
+    plot_chain.plot_deviation(ds, tmp_path / "deviation.png")
+    plot_chain.plot_histograms(ds, tmp_path / "histograms.png")
+    plot_chain.plot_variant_deviation({"a": ds}, tmp_path / "deviation_variants.png")
+    assert set(texts) == {"overview.png", "deviation.png", "histograms.png", "deviation_variants.png"}
+    printed = 0
+    for name, found in texts.items():
+        for t in found:
+            for stat, value in re.findall(r"(RMS|P95) ([-+0-9.e]+)", t):
+                printed += 1
+                assert re.search(rf"{stat} {re.escape(value)} ± \S+", t), (name, t)
+    assert printed >= 20
+    # the numbers are the statistics' own: X's phase RMS and its error in the deviation map
+    x = st["directions"]["x"]
+    dev = " ".join(texts["deviation.png"])
+    assert f"RMS {x['phase_mrad']['rms']:.3g} ± 0.012 mrad" in dev or \
+        f"RMS {x['phase_mrad']['rms']:.3g} ± 0.012," in dev
+
+
+def test_numerical_warnings_name_every_printed_deviation_over_10_percent():
+    from pmdsim.report.text import numerical_warnings
+
+    def stats(err_coord):
+        dev = {"phase_mrad": {"rms": 1.0, "p95": 2.0}, "coord_px": {"rms": 0.01, "p95": 0.02},
+               "coord_mm": {"rms": 0.0025, "p95": 0.005}, "slope_urad": {"rms": 3.0, "p95": 6.0},
+               "coord_vs_exact_px": {"rms": 0.001, "p95": 0.002}}
+        ne = {"phase_mrad": {"rms": 0.05, "p95": 0.1}, "coord_px": {"rms": err_coord, "p95": err_coord},
+              "coord_mm": {"rms": 1e-5, "p95": 1e-5}, "slope_urad": {"rms": 0.2, "p95": 0.4}}
+        return {"directions": {"x": {**dev, "numerical_error": ne}, "y": dict(dev)}}
+
+    assert numerical_warnings(stats(5e-5)) == []  # every error below 10 % (y states none)
+    # 5e-4 px: 5 % of the coordinate vs the mirror, 50 % of the one vs the exact point
+    (w,) = numerical_warnings(stats(5e-4))
+    assert w.startswith("x: ") and "coord_vs_exact_px rms 0.001 ± 0.0005" in w
+    assert "coord_vs_exact_px p95 0.002 ± 0.0005" in w and "coord_px rms" not in w
+    (w,) = numerical_warnings(stats(2e-3))  # now over 10 % of both coordinates
+    assert "coord_px rms 0.01 ± 0.002" in w and "phase_mrad" not in w

@@ -15,7 +15,9 @@ from pmdsim.measure.form import (
     remove_form,
     rim_mask,
     zernike_columns,
+    zernike_value,
 )
+from pmdsim.measure.integrate import zernike_noll_index
 
 # The first 37 Fringe (University of Arizona) Zernike polynomials as published (Wyant and
 # Creath, "Basic wavefront aberration theory for optical metrology", Applied Optics and
@@ -98,6 +100,21 @@ def test_fringe_order_matches_the_published_table():
     idx, cols = zernike_columns("noll", 11, u, v)
     for j, f in enumerate(NOLL_TABLE, start=1):
         np.testing.assert_allclose(cols[:, j - 1], f(r, t), atol=1e-12, err_msg=f"Noll Z{j}")
+
+
+@pytest.mark.parametrize("order", ["noll", "fringe"])
+def test_zernike_columns_share_work_but_not_numbers(order):
+    """The columns share rho, theta and the powers of rho between terms: each is still
+    bit for bit the term evaluated alone (so the tables did not change), on a 2-D grid of
+    points (columns last)."""
+    rng = np.random.default_rng(5)
+    u, v = rng.uniform(-1, 1, (7, 9)), rng.uniform(-0.8, 1.1, (7, 9))
+    idx, cols = zernike_columns(order, 37, u, v)
+    assert cols.shape == (7, 9, 37)
+    for k, (j, n, m) in enumerate(idx):
+        assert (n, m) == (zernike_noll_index(j) if order == "noll" else fringe_index(j))
+        alone = zernike_value(n, m, u, v, normalized=order == "noll")
+        assert np.array_equal(cols[..., k], alone), f"{order} Z{j}"
 
 
 def test_best_fit_sphere_recovers_a_radius_change():

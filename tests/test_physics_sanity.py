@@ -232,3 +232,150 @@ def test_any_sensor_or_display_is_a_field_named_error_or_checked(changes):
         assert field.split(".")[0] in ("sensor", "monitor"), str(err)
         return
     assert all(n.split(".")[0] in ("sensor", "monitor") for n in notes), notes
+
+
+# ----------------------------------------------------------------------------- albedo override
+def test_an_albedo_above_one_is_refused_unless_the_override_says_so():
+    """rho_s x the largest rho_s_scale (0.4 x 1e3 = 400) and a Fresnel factor above 1 are
+    refused naming the field and the override; with diagnostics.allow_albedo_above_one
+    the same settings give one note naming the field, the albedo and the override."""
+    scale = {"brdf": {"variation": {"radius_mm": [0.0, 50.0], "rho_s_scale": [1.0, 1e3]}}}
+    with pytest.raises(ConfigError) as info:
+        _check(**scale)
+    assert _field(info) == "brdf.variation.rho_s_scale"
+    assert "400" in str(info.value) and "allow_albedo_above_one" in str(info.value)
+    notes = _check(**merge(scale, {"diagnostics": {"allow_albedo_above_one": True}}))
+    assert len(notes) == 1 and notes[0].startswith("brdf.variation.rho_s_scale"), notes
+    assert "400" in notes[0] and "allow_albedo_above_one" in notes[0]
+    # a slope density's Fresnel factor above 1 (its rho_s has no upper bound of its own)
+    dens = {"brdf": {"__replace__": {"model": "slope_density", "density": "gaussian",
+                                     "alpha_x": 0.02, "alpha_y": 0.01, "rho_s": 5.0}}}
+    with pytest.raises(ConfigError) as info:
+        _check(**dens)
+    assert _field(info) == "brdf.rho_s" and "allow_albedo_above_one" in str(info.value)
+    assert _check(**merge(dens, {"diagnostics": {"allow_albedo_above_one": True}}))[0] \
+        .startswith("brdf.rho_s")
+    # the bound itself: exactly 1 passes without a note, just above it does not
+    assert _check(brdf={"variation": {"radius_mm": [0.0, 50.0],
+                                      "rho_s_scale": [1.0, 2.5]}}) == []
+    with pytest.raises(ConfigError):
+        _check(brdf={"variation": {"radius_mm": [0.0, 50.0], "rho_s_scale": [1.0, 2.5001]}})
+
+
+# ----------------------------------------------------------------------------- every command
+def _sweep_toml(tmp_path, values) -> Path:
+    from test_sweep import _config
+
+    data = _config({})
+    data.pop("sweep")
+    data["sensor"] = {"enabled": True}
+    path = tmp_path / "sweep.toml"
+    path.write_text(_toml(data) + "[sweep]\ndecimation = 0\n[sweep.parameters]\n"
+                    f'"sensor.gain_dn_per_electron" = {values!r}\n')
+    return path
+
+
+def test_sweep_checks_every_point_before_anything_is_created(tmp_path):
+    """The second point's gain saturates every pixel: refused before the store (or the
+    folder) exists, naming the point, its value and the field; exit 2."""
+    from pmdsim.cli import app
+
+    out = tmp_path / "sweep"
+    result = CliRunner().invoke(app, ["sweep", str(_sweep_toml(tmp_path, [0.5, 1e30])),
+                                      "-o", str(out), "--no-figures"])
+    assert result.exit_code == 2, result.output
+    text = " ".join(result.output.split())
+    assert "sweep point 1 (sensor.gain_dn_per_electron = 1e+30)" in text, text
+    assert "sensor.gain_dn_per_electron: the mean fringe level" in text
+    assert not out.exists()
+
+
+def test_the_sweep_checks_each_distinct_point_once_and_labels_its_notes():
+    from pmdsim.scene import sanity
+
+    cfgs = [parse_config(merge(base_dict(), {"monitor": {"falloff_exponent": 1000.0},
+                                             "sampling": {"seed": s}})) for s in range(3)]
+    calls = []
+    real = sanity.check_physics
+    try:
+        sanity.check_physics = lambda cfg, scene=None: calls.append(cfg) or real(cfg)
+        notes = sanity.check_each(cfgs, ["a", "b", "c"])
+    finally:
+        sanity.check_physics = real
+    assert len(calls) == 1 and len(notes) == 1 and notes[0].startswith("a: monitor.falloff")
+
+
+def test_converge_refuses_a_sensor_without_signal_before_the_work(tmp_path):
+    from pmdsim.cli import app
+
+    changes, field = REFUSED["dark_noise"]
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(_toml(merge(base_dict(), changes)))
+    out = tmp_path / "conv"
+    result = CliRunner().invoke(app, ["converge", str(cfg), "-o", str(out), "--camera", "8x6",
+                                      "--n-values", "4", "--theta", "1"])
+    assert result.exit_code == 2, result.output
+    assert field in result.output and not out.exists()
+
+
+def test_fit_refuses_a_display_without_signal_before_reading_the_images(tmp_path):
+    """The physics check comes before the images are read: the error names the monitor's
+    field, not the missing image file."""
+    from pmdsim.cli import app
+
+    changes, field = REFUSED["falloff_table"]
+    cfg = tmp_path / "fit.toml"
+    cfg.write_text(_toml(merge(base_dict(), changes)))
+    out = tmp_path / "fit"
+    result = CliRunner().invoke(app, ["fit", str(cfg), str(tmp_path / "missing.tif"),
+                                      "-o", str(out), "--no-figure"])
+    assert result.exit_code == 2, result.output
+    assert field in result.output and "missing.tif" not in result.output
+    assert not out.exists()
+
+
+def _strict_json(path):
+    import json
+
+    def refuse(name):
+        raise AssertionError(f"{path.name} holds {name}")
+
+    return json.loads(path.read_text(), parse_constant=refuse)
+
+
+def test_a_coarse_precompensated_display_gives_clipped_images_and_strict_statistics(tmp_path):
+    """Issue 21's case through simulate: a continuous monitor, gamma 2.2 pre-compensated,
+    a 2-bit drive. The camera values in run.zarr stay >= 0 and statistics.json (and the
+    manifest) hold no NaN/Infinity: a strict parser reads them."""
+    from pmdsim import load_run
+    from pmdsim.cli import app
+
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(_toml(merge(base_dict(), {
+        "camera": {"resolution": [16, 12], "focal_length_px": 32.0},
+        "monitor": {"pixel_model": "continuous", "gamma": 2.2, "bit_depth": 2,
+                    "precompensate_gamma": True},
+        "sampling": {"n_rays": 8},
+        "patterns": {"fringes": {"widths_px": [50.0, 400.0]}}})))
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["simulate", str(cfg), "-o", str(out), "--no-figures"])
+    assert result.exit_code == 0, result.output
+    stats = _strict_json(out / "statistics.json")
+    assert stats["directions"]["x"]["pixels"]["valid"] > 0
+    for f in out.glob("*.json"):
+        _strict_json(f)
+    img = np.asarray(load_run(out)["fringes"].values, np.float64)
+    assert np.nanmin(img) >= 0.0
+
+
+def test_result_json_is_strict():
+    """NaN and infinities become null, NumPy scalars plain numbers, nested anywhere."""
+    import json
+
+    from pmdsim.run.files import json_safe
+
+    data = {"a": float("nan"), "b": [np.float32(1.5), np.inf, {"c": -np.inf}],
+            "d": np.int64(3), "e": np.bool_(True), "f": (1, "x")}
+    text = json.dumps(json_safe(data), allow_nan=False)
+    assert json.loads(text) == {"a": None, "b": [1.5, None, {"c": None}], "d": 3, "e": True,
+                                "f": [1, "x"]}

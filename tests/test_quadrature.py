@@ -103,10 +103,63 @@ def test_orders_and_embedded_orders():
     assert q.square_order(1024) == (32, 32)
     assert q.embedded_order((8, 32)) == (6, 24)
     assert q.embedded_order((1, 4)) == (1, 3)
+    assert q.second_embedded_order((8, 32)) == (4, 16)
+    assert q.second_embedded_order((16, 16)) == (8, 8)
+    assert q.second_embedded_order((1, 4)) == (1, 2)
+    # linear orders 16, 12, 8: one step of 4 from the embedded to the rule as to the embedded
+    assert q.convergence_exponent((8, 32)) == pytest.approx(1.0)
+    assert q.convergence_exponent((5, 20)) == pytest.approx((10 - math.sqrt(60)) / (math.sqrt(60) - math.sqrt(30)))
+    assert q.convergence_exponent((1, 1)) is None
     s = ConeSampling(256, math.radians(1.0), mode="rule")
     assert s.rule(False).n == 256 and not s.include_principal
     assert s.ray_weights(False).sum() == pytest.approx(256.0)
-    assert [p.part for p in s.error_passes()] == [0, 1]
+    assert [p.part for p in s.error_passes()] == [0, 1, 2]
+    assert [p.rule(False).order for p in s.error_passes()] == [(8, 32), (6, 24), (4, 16)]
+
+
+def test_rays_traced_count_the_embedded_rules():
+    """A run's rays_traced counts every pass: the 3 x 16 rule of n_rays = 48 renders its
+    2 x 12 and 1 x 8 embedded rules too (80 nodes per bundle); rqmc's replicates share
+    n_rays; error_estimate = false renders the rule alone."""
+    from pmdsim.run.member import _passes_share
+
+    def share(**sampling):
+        return _passes_share(Simulation.from_config(make_config(
+            sampling={"n_rays": 48, "mode": "rule", **sampling},
+            monitor={"pixel_model": "continuous"})), True)
+
+    assert share() == pytest.approx((48 + 24 + 8) / 48)
+    assert share(error_estimate=False) == 1.0
+    assert share(mode="rqmc") == 1.0
+
+
+def test_convergence_factor_follows_a_geometric_error():
+    """Differences of a geometrically converging sequence: S_L = S + c rho^L (c complex,
+    varying over the pixels) at L = 16, 12, 8 give q = rho^4 = E(16) / E(12); fringes whose
+    embedded difference is not small, or whose factor is not below 1/10, get 1."""
+    from pmdsim.render.results import ASYMPTOTIC_DIFFERENCE, convergence_factor, phase_error
+
+    rng = np.random.default_rng(4)
+    exact = np.exp(1j * rng.uniform(0, 6, (3, 5, 7)))
+    c = 1e-2 * (rng.normal(size=(3, 5, 7)) + 1j * rng.normal(size=(3, 5, 7)))
+    rho = np.array([0.5, 0.55, 0.9])[:, None, None]
+    s16, s12, s8 = (exact + c * rho**L for L in (16, 12, 8))
+    q = convergence_factor(s16, s16 - s12, s16 - s8, 1.0)
+    # |dS1| / |dS2| = (rho^12 - rho^16) / (rho^8 - rho^16) at every pixel
+    expect = (rho**12 - rho**16) / (rho**8 - rho**16)
+    assert q[0] == pytest.approx(expect[0, 0, 0], rel=1e-12)
+    assert q[1] == pytest.approx(expect[1, 0, 0], rel=1e-12)
+    assert q[2] == 1.0  # 0.9^4 = 0.66: not clearly asymptotic
+    c = 1e4 * c
+    big = convergence_factor(exact + c * rho**16, c * (rho**16 - rho**12), c * (rho**16 - rho**8), 1.0)
+    assert np.median(np.abs(c * (rho**16 - rho**12))[0]) > 5 * ASYMPTOTIC_DIFFERENCE
+    assert big[0] == 1.0  # the same rate, but the differences are not yet small
+    # the statement: 10 q x the phase difference + 0.1 q x the relative difference
+    d1 = s16 - s12
+    pe = phase_error(s16, d1, "embedded", q)
+    across = np.abs((d1 * np.conj(s16)).imag) / np.abs(s16) ** 2
+    np.testing.assert_allclose(pe[0], q[0] * (10 * across[0] + 0.1 * np.abs(d1[0]) / np.abs(s16[0])))
+    np.testing.assert_allclose(pe[2], across[2] + 0.1 * np.abs(d1[2]) / np.abs(s16[2]))
 
 
 def test_sobol_replicates_differ_and_repeat():
@@ -139,7 +192,11 @@ def test_fig3_paper_rule_256_within_0p1_mrad_of_cubature(fig3_paper):
     np.testing.assert_allclose(np.abs(got), np.abs(ref), rtol=2e-4)  # the kernels' polynomial exp
 
 
-def test_fig3_stated_error_bounds_the_true_error(fig3_paper):
+def test_fig3_stated_error_bounds_the_true_error_and_is_not_a_blanket(fig3_paper):
+    """The stated error (embedded rules, scaled by the observed convergence) bounds the
+    error against cubature in >= 95 % of (pixel, fringe), and is not orders of magnitude
+    above it on the finest fringes, which the deviation's error is taken from (measured:
+    median stated/true about 50 in X, 10 in Y; the unscaled statement: 800 and 90)."""
     cfg, fr, pixels, ref = fig3_paper
     pe = fr.phase_error()
     got = np.array([fr.sums[:, :, r, c] for r, c in pixels])
@@ -147,6 +204,10 @@ def test_fig3_stated_error_bounds_the_true_error(fig3_paper):
     true = np.abs(np.angle(got / ref))
     assert np.mean(stated >= true) >= 0.95
     assert np.all(np.isfinite(stated))
+    assert np.all(np.asarray(fr.sampling["convergence"]) < 0.1)  # asymptotic: scaled
+    ratio = np.median(stated[:, :, 0] / true[:, :, 0], axis=0)  # per direction, 50 px
+    assert np.all(ratio < 200), ratio
+    assert np.all(ratio > 1), ratio
 
 
 def test_coarse_rule_error_is_bounded_where_it_matters():
@@ -186,8 +247,10 @@ def test_fig3_radiometric_gauss_hermite_within_0p1_mrad(brdf):
         err = np.concatenate([np.angle(fr.sums[0, 1:, r, c] / sx), np.angle(fr.sums[1, :, r, c] / sy)])
         assert np.abs(err).max() * 1e3 < 0.1, err
         stated = np.concatenate([fr.phase_error()[0, 1:, r, c], fr.phase_error()[1, :, r, c]])
-        # bounded, or both at round-off (Gauss-Hermite is all but exact here)
-        assert np.mean((stated >= np.abs(err)) | (np.abs(err) < 1e-9)) >= 0.8
+        # bounded, or below the reference's own tolerance (Gauss-Hermite is all but exact
+        # here: 16 x 16 agrees with 64 x 64 to 4e-12 rad; the statement's floor is 1e-9 rad)
+        assert np.all(stated >= 1e-9)
+        assert np.mean((stated >= np.abs(err)) | (np.abs(err) < 1e-9)) >= 0.95
 
 
 # ----------------------------------------------------------------------------- nearest monitor
@@ -208,8 +271,34 @@ def test_nearest_monitor_uses_rqmc_and_its_error_bounds_the_true_one():
         true = np.abs(np.angle(fr.sums / ref.sums))[ok]
     stated = fr.phase_error()[ok]
     assert true.size > 500
-    assert np.mean(stated >= true) >= 0.85
+    assert np.mean(stated >= true) >= 0.95  # measured 0.985-0.99 over seeds 0-2
     assert np.median(stated) < 20 * np.median(true)  # an error statement, not a blanket
+
+
+def test_dots_and_images_return_their_rqmc_error():
+    """Dots and monitor images (step integrands: the default rule renders rqmc) return
+    their values' numerical error with ``with_error=True``: 95 % half-widths that bound
+    the difference to a converged reference of another method (the randomised lattice,
+    64 x the rays) in >= 90 % of the values (measured: dots 100 %, images 97 %), and are
+    not a blanket (median stated / true below 20)."""
+    from pmdsim import patterns
+
+    sim = Simulation.from_config(make_config(sampling={"n_rays": 256, "mode": "rule"}))
+    ref = Simulation.from_config(make_config(sampling={"n_rays": 16384, "mode": "random",
+                                                       "seed": 5}))
+    dots = patterns.dot_grid(sim.scene.monitor.shape, grid=(2, 2), size=40)
+    levels = np.random.default_rng(0).random((2,) + sim.scene.monitor.shape)
+    for got, want in ((sim.render_dots(dots, with_error=True), ref.render_dots(dots)),
+                      (sim.render_images(levels, with_error=True), ref.render_images(levels))):
+        (img, err), ok = got, np.isfinite(got[0]) & np.isfinite(want)
+        ok &= want > 0.05 * np.nanmax(want)
+        true = np.abs(img - want)[ok]
+        assert ok.sum() > 200 and err.shape == img.shape
+        assert np.mean(err[ok] >= true) >= 0.9
+        assert np.median(err[ok]) < 20 * np.median(true)
+    assert sim.render_dots(dots).shape == (4,) + img.shape[1:]  # default: the images alone
+    lattice = Simulation.from_config(make_config(sampling={"mode": "stratified"}))
+    assert lattice.render_dots(dots, with_error=True)[1] is None
 
 
 def test_modes_keep_their_earlier_meaning():

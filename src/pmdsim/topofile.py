@@ -6,19 +6,24 @@ non-measured points and outliers handled as asked:
 
 - ``.x3p`` (ISO 25178-72) through **x3pio** (MIT; ``pip install pmdsim[topography]``):
   coordinates in metres in the file, spacing from its axes;
-- the instrument formats **surfalize** reads (GPL-3.0, an optional extra of its own:
-  ``pip install pmdsim[instruments]``): Digital Surf ``.sur``, Sensofar ``.plu``/``.plux``,
-  Keyence ``.vk4``/``.vk6``/``.vk7``, Olympus ``.lext``/``.oir``/``.poir``, Alicona ``.al3d``,
-  ISO 25178-71 ``.sdf``, ``.tmd``, ``.opd``, ``.zon``, ``.nms``, ``.os3d``, ``.gwy``,
-  ``.hdat``, ``.zmg``, ``.sflz``, ``.xyz``, ``.fits``; surfalize works in micrometres;
+- the instrument formats read through **surfalize** (GPL-3.0, an optional extra of its own:
+  ``pip install pmdsim[instruments]``) *that are tested* on files written by an independent
+  writer or by surfalize's own writer (values, orientation and dx != dy spacing checked,
+  ``tests/test_topography.py``): Digital Surf ``.sur``, ISO 25178-71 ``.sdf``, Alicona
+  ``.al3d``, ``.tmd`` (TrueMap) and surfalize's own ``.sflz``; surfalize works in
+  micrometres;
 - plain arrays ``.npy``, ``.csv``/``.txt`` and float ``.tif``/``.tiff`` (no units and no
   spacing inside: the caller gives ``spacing_mm`` and ``height_unit``).
 
 Every failure is a :class:`~pmdsim.config.files.FileInputError` (an ``InputError`` and a
 ``ConfigError``: exit code 2 in the command line; a missing file a ``MissingFileError``)
 that names the configuration field and the file, raised before any long work. Plain arrays
-are read by the readers of :data:`pmdsim.config.files.HEIGHT_MAP_READERS`. Zygo ``.datx`` (HDF5) is not read by either library (0.19.2 /
-2.0.0): export such a measurement as X3P or SDF from the instrument software.
+are read by the readers of :data:`pmdsim.config.files.HEIGHT_MAP_READERS`. The formats of :data:`NOT_READ` are refused with the reason: no reader of them could be
+tested here (surfalize reads more of them, but a file laid out as Gwyddion's reader
+describes Sensofar ``.plu`` reads two values shifted in surfalize 0.19.2, and its ``.xyz``
+spacing is (max - min) / n instead of / (n - 1)); Zygo ``.datx`` (HDF5) is read by neither
+maintained library (surfalize 0.19.2, x3pio 2.0.0) and its HDF5 layout is not published.
+Export such a measurement as X3P or SDF from the instrument software.
 """
 
 from __future__ import annotations
@@ -34,9 +39,21 @@ from .config.files import MissingFileError as MissingInputError
 
 #: Suffixes read by x3pio, by surfalize, and as plain arrays.
 X3P_SUFFIXES = (".x3p",)
-SURFALIZE_SUFFIXES = (".sur", ".plu", ".plux", ".vk4", ".vk6", ".vk7", ".lext", ".oir", ".poir",
-                      ".al3d", ".sdf", ".tmd", ".opd", ".zon", ".nms", ".os3d", ".gwy", ".hdat",
-                      ".zmg", ".sflz", ".xyz", ".fits", ".fit", ".fts", ".dat", ".vk3")
+SURFALIZE_SUFFIXES = (".sur", ".sdf", ".al3d", ".tmd", ".sflz")
+#: Instrument formats that are refused, with the reason (module doc).
+_UNTESTED = ("surfalize reads it, but no file of it could be checked against an independent "
+             "writer or a sample file, so its values and spacing are not trusted here")
+NOT_READ = dict.fromkeys((".plux", ".vk3", ".vk4", ".vk6", ".vk7", ".lext", ".oir", ".poir",
+                          ".opd", ".zon", ".nms", ".os3d", ".gwy", ".hdat", ".zmg", ".fits",
+                          ".fit", ".fts", ".dat"), _UNTESTED) | {
+    ".plu": "a file laid out as Gwyddion's reader describes (the grid's size before the "
+            "heights) reads shifted by two values in surfalize 0.19.2; which layout real files "
+            "have could not be checked",
+    ".xyz": "surfalize 0.19.2 takes the spacing as (max - min) / n instead of / (n - 1), and "
+            "assumes metres",
+    ".datx": "Zygo's HDF5 layout is not published and no maintained reader (surfalize 0.19.2, "
+             "x3pio 2.0.0) reads it",
+}
 ARRAY_SUFFIXES = tuple(files.HEIGHT_MAP_READERS)
 HEIGHT_UNITS_MM = {"mm": 1.0, "um": 1e-3, "nm": 1e-6, "m": 1e3}
 LEVELS = ("none", "mean", "plane")
@@ -105,6 +122,10 @@ def read_topography(path, field: str = "surface.file", *, spacing_mm=None,
         z = _read_array(path, field) * HEIGHT_UNITS_MM[height_unit]
         dx, dy = (float(v) for v in spacing_mm)
         reader = "array"
+    elif suffix in NOT_READ:
+        raise InputError(f"{field}: {path}: {suffix} files are not read ({NOT_READ[suffix]}); "
+                         "export the measurement as X3P (ISO 25178-72) or SDF (ISO 25178-71) "
+                         "from the instrument software")
     else:
         raise InputError(f"{field}: {path}: unknown topography format {suffix!r}; read are "
                          f"{', '.join(X3P_SUFFIXES + SURFALIZE_SUFFIXES + ARRAY_SUFFIXES)}")

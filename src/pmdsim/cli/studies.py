@@ -99,6 +99,8 @@ def converge(
         console.print(f"figure {result.figure}")
     for w in result.warnings:
         _console(stderr=True).print(f"warning: {w.message}", style="yellow", markup=False)
+    for note in result.notes:
+        _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
 
 
 def budget(
@@ -139,6 +141,8 @@ def budget(
     console.print(f"table  {result.table}")
     if result.figure is not None:
         console.print(f"figure {result.figure}")
+    for note in result.notes:
+        _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
 
 
 def sweep(
@@ -197,8 +201,17 @@ def sweep(
     except (ConfigError, FileNotFoundError, FileExistsError, PermissionError,
             NotADirectoryError, ValueError) as err:
         _fail(str(err))
+    for note in result.notes:
+        _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
     console.print(f"computed {len(result.computed)} points, {len(result.skipped)} were already "
                   f"done, in {result.seconds:.1f} s")
     console.print(f"store: {result.store}")
     for f in result.files:
         console.print(f"wrote {f}")
+    if result.empty:  # a point without a valid pixel is not a result (unless asked for)
+        _console(stderr=True).print(
+            "error: " + "; ".join(result.empty) + f" (their statistics are NaN in "
+            f"{result.store} and points.csv; run such a point alone with pmdsim simulate to "
+            "see which stage removed the pixels, or set diagnostics.allow_no_valid_pixels = "
+            "true to accept them)", style="bold red", markup=False)
+        raise typer.Exit(1)

@@ -15,7 +15,7 @@ def texture(
     nose_radius_mm: float | None = typer.Option(None, "--nose-radius-mm",
                                                 help="Tool nose radius r, mm."),
     from_file: Path | None = typer.Option(
-        None, "--from", help="A measured topography (X3P, .sur, .plu, .vk4, ...; or .npy/.csv/"
+        None, "--from", help="A measured topography (X3P, .sur, .sdf, .al3d, ...; or .npy/.csv/"
         ".tif with --spacing-um): slope density, PSD, Sq, Sdq, correlation lengths, regime "
         "instead of the machining."),
     spacing_um: tuple[float, float] | None = typer.Option(
@@ -157,6 +157,8 @@ def fit(
     console.print(f"table  {res.json}")
     if res.figure is not None:
         console.print(f"figure {res.figure}")
+    for note in res.notes:
+        _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
     if not res.result.success:
         _console(stderr=True).print(f"error: the fit failed: {res.result.reason} (files "
                                     f"written to {res.outdir}, marked failed)",

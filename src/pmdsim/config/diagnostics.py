@@ -10,7 +10,8 @@ from .base import Bool, Float, Int, PositiveFloat, _Model
 
 
 class DiagnosticsConfig(_Model):
-    """Bounds for the convergence warnings of :func:`pmdsim.studies.diagnostics.check`."""
+    """Bounds for the convergence warnings of :func:`pmdsim.studies.diagnostics.check`, and
+    the explicit overrides of the checks before and after the work (``allow_*``)."""
 
     min_energy_fraction: Annotated[Float, Field(gt=0, le=1)] = Field(
         0.95, description="warn when the cone (theta_max) holds less of the lobe's energy"
@@ -40,3 +41,7 @@ class DiagnosticsConfig(_Model):
     allow_no_valid_pixels: Bool = Field(
         False, description="keep a decoded run in which some fringe direction has no valid "
         "pixel (by default an error naming the stage that removed them and its share)")
+    allow_albedo_above_one: Bool = Field(
+        False, description="accept a BRDF whose rho_s (times the largest [brdf.variation] "
+        "rho_s_scale) exceeds 1, a surface that reflects more light than falls on it (by "
+        "default refused before the work); the run says so in a note")

@@ -118,15 +118,16 @@ def _member_estimate(cfg: "RunConfig", n_px: float, width: int) -> tuple[dict, f
     return parts, n_px * rpp * passes
 
 
-#: Rays of a Gauss rule plus its embedded rule (about 3/4 of the order in each of two
-#: dimensions: ~0.56 more nodes), rounded up: the error-estimating pass of mode "rule".
-RULE_WITH_EMBEDDED = 1.75
+#: Rays of a Gauss rule plus its two embedded rules (about 3/4 and 1/2 of the order in
+#: each of two dimensions: ~0.56 + 0.25 more nodes), rounded up: the error-estimating
+#: passes of mode "rule".
+RULE_WITH_EMBEDDED = 1.85
 
 
 def rays_per_bundle(sampling, pixel_model: str = "continuous") -> float:
     """Rays per vision ray over all the sample sets of one render: ``n_rays`` (or, with
     ``target_error_mrad``, up to ``max_rays``); mode ``rule`` with its error estimate adds
-    the embedded rule on a smooth (continuous-monitor) integrand, elsewhere it runs as
+    the embedded rules on a smooth (continuous-monitor) integrand, elsewhere it runs as
     ``rqmc`` (R sets of n_rays / R: n_rays in all)."""
     n = float(sampling.max_rays if sampling.target_error_mrad is not None else sampling.n_rays)
     if (sampling.mode == "rule" and sampling.error_estimate and pixel_model == "continuous"):

@@ -15,8 +15,8 @@ class SamplingConfig(_Model):
     ``n_rays`` counts the rays (quadrature nodes) of a pixel's bundle. ``mode = "rule"``
     (default) uses a deterministic Gauss rule of at most ``n_rays`` nodes (cone:
     Gauss-Legendre theta x trapezoid phi; radiometric: Gauss-Hermite in slope space) and
-    estimates every sum's numerical error from the embedded rule of about 3/4 the order
-    (docs/physics.md); where the integrand is not smooth (``nearest`` monitor, dots,
+    estimates every sum's numerical error from the embedded rules of about 3/4 and 1/2 the
+    order (docs/physics.md); where the integrand is not smooth (``nearest`` monitor, dots,
     images, tabulated slope densities) it uses ``"rqmc"``: ``replicates`` scrambled Sobol
     sets of ``n_rays / replicates`` points, error from their spread.
     ``"stratified"`` (the earlier default) is P plus a Fibonacci lattice, the same for
@@ -32,8 +32,8 @@ class SamplingConfig(_Model):
     seed: Annotated[Int, Field(ge=0, lt=2**63)] = 0
     replicates: Annotated[Int, Field(ge=2, le=1024)] = 8
     error_estimate: bool = Field(
-        True, description="render the embedded rule (mode 'rule') to state every sum's "
-        "numerical error; false saves that pass (about half the rays) and states none")
+        True, description="render the two embedded rules (mode 'rule') to state every sum's "
+        "numerical error; false saves those passes (about 81 % more rays) and states none")
     target_error_mrad: Annotated[Float, Field(gt=0)] | None = Field(
         None, description="raise the rule's order (n_rays) until the stated phase error "
         "(P95 over pixels, every fringe) is below this; None: render n_rays as given")

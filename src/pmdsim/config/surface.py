@@ -171,8 +171,8 @@ class ZernikeSurfaceConfig(_SagSurfaceBase):
 
 class HeightMapSurfaceConfig(_SagSurfaceBase):
     """A measured topography: heights on a regular grid from ``file``, rows along local y,
-    columns along local x: an instrument file (X3P, Digital Surf .sur, Sensofar .plu,
-    Keyence .vk4, ...: units and spacing from the file; ``pmdsim.topofile``) or a plain
+    columns along local x: an instrument file (X3P, Digital Surf .sur, ISO 25178-71 .sdf,
+    Alicona .al3d, ...: units and spacing from the file; ``pmdsim.topofile``) or a plain
     array (.npy, .csv, 32-bit float .tif/.tiff) with ``spacing_mm`` = (dx, dy) and heights
     in ``height_unit``. ``level`` ("none", "mean", "plane"), ``outlier_sigma`` and ``fill``
     ("error", "nearest", "mean": for non-measured points and outliers) prepare it.

@@ -45,7 +45,7 @@ class RayleighRiceConfig(_SmoothFields):
 
 
 class TopographyConfig(_SmoothFields):
-    """A measured roughness patch (``file``: X3P, .sur, .plu, .vk4, ... with units and
+    """A measured roughness patch (``file``: X3P, .sur, .sdf, .al3d, ... with units and
     spacing inside, or .npy/.csv/.tif with ``spacing_mm`` and ``height_unit``), levelled
     (``level``), outliers and non-measured points handled (``outlier_sigma``, ``fill``);
     ``radial_axis``: the map axis across the turning grooves (local y). ``regime``:
@@ -70,5 +70,5 @@ class TopographyConfig(_SmoothFields):
     @model_validator(mode="after")
     def _check(self) -> "TopographyConfig":
         if not self.file:
-            raise ValueError("file: give the topography file (X3P, .sur, .plu, ...)")
+            raise ValueError("file: give the topography file (X3P, .sur, .sdf, ...)")
         return self

@@ -237,7 +237,7 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
                 phase_error[d], float(min(res.widths_px)), pitch_mm,
                 lambda c, d=d: slope_deviation_urad(d, c, geometry, slope_geometry, distance_mm,
                                                     pitch_mm),
-                dev.coord_px)
+                dev.coord_px, slope_at_coord=slope)
             num = {k: np.where(dev.valid, v, np.nan) for k, v in num.items()}
         per[d] = DirectionChain(
             d, res, ref, dev, slope, analysis.deviation_stats(slope, dev.valid, considered),

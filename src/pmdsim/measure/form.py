@@ -102,8 +102,59 @@ def zernike_columns(order: str, n_terms: int, u, v) -> tuple[list, np.ndarray]:
         idx = [(j, *fringe_index(j)) for j in range(1, n_terms + 1)]
     else:
         raise ValueError(f"order must be 'noll' or 'fringe', got {order!r}")
-    cols = np.stack([zernike_value(n, m, u, v, normalized=order == "noll") for _, n, m in idx], axis=1)
-    return idx, cols
+    basis = _Basis(u, v)
+    cols = np.empty((basis.rho.size, len(idx)))
+    for k, (_, n, m) in enumerate(idx):
+        cols[:, k] = basis.value(n, m, normalized=order == "noll").ravel()
+    return idx, cols.reshape(basis.rho.shape + (len(idx),))
+
+
+class _Basis:
+    """Zernike terms at fixed unit-disc points (u, v), sharing rho, theta, the powers of rho
+    and the angular factors between terms: term by term the same arithmetic as
+    :func:`zernike_value` (so the same numbers, bit for bit), without recomputing them."""
+
+    def __init__(self, u, v):
+        self.u = np.asarray(u, np.float64)
+        self.v = np.asarray(v, np.float64)
+        self.rho = np.hypot(self.u, self.v)
+        self._theta = None
+        self._powers: dict = {}
+        self._angular: dict = {}
+
+    def _power(self, p: int) -> np.ndarray:
+        if p not in self._powers:
+            self._powers[p] = self.rho**p
+        return self._powers[p]
+
+    def radial(self, n: int, m: int) -> np.ndarray:
+        """R_n^|m|(rho), summed as :func:`pmdsim.measure.integrate._radial` sums it."""
+        m = abs(m)
+        r = np.zeros_like(self.rho)
+        for k in range((n - m) // 2 + 1):
+            c = (-1) ** k * math.factorial(n - k) / (
+                math.factorial(k) * math.factorial((n + m) // 2 - k)
+                * math.factorial((n - m) // 2 - k))
+            r += c * self._power(n - 2 * k)
+        return r
+
+    def angular(self, m: int) -> np.ndarray | None:
+        """cos(m theta) (m > 0), sin(|m| theta) (m < 0); None for m = 0 (a factor 1)."""
+        if m == 0:
+            return None
+        if m not in self._angular:
+            if self._theta is None:
+                self._theta = np.arctan2(self.v, self.u)
+            th = self._theta
+            self._angular[m] = np.cos(m * th) if m > 0 else np.sin(-m * th)
+        return self._angular[m]
+
+    def value(self, n: int, m: int, normalized: bool = True) -> np.ndarray:
+        norm = 1.0
+        if normalized:
+            norm = math.sqrt(n + 1) if m == 0 else math.sqrt(2 * (n + 1))
+        ang = self.angular(m)
+        return norm * self.radial(n, m) if ang is None else norm * self.radial(n, m) * ang
 
 
 def disc_of(mask, x, y, centre=None, radius=None) -> tuple[tuple[float, float], float]:
@@ -316,7 +367,8 @@ def remove_form(error, mask, x, y, spec: FormSpec, *, true_height=None, disc=(No
         cols += _term_columns(lin, (xm - xc) / scale, (ym - yc) / scale)
     if spec.zernike:
         u, v = (xm - c[0]) / rad, (ym - c[1]) / rad
-        cols += [zernike_value(*zernike_noll_index(j), u, v) for j in spec.zernike]
+        basis = _Basis(u, v)
+        cols += [basis.value(*zernike_noll_index(j)) for j in spec.zernike]
     if cols:
         a = np.stack(cols, axis=1)
         r = r - a @ _lstsq(a, r)

@@ -27,10 +27,13 @@ import numpy as np
 QUANTITIES = ("phase_mrad", "coord_px", "coord_mm", "slope_urad")
 
 
-def finest_phase_error(fringes, direction: str) -> np.ndarray | None:
+def finest_phase_error(fringes, direction: str, phase_error: np.ndarray | None = None
+                       ) -> np.ndarray | None:
     """(H, W) rad: the phase error of the finest width of one direction of a
-    :class:`~pmdsim.render.FringeResult`; None when the render states none."""
-    pe = fringes.phase_error()
+    :class:`~pmdsim.render.FringeResult`; None when the render states none.
+    ``phase_error``: ``fringes.phase_error()`` when the caller has it already (it is
+    computed from every sum, not stored)."""
+    pe = fringes.phase_error() if phase_error is None else phase_error
     if pe is None or direction not in fringes.directions:
         return None
     wi = int(np.argmin(fringes.widths))
@@ -38,16 +41,20 @@ def finest_phase_error(fringes, direction: str) -> np.ndarray | None:
 
 
 def propagate(phase_err: np.ndarray, width_px: float, pitch_mm: float,
-              slope_of_coord=None, coord_px: np.ndarray | None = None) -> dict:
+              slope_of_coord=None, coord_px: np.ndarray | None = None,
+              slope_at_coord: np.ndarray | None = None) -> dict:
     """Numerical error maps {quantity: (H, W)} from a phase error (rad) of fringes of
     period ``width_px``. ``slope_of_coord``: the chain's conversion coord deviation (px) ->
-    slope deviation (urad), evaluated at ``coord_px`` and ``coord_px + delta c``."""
+    slope deviation (urad), evaluated at ``coord_px`` and ``coord_px + delta c``;
+    ``slope_at_coord``: its value at ``coord_px`` when the caller has it already (one
+    conversion less; the slope error is then NaN where ``coord_px`` is not finite)."""
     phase_err = np.asarray(phase_err, np.float64)
     dc = phase_err * width_px / (2 * math.pi)
     out = {"phase_mrad": phase_err * 1e3, "coord_px": dc, "coord_mm": dc * pitch_mm}
     if slope_of_coord is not None:
         c0 = np.zeros_like(dc) if coord_px is None else np.where(np.isfinite(coord_px), coord_px, 0.0)
-        out["slope_urad"] = np.abs(slope_of_coord(c0 + dc) - slope_of_coord(c0))
+        s0 = slope_of_coord(c0) if slope_at_coord is None or coord_px is None else slope_at_coord
+        out["slope_urad"] = np.abs(slope_of_coord(c0 + dc) - s0)
     return out
 
 

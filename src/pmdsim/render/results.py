@@ -9,18 +9,42 @@ from dataclasses import dataclass
 import numpy as np
 
 
-def phase_error(sums: np.ndarray, sums_err: np.ndarray, kind: str | None) -> np.ndarray:
+def phase_error(sums: np.ndarray, sums_err: np.ndarray, kind: str | None,
+                convergence: np.ndarray | None = None) -> np.ndarray:
     """Phase error (rad) of ``arg sums`` for the sums' errors (:attr:`FringeResult.sums_err`);
-    ``kind``: ``"embedded"`` (signed differences) or ``"replicates"`` (half-widths)."""
+    ``kind``: ``"embedded"`` (signed differences) or ``"replicates"`` (half-widths).
+
+    ``"embedded"``: ``|Im(dS conj S)| / |S|^2 + FLOOR |dS| / |S|`` (the two rules' phase
+    difference and :data:`EMBEDDED_FLOOR`: the embedded rule's error, a bound on the rendered
+    rule's); where ``convergence`` (per fringe, the leading axes of ``sums`` without the
+    pixel axes: :func:`convergence_factor`) is ``q < 1``, the rule is in its asymptotic
+    regime and the statement is ``SAFETY q |Im(dS conj S)| / |S|^2 + FLOOR q |dS| / |S|``
+    (:data:`CONVERGENCE_SAFETY`). Never below :data:`ROUNDOFF_PHASE`."""
     mag = np.abs(sums)
     with np.errstate(divide="ignore", invalid="ignore"):
         if kind == "replicates":
             c, s = sums.real / mag, sums.imag / mag
             out = np.hypot(sums_err.real * s, sums_err.imag * c) / mag
         else:
-            out = (np.abs((sums_err * np.conj(sums)).imag) / (mag * mag)
-                   + EMBEDDED_FLOOR * np.abs(sums_err) / mag)
+            across = np.abs((sums_err * np.conj(sums)).imag) / (mag * mag)
+            rel = np.abs(sums_err) / mag
+            if convergence is None:
+                out = across + EMBEDDED_FLOOR * rel
+            else:
+                q = np.asarray(convergence, np.float64)
+                q = q.reshape(q.shape + (1,) * (sums.ndim - q.ndim))
+                fast = q < 1.0
+                out = np.where(fast, CONVERGENCE_SAFETY * q * across + EMBEDDED_FLOOR * q * rel,
+                               across + EMBEDDED_FLOOR * rel)
+        out = np.maximum(out, ROUNDOFF_PHASE)
     return np.where(mag > 0, out, np.nan)
+
+
+#: The smallest phase error stated (rad): the kernels' arithmetic (fast exp and sincos with
+#: relative errors below 1e-11, sums over up to 10^5 rays) leaves phases uncertain by about
+#: 1e-12 rad (Gauss-Hermite 8 x 8 to 32 x 32 on Fig. 3's radiometric fringes all agree with
+#: 64 x 64 to 4e-12 rad), where the rules' differences can be smaller still.
+ROUNDOFF_PHASE = 1e-9
 
 
 #: The share of the relative sum difference ``|delta S| / |S|`` added to the embedded
@@ -29,6 +53,47 @@ def phase_error(sums: np.ndarray, sums_err: np.ndarray, kind: str | None) -> np.
 #: rendered rule's error; with this floor the statement bounded the true error (SciPy
 #: cubature) in >= 94 % of (pixel, fringe) on 1 and 2 deg cones, orders 4 x 16 to 16 x 64.
 EMBEDDED_FLOOR = 0.1
+
+#: Safety factor on the observed convergence factor (:func:`convergence_factor`): the
+#: embedded rule's phase difference times ``SAFETY q`` bounded the rendered rule's error in
+#: >= 95 % of pixels on Fig. 3 (1 deg cone, orders 5 x 20 to 12 x 48, tested against SciPy
+#: cubature); 3 did not at 10 x 40.
+CONVERGENCE_SAFETY = 10.0
+
+#: The rule is taken as asymptotic only where the embedded rule already agrees with it to
+#: this relative difference ``|dS1| / |S|`` (median over the pixels of a fringe): on 2 and 4
+#: deg cones (pre-asymptotic) the ratio of differences can look fast while the error does
+#: not fall (there mostly 2e-3 to 0.3 up to 8 x 32; Fig. 3's 1 deg cone at 8 x 32: 2e-4 to
+#: 8e-4). Measured: 1e-3 and 2e-3 kept the embedded statement's coverage but at 4 deg 10 x
+#: 40; 1e-2 did not (2 deg, 6 x 24).
+ASYMPTOTIC_DIFFERENCE = 2e-3
+
+
+def convergence_factor(sums: np.ndarray, d1: np.ndarray, d2: np.ndarray,
+                       exponent: float | None, pixel_axes: int = 2) -> np.ndarray | None:
+    """Per fringe (the leading axes of ``sums``; the last ``pixel_axes`` are pixels): the observed
+    factor ``q = median(|dS1| / |dS2|)^k`` by which the rendered rule's error is below the
+    embedded rule's, ``dS1 = S - S_embedded``, ``dS2 = S - S_second`` and ``k`` from
+    :func:`pmdsim.scene.quadrature.convergence_exponent` (an error falling exponentially in
+    the order); 1 (no reduction) where the fringe is not clearly asymptotic: ``SAFETY q >=
+    1``, or the median ``|dS1| / |S|`` above :data:`ASYMPTOTIC_DIFFERENCE`, or no valid
+    pixel. None without an exponent."""
+    if exponent is None:
+        return None
+    lead = sums.shape[:-pixel_axes]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a1 = (np.abs(d1) / np.abs(sums)).reshape(lead + (-1,))
+        ratio = (np.abs(d1) / np.abs(d2)).reshape(lead + (-1,))
+    out = np.ones(lead)
+    for idx in np.ndindex(*lead):
+        r, a = ratio[idx], a1[idx]
+        ok = np.isfinite(r) & np.isfinite(a)
+        if not ok.any():
+            continue
+        q = min(1.0, float(np.median(r[ok])) ** exponent)
+        if CONVERGENCE_SAFETY * q < 1.0 and float(np.median(a[ok])) <= ASYMPTOTIC_DIFFERENCE:
+            out[idx] = q
+    return out
 
 
 def worst_phase_error(fr, min_modulation: float = 0.05) -> float | None:
@@ -48,6 +113,23 @@ def worst_phase_error(fr, min_modulation: float = 0.05) -> float | None:
                 p = float(np.percentile(a, 95))
                 worst = p if worst is None else max(worst, p)
     return worst
+
+
+def value_error(err, cols: slice, norm: np.ndarray, values: np.ndarray | None = None,
+                ftot_col: int | None = None) -> np.ndarray | None:
+    """(H, W, Q) numerical error of estimator values ``sum_cols * norm`` from the render's
+    error (:meth:`pmdsim.render.Simulation._render`: the rqmc half-widths, or the
+    differences to the embedded rules, of which the first, as a magnitude, is taken).
+    ``ftot_col``: the value is a ratio ``sum / f_total`` (``weighted_mean``): the error of
+    ``f_total`` adds ``|value| e_ftot / f_total`` (first order, half-widths added: a bound).
+    None without an error."""
+    if err is None:
+        return None
+    e = np.abs(err[0] if isinstance(err, tuple) else err)
+    out = e[..., cols] * np.abs(norm)[..., None]
+    if ftot_col is not None and values is not None:
+        out = out + np.abs(values) * (e[..., ftot_col] * np.abs(norm))[..., None]
+    return out
 
 
 @dataclass(frozen=True)
@@ -72,6 +154,10 @@ class FringeResult:
     sampling : dict
         What was rendered: ``mode`` (the effective one), ``rule``, ``nodes``, ``order``,
         ``error`` (``"embedded"``, ``"replicates"`` or None), ``smooth``.
+    convergence : (n_directions, n_widths) float64 or None
+        Mode ``rule``: the observed convergence factor of each fringe
+        (:func:`convergence_factor`; 1 where the rule is not clearly asymptotic), None
+        without the second embedded rule.
     """
 
     directions: tuple[str, ...]
@@ -83,6 +169,7 @@ class FringeResult:
     f_hit: np.ndarray
     sums_err: np.ndarray | None = None
     sampling: dict | None = None
+    convergence: np.ndarray | None = None
 
     def image(self, direction: str, width: float, k: int) -> np.ndarray:
         return self.images[self.directions.index(direction), self.widths.index(width), k]
@@ -91,13 +178,14 @@ class FringeResult:
         """(n_directions, n_widths, H, W) rad: the numerical error of the phase
         ``arg S`` each sum decodes to, from the part of the sum's error across ``S``
         (first order; the part along ``S`` changes the modulation, not the phase):
-        ``|Im(delta S conj(S))| / |S|^2 + 0.1 |delta S| / |S|`` for the embedded rule (the
-        phase difference of the two rules and a floor, :data:`EMBEDDED_FLOOR`),
+        :func:`phase_error` (the embedded rule's phase difference and a floor, scaled by
+        the observed :attr:`convergence` where the rule is asymptotic),
         ``sqrt((e_re sin phi)^2 + (e_im cos phi)^2) / |S|`` for the rqmc errors; None
         without :attr:`sums_err`."""
         if self.sums_err is None or self.sums is None:
             return None
-        return phase_error(self.sums, self.sums_err, (self.sampling or {}).get("error"))
+        return phase_error(self.sums, self.sums_err, (self.sampling or {}).get("error"),
+                           self.convergence)
 
 
 @dataclass(frozen=True)

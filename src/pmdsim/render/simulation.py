@@ -41,8 +41,9 @@ from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
 from ..kernels.synth import shifted_images
-from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, phase_error,  # noqa: F401
-                      worst_phase_error)
+from ..scene.quadrature import convergence_exponent
+from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, convergence_factor,  # noqa: F401
+                      phase_error, value_error, worst_phase_error)
 from .rows import (local_scheduler, reduce_subrays, scene_geometry_rows,  # noqa: F401
                    vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels
@@ -127,7 +128,7 @@ class Simulation:
 
     def plan(self, smooth: bool = True) -> tuple:
         """The sample sets (:class:`~pmdsim.scene.sampling.ConeSampling`) a render uses, the
-        rendered one first: in mode ``rule`` the rule and its embedded rule (none with
+        rendered one first: in mode ``rule`` the rule and its two embedded rules (none with
         ``error_estimate = false``); in mode ``rqmc`` the R replicates; else one set.
         ``smooth=False`` (a ``nearest`` monitor, dots, images, a tabulated slope density):
         mode ``rule`` becomes ``rqmc`` (when ``n_rays`` >= 2 R), whose error estimate does
@@ -148,9 +149,10 @@ class Simulation:
                 and (not self._lobe or self.scene.sampling.lobe_gaussian))
 
     def _render(self, mode, ncols, smooth=True, progress=None, **kw):
-        """Pixel sums (H, W, C) and their numerical error (H, W, C) or None, over the sample
-        sets of :meth:`plan`: the rule and its difference to the embedded rule (signed), or
-        the mean of the rqmc replicates and its error ``t(0.975, R - 1) s / sqrt(R)``."""
+        """Pixel sums (H, W, C) and their numerical error or None, over the sample sets of
+        :meth:`plan`: the rule and its differences (H, W, C) to the embedded rules (signed;
+        a tuple, the embedded rule first), or the mean of the rqmc replicates and its error
+        (H, W, C) ``t(0.975, R - 1) s / sqrt(R)``."""
         from ..scene.quadrature import student_t975
 
         passes = self.plan(smooth)
@@ -164,9 +166,12 @@ class Simulation:
         out = self._render_set(passes[0], mode, ncols, progress=prog(0), **kw)
         if n == 1:
             return out, None
-        if passes[0].mode == "rule":
-            coarse = self._render_set(passes[1], mode, ncols, progress=prog(1), **kw)
-            return out, out - coarse
+        if passes[0].mode == "rule":  # the differences to the embedded rules, in place
+            diffs = []
+            for k in range(1, n):
+                coarse = self._render_set(passes[k], mode, ncols, progress=prog(k), **kw)
+                diffs.append(np.subtract(out, coarse, out=coarse))
+            return out, tuple(diffs)
         mean, m2 = out.copy(), np.zeros_like(out)
         for k in range(1, n):  # Welford: one replicate in memory at a time
             o = self._render_set(passes[k], mode, ncols, progress=prog(k), **kw)
@@ -311,7 +316,7 @@ class Simulation:
         d = {"mode": first.mode, "rule": rule.describe(), "nodes": rule.n,
              "order": list(rule.order), "passes": len(passes), "error": err, "smooth": smooth}
         if err == "embedded":
-            d["embedded_rule"] = passes[1].rule(self._lobe).describe()
+            d["embedded_rule"] = " and ".join(p.rule(self._lobe).describe() for p in passes[1:])
         return d
 
     # ------------------------------------------------------------------ public API
@@ -468,13 +473,27 @@ class Simulation:
                 np.cos(deltas), np.sin(deltas), black, white,
                 sums.reshape(nd * nw, h * w_), images.reshape(nd * nw, len(deltas), h * w_),
             )
-        sums_err = None
+        sums_err = convergence = None
+        info = self.describe_sampling(self.fringes_smooth())
         if linear and err is not None:  # the error of every normalised complex sum
+            diffs = err if isinstance(err, tuple) else (err,)
+            cols = {(di, wi): base[d] + wi * per_width for di, d in enumerate(directions)
+                    for wi in range(nw)}
+
+            def fringe_sum(e, di, wi):
+                return (e[..., cols[di, wi]] + 1j * e[..., cols[di, wi] + 1]) * np.abs(norm)
+
             sums_err = np.empty((nd, nw, h, w_), np.complex128)
-            for di, d in enumerate(directions):
-                for wi in range(nw):
-                    col = base[d] + wi * per_width
-                    sums_err[di, wi] = (err[..., col] + 1j * err[..., col + 1]) * np.abs(norm)
+            for di, wi in cols:
+                sums_err[di, wi] = fringe_sum(diffs[0], di, wi)
+            kexp = convergence_exponent(tuple(info["order"])) if len(diffs) > 1 else None
+            if kexp is not None:  # the observed convergence from the second embedded rule
+                convergence = np.ones((nd, nw))  # fringe by fringe: one (H, W) copy at a time
+                for di, wi in cols:
+                    convergence[di, wi] = convergence_factor(
+                        sums[di, wi], sums_err[di, wi], fringe_sum(diffs[1], di, wi), kexp)
+                info["convergence"] = [[round(float(c), 6) for c in r] for r in convergence]
+            del diffs, err
         for di, d in enumerate(directions if not linear else ()):
             for wi in range(nw):
                 col = base[d] + wi * per_width
@@ -493,13 +512,18 @@ class Simulation:
                         # to [min, max] luminance x the weight on the monitor (never < 0)
                         images[di, wi, k] = np.clip(acc, g.min() * f_hit, g.max() * f_hit)
         return FringeResult(directions, widths, deltas, images, sums, f_total, f_hit, sums_err,
-                            self.describe_sampling(self.fringes_smooth()))
+                            info, convergence)
 
-    def render_images(self, levels: np.ndarray, progress: ProgressFn | None = None) -> np.ndarray:
+    def render_images(self, levels: np.ndarray, progress: ProgressFn | None = None,
+                      with_error: bool = False):
         """Camera images (Q, H, W) float32 of monitor images ``levels`` (Q, Hm, Wm) in [0, 1].
 
         The monitor shows each level as luminance (gamma, black/white); each monitor pixel is
         a flat square emitter (the ray takes the value of the pixel it lands in).
+        ``with_error``: (images, their numerical error (Q, H, W) float32 or None): the
+        ``rqmc`` replicates' ``t(0.975, R - 1) s / sqrt(R)`` per value (the default ``rule``
+        renders ``rqmc`` here: the monitor's pixels make the integrand a step function;
+        :func:`~pmdsim.render.results.value_error`); None for modes without an error.
         """
         levels = np.asarray(levels)
         if levels.ndim == 2:
@@ -510,23 +534,43 @@ class Simulation:
                 f"levels: monitor images must be (Q, {mon.height}, {mon.width}), got {levels.shape}"
             )
         lum = np.ascontiguousarray(mon.luminance(levels), dtype=np.float32)
-        out, _ = self._render(kb.MODE_IMAGES, kb.OUT_FIRST + lum.shape[0], smooth=False,
-                              images=lum, progress=progress)
+        out, err = self._render(kb.MODE_IMAGES, kb.OUT_FIRST + lum.shape[0], smooth=False,
+                                images=lum, progress=progress)
         norm = self._normalise(out)
-        return np.moveaxis(out[..., kb.OUT_FIRST:] * norm[..., None], -1, 0).astype(np.float32)
+        vals = out[..., kb.OUT_FIRST:] * norm[..., None]
+        images = np.moveaxis(vals, -1, 0).astype(np.float32)
+        if not with_error:
+            return images
+        e = value_error(err, slice(kb.OUT_FIRST, None), norm, vals, self._ratio_col())
+        return images, None if e is None else np.moveaxis(e, -1, 0).astype(np.float32)
 
-    def render_dots(self, dots: Sequence[Dot], progress: ProgressFn | None = None) -> np.ndarray:
-        """Camera images (Q, H, W) float32 of white square dots on a black monitor."""
+    def _ratio_col(self) -> int | None:
+        """The f_total column when the estimator is a ratio (``weighted_mean``)."""
+        return kb.OUT_FTOTAL if self.scene.estimator == "weighted_mean" else None
+
+    def render_dots(self, dots: Sequence[Dot], progress: ProgressFn | None = None,
+                    with_error: bool = False):
+        """Camera images (Q, H, W) float32 of white square dots on a black monitor;
+        ``with_error``: (images, their numerical error (Q, H, W) or None), as
+        :meth:`render_images`."""
         if len(dots) == 0:
             raise ValueError("dots: give at least one dot")
         rows = np.array([d.as_row() for d in dots])
         mon = self.scene.monitor
-        out, _ = self._render(kb.MODE_DOTS, kb.OUT_FIRST + len(dots), smooth=False, dots=rows,
-                              progress=progress)
+        out, err = self._render(kb.MODE_DOTS, kb.OUT_FIRST + len(dots), smooth=False, dots=rows,
+                                progress=progress)
         norm = self._normalise(out)
         hit = out[..., kb.OUT_FIRST:]
         lum = mon.black_level * out[..., kb.OUT_FHIT][..., None] + (mon.white_level - mon.black_level) * hit
-        return np.moveaxis(lum * norm[..., None], -1, 0).astype(np.float32)
+        vals = lum * norm[..., None]
+        images = np.moveaxis(vals, -1, 0).astype(np.float32)
+        if not with_error:
+            return images
+        e = value_error(err, slice(kb.OUT_FIRST, None), norm, vals, self._ratio_col())
+        if e is not None:  # luminance: black x f_hit + (white - black) x the dot's hits
+            e = abs(mon.white_level - mon.black_level) * e + abs(mon.black_level) * value_error(
+                err, slice(kb.OUT_FHIT, kb.OUT_FHIT + 1), norm)
+        return images, None if e is None else np.moveaxis(e, -1, 0).astype(np.float32)
 
     def transport(self, rows: Sequence[int], cols: Sequence[int], directions: bool = True):
         """The scattered rays of selected pixels (``directions=False``: without the world

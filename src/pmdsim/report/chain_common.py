@@ -163,9 +163,34 @@ def _g(v, digits: int = 3) -> str:
     return "nan" if v is None or not np.isfinite(v) else f"{v:.{digits}g}"
 
 
+#: The numerical error a deviation shares with another: the coordinate against the exact
+#: specular point has the decoded coordinate's error (the exact point has none).
+_ERROR_OF = {"coord_vs_exact_px": "coord_px"}
+
+
+def _with_error(s_dir: dict, key: str) -> dict:
+    """The statistics of deviation ``key`` of one direction's statistics, with ``"error"``:
+    its numerical error's statistics (``numerical_error``, absent where none is stated)."""
+    out = dict(s_dir.get(key) or {})
+    err = (s_dir.get("numerical_error") or {}).get(_ERROR_OF.get(key, key))
+    if err:
+        out["error"] = err
+    return out
+
+
+def _pm(s: dict, stat: str, digits: int = 3) -> str:
+    """Statistic ``stat`` (``"rms"``, ``"p95"``) of :func:`_with_error` statistics as
+    "value ± numerical error" (the value alone where no error is stated)."""
+    e = (s.get("error") or {}).get(stat)
+    if e is None or not np.isfinite(e):
+        return _g(s.get(stat), digits)
+    return f"{_g(s.get(stat), digits)} ± {_g(e, 2)}"
+
+
 def _histogram(ax, data: dict, colours: dict, stats: dict, bins: int = 121, lim=None,
                log: bool = False, styles: dict | None = None):
-    """Step histograms of ``data`` (label -> values) on a symmetric range; ``log``: a log
+    """Step histograms of ``data`` (label -> values) on a symmetric range, labelled with
+    ``stats`` (label -> :func:`_with_error` statistics: "RMS value ± error"); ``log``: a log
     count axis (set before the limits, so that the empty bins do not collapse it)."""
     lim = symmetric_limit(data.values(), 99.9) if lim is None else lim
     styles = styles or {}
@@ -182,8 +207,8 @@ def _histogram(ax, data: dict, colours: dict, stats: dict, bins: int = 121, lim=
         counts, _, _ = ax.hist(np.clip(a, -lim, lim), bins=edges, histtype="step",
                                linewidth=1.3, color=colours.get(key),
                                linestyle=styles.get(key, "-"),
-                               label=f"{key}: mean {_g(s.get('mean'))}, "
-                               f"RMS {_g(s.get('rms'))}, P95 {_g(s.get('p95'))}, n = {a.size:,}")
+                               label=f"{key}: RMS {_pm(s, 'rms')}, P95 {_pm(s, 'p95')}"
+                               f"\n{'':>4}mean {_g(s.get('mean'))}, n = {a.size:,}")
         top = max(top, float(np.max(counts)) if np.size(counts) else 0.0)
     ax.axvline(0, color="0.5", linewidth=0.6)
     ax.set_xlim(-lim, lim)

@@ -13,7 +13,7 @@ from .scene import _figure, _save, imshow
 from .chain_common import (
     CLASS_COLOURS, DEVIATIONS, DEV_CMAP, DIR_COLOURS, FLAG_COLOURS, VS_EXACT, VS_MIRROR,
     _classes, _dirs, _g, _histogram, _image_axes, _label, _map_size, _off_monitor, _overlay,
-    _stats, coord_vs_exact, symmetric_limit, valid_only,
+    _pm, _stats, _with_error, coord_vs_exact, symmetric_limit, valid_only,
 )
 
 
@@ -86,14 +86,15 @@ def plot_deviation(ds, path, name: str | None = None) -> Path:
             ax = axes[i, j]
             im = imshow(ax, maps[i], cmap=DEV_CMAP, vmin=-lim, vmax=lim, interpolation="nearest")
             _overlay(ax, ds, d, legend=(j == 0))
-            st = stats[d].get(key) or {}
+            st = _with_error(stats[d], key)
             ax.set_title(f"{name}: {d.upper()} {title}\nmean {_g(st.get('mean'))}, "
-                         f"RMS {_g(st.get('rms'))}, P95 {_g(st.get('p95'))} {unit}", fontsize=8)
+                         f"RMS {_pm(st, 'rms')}, P95 {_pm(st, 'p95')} {unit}", fontsize=8)
             _image_axes(ax)
         cb = fig.colorbar(im, ax=list(axes[:, j]), orientation="horizontal", shrink=0.9,
                           extend="both", pad=0.02)
-        cb.set_label(label + f"\nscale +-{lim:g} (P99.5 of |deviation|, valid pixels)",
-                     fontsize=8)
+        cb.set_label(label + f"\nscale +-{lim:g} (P99.5 of |deviation|, valid pixels)"
+                     + ("; ± in titles: numerical error" if j == 0 and any(
+                         stats[d].get("numerical_error") for d in dirs) else ""), fontsize=8)
     return _save(fig, path)
 
 
@@ -108,7 +109,7 @@ def plot_histograms(ds, path, name: str | None = None) -> Path:
     for ax, (var, scale, label, _), key in zip(axes, DEVIATIONS, keys):
         _histogram(ax, {d.upper(): ds[var].sel(direction=d).values * scale for d in dirs},
                    {d.upper(): DIR_COLOURS.get(d, None) for d in dirs},
-                   {d.upper(): stats[d][key] for d in dirs})
+                   {d.upper(): _with_error(stats[d], key) for d in dirs})
         ax.set_xlabel(label)
         ax.set_ylabel("pixels")
         ax.set_title(f"{name}: {label.split(' (')[0]}", fontsize=9)

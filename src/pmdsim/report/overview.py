@@ -11,7 +11,7 @@ from matplotlib.ticker import FixedLocator, MaxNLocator
 from .scene import _axes_at, _figure, _fixed_figure, _save, imshow
 from .chain_common import (
     CLASS_COLOURS, DEV_CMAP, DIR_COLOURS, OVERVIEW_DPI, VS_EXACT, VS_MIRROR, _dirs, _g,
-    _histogram, _image_axes, _label, _overlay, _stats, _wrap, coord_vs_exact,
+    _histogram, _image_axes, _label, _overlay, _pm, _stats, _with_error, _wrap, coord_vs_exact,
     symmetric_limit, valid_only,
 )
 
@@ -72,15 +72,15 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
             im = imshow(ax, m, cmap=DEV_CMAP, vmin=-lm, vmax=lm, interpolation="nearest")
             last["c" + str(col)] = (ax, im)
             _overlay(ax, ds, d, legend=(col == 0))
-            s = st["directions"][d].get(key) or {}
+            s = _with_error(st["directions"][d], key)
             unit = "urad" if key == "slope_urad" else "px"
             extra = ""
             if key == "coord_px":
-                su = st["directions"][d].get("slope_urad") or {}
-                extra = f" ({_g(su.get('rms'))} urad)"
+                su = _with_error(st["directions"][d], "slope_urad")
+                extra = f" ({_pm(su, 'rms')} urad)"
             ax.set_title(f"{name}: {d.upper()} {'slope' if unit == 'urad' else 'coordinate'} deviation"
-                         f"\n{against}: RMS {_g(s.get('rms'))} {unit}{extra}, P95 {_g(s.get('p95'))} {unit}",
-                         fontsize=9)
+                         f" {against}\nRMS {_pm(s, 'rms')} {unit}{extra}\nP95 {_pm(s, 'p95')} {unit}",
+                         fontsize=8)
             _image_axes(ax)
     for col, (key, label, extend) in enumerate((
             ("f", "camera value", "neither"),
@@ -105,7 +105,7 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
         for m, tag, key, ls in pairs:
             k = f"{d.upper()} {tag}"
             hist[k], colours[k], styles[k] = m, DIR_COLOURS.get(d), ls
-            hstats[k] = st["directions"][d].get(key) or {}
+            hstats[k] = _with_error(st["directions"][d], key)
     _histogram(ax, hist, colours, hstats, lim=lim, styles=styles)
     ax.set_xlabel("coordinate deviation (monitor px)\n" + (
         "vs decoded mirror (= exact specular point)" if same else
@@ -120,7 +120,9 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
     title = (f"{name}: phase measurement deviation from the ideal specular reference "
              + ("(decoded mirror = exact specular points)" if same else
                 "(decoded mirror) and from the exact specular points")
-             + (f"; {est} estimator" if est else ""))
+             + (f"; {est} estimator" if est else "")
+             + ("; value ± the rendering's numerical error"
+                if any(v.get("numerical_error") for v in st["directions"].values()) else ""))
     if description:
         title += f"\n{description}"
     fig.suptitle(title, fontsize=11, y=1 - 0.08 / fig.get_size_inches()[1], va="top")
@@ -149,6 +151,10 @@ def _stats_box(st: dict, estimator: str | None = None) -> str:
             r = s[q]
             lines.append(f"{d.upper():3}{lab:>13}" + "".join(f"{_g(r[k]):>9}"
                                                             for k in ("mean", "rms", "p95")))
+            e = (s.get("numerical_error") or {}).get(q)
+            if e:  # the rendering's numerical error of the RMS and P95 above
+                lines.append(f"{'':3}{'± numerical':>13}{'':>9}"
+                             + "".join(f"{_g(e.get(k), 2):>9}" for k in ("rms", "p95")))
         ex = s.get("coord_vs_exact_px") or {}
         lines.append(f"{d.upper():3}{'px vs exact':>13}" + "".join(f"{_g(ex.get(k)):>9}"
                                                                for k in ("mean", "rms", "p95")))
@@ -194,9 +200,9 @@ def plot_variant_deviation(datasets: dict, path, descriptions: dict | None = Non
             im = imshow(ax, maps[n, d], cmap=DEV_CMAP, vmin=-lim, vmax=lim,
                            interpolation="nearest")
             _overlay(ax, datasets[n], d, legend=True)
-            s = st[d]["coord_px"]
-            ax.set_title(f"{n}: {d.upper()} coordinate deviation {VS_MIRROR}\nRMS {_g(s['rms'])} px, "
-                         f"P95 {_g(s['p95'])} px, valid {100 * (s['valid_fraction'] or 0):.1f} %",
+            s = _with_error(st[d], "coord_px")
+            ax.set_title(f"{n}: {d.upper()} coordinate deviation {VS_MIRROR}\nRMS {_pm(s, 'rms')} px, "
+                         f"P95 {_pm(s, 'p95')} px, valid {100 * (s['valid_fraction'] or 0):.1f} %",
                          fontsize=8)
             _image_axes(ax)
         if descriptions.get(n):
@@ -209,7 +215,8 @@ def plot_variant_deviation(datasets: dict, path, descriptions: dict | None = Non
         ax = fig.add_subplot(gs[-1, j])
         _histogram(ax, {n: maps[n, d] for n in names},
                    {n: colours[k % len(colours)] for k, n in enumerate(names)},
-                   {n: _stats(datasets[n])["directions"][d]["coord_px"] for n in names},
+                   {n: _with_error(_stats(datasets[n])["directions"][d], "coord_px")
+                    for n in names},
                    lim=lim, log=True)
         ax.set_xlabel(f"{d.upper()} coordinate deviation {VS_MIRROR} (monitor px)", fontsize=8)
         ax.set_ylabel("pixels", fontsize=8)

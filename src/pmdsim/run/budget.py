@@ -17,6 +17,7 @@ from typing import Callable
 from ..config import RunConfig, check_resources
 from ..scene import resolve_roi
 from ..studies.budget import HEIGHT_COLUMNS, TABLE_COLUMNS, budget
+from ..studies.valid_pixels import check_rows
 from . import files as pio
 from .threads import single_blas
 
@@ -31,6 +32,7 @@ class BudgetResult:
     figure: Path | None
     height_rows: list = ()
     settings: dict | None = None
+    notes: tuple = ()
 
 
 def _csv(path: Path, rows, columns) -> None:
@@ -65,16 +67,17 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     check_physics(cfg, Scene.from_config(cfg))  # a sensor/display that leaves no signal
     result = budget(cfg, progress, truth)
     rows = result.rows
+    notes = check_rows(rows, cfg.diagnostics.allow_no_valid_pixels, "budget",
+                       lambda r: f"{r['effect']} {r['direction']}")  # 0 valid: not a result
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
         _csv(tmp / "budget.csv", rows, TABLE_COLUMNS)
         if result.height_rows:
             _csv(tmp / "heights.csv", result.height_rows, HEIGHT_COLUMNS)
             _csv(tmp / "zernike.csv", zernike_rows(result.height_rows),
                  ("effect", "part", "order", "index", "n", "m", "coefficient", "removed"))
-        (tmp / "budget.json").write_text(json.dumps(
-            {"name": cfg.name, "truth": truth, "settings": result.settings, "rows": rows,
-             "height_rows": result.height_rows, "config": cfg.model_dump(mode="json")},
-            indent=2) + "\n")
+        pio.write_json(tmp / "budget.json", {
+            "name": cfg.name, "truth": truth, "settings": result.settings, "rows": rows,
+            "height_rows": result.height_rows, "config": cfg.model_dump(mode="json")})
         fig = None
         if figure:
             from ..report.budget import plot_budget
@@ -83,4 +86,5 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
                         height_rows=result.height_rows, settings=result.settings)
             fig = final / "budget.png"
         (tmp / MARKER).write_text(json.dumps({"name": cfg.name, "kind": "budget"}) + "\n")
-    return BudgetResult(rows, final, final / "budget.csv", fig, result.height_rows, result.settings)
+    return BudgetResult(rows, final, final / "budget.csv", fig, result.height_rows, result.settings,
+                        tuple(notes))

@@ -11,6 +11,8 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..config import RunConfig
+from ..scene.sanity import check_physics
+from ..studies.valid_pixels import check_rows
 from ..studies.convergence import (ALL_ESTIMATORS, COLUMNS, DEFAULT_N, DEFAULT_THETA_DEG,
                                    convergence_study)
 from . import files as pio
@@ -37,7 +39,13 @@ class ConvergenceResult:
     figure: Path | None
     warnings: list = field(default_factory=list)
     diagnostics: dict = field(default_factory=dict)
+    notes: tuple = ()
 
+
+
+def _row_name(r: dict) -> str:
+    theta = "" if r["theta_max_deg"] != r["theta_max_deg"] else f" theta_max {r['theta_max_deg']:g} deg"
+    return f"{r['estimator']} N = {r['n_rays']}{theta} {r['direction']} {r['width_px']:g} px"
 
 
 @single_blas
@@ -62,8 +70,11 @@ def run_convergence(
     ``convergence.png``; the other parameters are the study's."""
     final = Path(outdir).absolute()
     pio.check_output_dir(final, overwrite, MARKER)
+    notes = check_physics(cfg)  # a sensor/display/BRDF that leaves no signal, before the work
     study = convergence_study(cfg, n_values, theta_values, estimators, camera_size, widths,
                               directions, shifts, progress, diagnostics)
+    notes += check_rows(study.rows, cfg.diagnostics.allow_no_valid_pixels, "converge",
+                        _row_name)
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
         with open(tmp / "convergence.csv", "w", newline="") as fh:
             wr = csv.DictWriter(fh, fieldnames=COLUMNS)
@@ -79,6 +90,6 @@ def run_convergence(
                              cfg.sampling.theta_max_deg,
                              title=f"{cfg.name}: convergence ({w} x {h} px camera)")
             fig_path = final / "convergence.png"
-        (tmp / MARKER).write_text(json.dumps(study.meta, indent=2) + "\n")
+        pio.write_json(tmp / MARKER, study.meta)
     return ConvergenceResult(study.rows, final, final / "convergence.csv", fig_path,
-                             study.warnings, study.diagnostics)
+                             study.warnings, study.diagnostics, tuple(notes))

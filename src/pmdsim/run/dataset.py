@@ -418,8 +418,7 @@ def assign_to_dataset(ds, chain: ChainResult, stats: dict):
 
     ds = ds.assign_coords(quantity=("quantity", np.array(list(QUANTITIES), dtype=object)),
                           statistic=("statistic", np.array(STATISTICS, dtype=object)))
-    for name, (dims, data, attrs) in dataset_variables(chain).items():
-        ds[name] = (dims, data, attrs)
+    ds = ds.assign(dataset_variables(chain))  # one merge, not one per variable
     ds.attrs["decode_method"] = chain.method
     ds.attrs["min_modulation_ratio"] = chain.min_modulation_ratio
     ds.attrs["statistics_json"] = json.dumps(stats)

@@ -314,7 +314,7 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
     with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp:
         t = time.perf_counter()
         ds.to_zarr(tmp / DATASET_NAME, mode="w-", consolidated=False)
-        (tmp / "statistics.json").write_text(json.dumps(stats, indent=2) + "\n")
+        pio.write_json(tmp / "statistics.json", stats)
         figure_paths = []
         if figures:
             from ..report.chain import plot_decoded

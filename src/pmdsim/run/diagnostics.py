@@ -4,13 +4,13 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..config import RunConfig
 from ..render import Geometry, Simulation
+from .files import json_safe
 
 
 #: Quadrature points per grid pixel for the lobe-energy fraction of a run (``diagnose``'s
@@ -47,22 +47,6 @@ class _Diagnosed:
     warnings: tuple
     coords: dict
     variables: dict
-
-
-
-def _json_safe(obj):
-    """NaN/inf -> None and NumPy scalars -> Python numbers, recursively (strict JSON)."""
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    return obj
 
 
 
@@ -107,7 +91,7 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
         summary["energy"]["quadrature_points"] = DIAGNOSTICS_ENERGY_SAMPLES
     summary["bounds"] = cfg.diagnostics.model_dump(mode="json")
     summary["warnings"] = [asdict(w) for w in warnings]
-    summary = _json_safe(summary)
+    summary = json_safe(summary)
 
     coords = {
         "diag_row": ("diag_row", grid.rows.astype(np.int64), {

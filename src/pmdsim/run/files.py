@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import re
 import shutil
@@ -208,11 +209,32 @@ class StaleTemporaryWarning(UserWarning):
     """A temporary folder of an earlier, interrupted run was found next to the output."""
 
 
+def json_safe(obj):
+    """NaN/inf -> None and NumPy scalars -> Python numbers, recursively (strict JSON: a
+    result file never holds NaN, which strict parsers refuse; None reads as "undefined")."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
+def write_json(path: str | Path, content, indent: int | None = 2) -> Path:
+    """Write ``content`` as strict JSON (:func:`json_safe`; ``allow_nan=False``)."""
+    path = Path(path)
+    path.write_text(json.dumps(json_safe(content), indent=indent, allow_nan=False) + "\n")
+    return path
+
+
 def write_manifest(folder: str | Path, content: dict) -> Path:
     """Write the run manifest (JSON) into ``folder``; call it last."""
-    path = Path(folder) / MANIFEST
-    path.write_text(json.dumps(content, indent=2, sort_keys=False) + "\n")
-    return path
+    return write_json(Path(folder) / MANIFEST, content)
 
 
 # ----------------------------------------------------------------------------- dataset

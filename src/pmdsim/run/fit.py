@@ -20,6 +20,7 @@ import numpy as np
 from ..config import ConfigError, InputError, RunConfig
 from ..studies.fit import (MAX_CHI2, MAX_RAYS, FitResult, NoiseModel, check_fit_resources,
                            fit_fringe_images, format_fit)
+from ..scene.sanity import check_physics
 from . import files as pio
 from .threads import single_blas
 
@@ -34,6 +35,7 @@ class FitRun:
     figure: Path | None
     outdir: Path
     saturated: int = 0
+    notes: tuple = ()
 
 
 def check_fit_output(outdir, overwrite: bool = False) -> Path:
@@ -86,6 +88,7 @@ def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwri
     Returns also when the fit failed (``result.success`` false; the files say so)."""
     final = check_fit_output(outdir, overwrite)
     check_fit_resources(cfg, max_rays)  # memory and time, before the images are read
+    notes = check_physics(cfg)  # a sensor/display/BRDF that leaves no signal, named
     fr = cfg.patterns.fringes
     images, noise, saturated = load_fit_images(cfg, image_paths)
     res = fit_fringe_images(cfg, images, fr.widths_px, fr.directions, noise, max_chi2=max_chi2,
@@ -95,9 +98,9 @@ def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwri
         text += f"\n{saturated} saturated values left out"
     fig = None
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
-        (tmp / "fit.json").write_text(json.dumps(
-            res.as_dict() | {"model_name": cfg.brdf.model, "frame": cfg.anisotropy.frame,
-                             "saturated_values": saturated}, indent=2) + "\n")
+        pio.write_json(tmp / "fit.json", res.as_dict() | {
+            "model_name": cfg.brdf.model, "frame": cfg.anisotropy.frame,
+            "saturated_values": saturated})
         (tmp / "fit.txt").write_text(text + "\n")
         if figure:
             from ..report.texture import plot_fit
@@ -106,4 +109,4 @@ def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwri
             fig = final / "fit.png"
         (tmp / MARKER).write_text(json.dumps({"name": cfg.name, "kind": "fit",
                                               "success": res.success}) + "\n")
-    return FitRun(res, text, final / "fit.json", fig, final, saturated)
+    return FitRun(res, text, final / "fit.json", fig, final, saturated, tuple(notes))

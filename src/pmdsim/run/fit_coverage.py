@@ -26,9 +26,8 @@ def run_fit_coverage(outdir, n: int = 20, seed: int = 0, overwrite: bool = False
     results = fit_coverage(n, seed, progress)
     covered = sum(r.covered for r in results)
     with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
-        (tmp / "coverage.json").write_text(json.dumps(
-            {"n": n, "seed": seed, "covered_k2": covered,
-             "cases": [r.as_dict() for r in results]}, indent=2) + "\n")
+        pio.write_json(tmp / "coverage.json", {"n": n, "seed": seed, "covered_k2": covered,
+                                               "cases": [r.as_dict() for r in results]})
         plot_fit_coverage(results, tmp / "coverage.png")
         (tmp / MARKER).write_text(json.dumps({"kind": "fit-coverage", "n": n}) + "\n")
     return results, final

@@ -38,7 +38,7 @@ import json
 import os
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -59,8 +59,9 @@ ProgressFn = Callable[[int, int], None]
 @dataclass(frozen=True)
 class SweepResult:
     """What :func:`run_sweep` did: the store, the points it computed now (flat indices), the
-    points it found done, the wall time and the files written beside the store
-    (``points.csv``, figures)."""
+    points it found done, the wall time, the files written beside the store
+    (``points.csv``, figures), the physics checks' notes and the ``empty`` points (one line
+    each: a fringe direction without a valid pixel, :func:`empty_points`)."""
 
     outdir: Path
     store: Path
@@ -69,6 +70,8 @@ class SweepResult:
     total: int
     seconds: float
     files: tuple = ()
+    notes: tuple = ()
+    empty: tuple = ()
 
 
 # ----------------------------------------------------------------------------- the store
@@ -228,6 +231,20 @@ def remove_stale_stores(outdir: str | Path) -> list[Path]:
     return removed
 
 
+def _labels(plan: SweepPlan) -> list[str]:
+    return [f"sweep point {p.index} (" + ", ".join(f"{k} = {v!r}" for k, v in p.values.items())
+            + ")" for p in plan.points]
+
+
+def check_sweep_physics(plan: SweepPlan) -> list[str]:
+    """The physics sanity of every point (:func:`pmdsim.scene.sanity.check_each`), before
+    anything is created: a sensor, display or BRDF that leaves no signal is refused naming
+    the point, its values and the field; returns the notes, each naming its point."""
+    from ..scene.sanity import check_each
+
+    return check_each([p.config for p in plan.points], _labels(plan))
+
+
 def check_sweep_resources(plan: SweepPlan, scheduler: str, num_workers: int | None,
                           local: bool = True):
     """Refuse, before anything is created, a sweep whose largest point does not fit this
@@ -366,11 +383,13 @@ def run_sweep(cfg: RunConfig | str | Path, outdir: str | Path, *, scheduler: str
                           "'processes' or a scheduler address such as tcp://host:8786")
     outdir = Path(outdir)
     check_sweep_resources(plan, scheduler, num_workers, local=client is None and not is_address)
+    notes = check_sweep_physics(plan)  # every point's sensor, display and BRDF, named
     remote = connect_scheduler(scheduler) if client is None and is_address else None
     try:
         with claim_sweep(outdir):
-            return _run_claimed(plan, outdir, overwrite, client or remote, scheduler,
-                                num_workers, progress, figures, t0)
+            result = _run_claimed(plan, outdir, overwrite, client or remote, scheduler,
+                                  num_workers, progress, figures, t0)
+            return replace(result, notes=tuple(notes))
     finally:
         if remote is not None:
             remote.close()
@@ -418,7 +437,27 @@ def _run_claimed(plan: SweepPlan, outdir: Path, overwrite: bool, client, schedul
 
         files += sweep_figures(ds, outdir / "figures")
     return SweepResult(outdir, store, tuple(sorted(computed)), skipped, len(plan.points),
-                       time.perf_counter() - t0, tuple(files))
+                       time.perf_counter() - t0, tuple(files), empty=empty_points(plan, ds))
+
+
+def empty_points(plan: SweepPlan, ds) -> tuple[str, ...]:
+    """One line per finished point with a fringe direction without a valid pixel (its
+    statistics are NaN in the store), unless its ``diagnostics.allow_no_valid_pixels``
+    says that is wanted: a sweep with such points is not a complete result (the command
+    line exits 1 naming them)."""
+    valid = ds["deviation_stats"].sel(quantity="phase_mrad", statistic="n_valid").load()
+    done = ds["done"].values
+    out = []
+    for p in plan.points:
+        if not done[p.position] or p.config.diagnostics.allow_no_valid_pixels:
+            continue
+        n = valid.isel(dict(zip(plan.dims, p.position)))
+        dirs = [str(d) for d, v in zip(ds["direction"].values, n.values) if not v > 0]
+        if dirs:
+            shown = ", ".join(f"{k} = {v!r}" for k, v in p.values.items())
+            out.append(f"sweep point {p.index} ({shown}): no valid pixel in the "
+                       f"{' and '.join(dirs)} fringes")
+    return tuple(out)
 
 
 def load_sweep(path: str | Path):

@@ -3,12 +3,12 @@ every number, a text table, a figure. (The BRDF fit's folder, ``pmdsim fit``: :m
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..brdf.turning import TextureParameters, format_texture, texture_parameters
 from ..report.texture import plot_texture
+from .files import write_json
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,7 @@ def run_texture(outdir=None, *, figure: bool = True, wavelengths_nm=(610.0, 545.
         out = Path(outdir)
         out.mkdir(parents=True, exist_ok=True)
         js = out / "texture.json"
-        js.write_text(json.dumps(p.as_dict(), indent=2))
+        write_json(js, p.as_dict())
         (out / "texture.txt").write_text(text + "\n")
         if figure:
             fig = plot_texture(p, out / "texture.png", wavelengths_nm, weights)
@@ -67,8 +67,8 @@ def run_topography(path, outdir=None, *, figure: bool = True, spacing_mm=None,
         out = Path(outdir)
         out.mkdir(parents=True, exist_ok=True)
         js = out / "topography.json"
-        js.write_text(json.dumps(a.as_dict() | {"reader": t.reader, "invalid_points": t.invalid,
-                                                "radial_axis": radial_axis}, indent=2))
+        write_json(js, a.as_dict() | {"reader": t.reader, "invalid_points": t.invalid,
+                                      "radial_axis": radial_axis})
         (out / "topography.txt").write_text(text + "\n")
         if figure:
             fig = plot_topography(a, h, dx, dy, out / "topography.png")

@@ -81,7 +81,7 @@ def write_variant_outputs(cfg: RunConfig, tmp: Path, names: list[str], subs, fig
     datasets back lazily from their folders."""
     stats = {r.config.name: r.statistics for r in subs if r.statistics}
     if stats:
-        (tmp / "statistics.json").write_text(json.dumps({"variants": stats}, indent=2) + "\n")
+        pio.write_json(tmp / "statistics.json", {"variants": stats})
         (tmp / "summary.txt").write_text("\n".join(summary_text_of(s) for s in stats.values()))
     decoded = any("directions" in s for s in stats.values())
     has_dots = cfg.patterns.dots is not None

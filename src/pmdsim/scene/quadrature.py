@@ -29,11 +29,20 @@ Rules (:func:`cone_rule`, :func:`hermite_rule`, :func:`unit_rule`):
   densities cell by cell in the limit, but the cell edges make the integrand piecewise
   smooth, so these use randomised QMC by default (:func:`sampling_plan`).
 
-Error of the rendered rule: the **embedded** rule of about 3/4 the order in each
-coordinate (:func:`embedded_order`) is rendered too; ``|S - S_embedded|`` is the error
-estimate of every sum ``S``. It is the error of the coarser rule, so it bounds the error
-of the rendered one (tested against SciPy's adaptive cubature: >= 95 % of pixels, usually
-by a wide margin: a conservative statement). Where the integrand is not smooth (a
+Error of the rendered rule: two **embedded** rules, of about 3/4 the order in each
+coordinate (:func:`embedded_order`) and as far below that again
+(:func:`second_embedded_order`; 8 x 32 -> 6 x 24 -> 4 x 16: 81 % more rays), are rendered
+too. ``dS1 = S - S_embedded`` is the error of the coarser rule, so
+``|Im(dS1 conj S)| / |S|^2 + 0.1 |dS1| / |S|`` (phase difference plus a floor for the
+pre-asymptotic case) bounds the rendered rule's phase error, by 10 to 1000 x where the rule
+converges fast. ``|dS1| / |dS2|`` (median over the pixels of a fringe) is the observed
+convergence factor per step; when it shows the asymptotic regime (its prediction
+``q = median(|dS1| / |dS2|)^k`` for ``E(rule) / E(embedded)``, :func:`convergence_exponent`,
+is below 1/10 and the median ``|dS1| / |S|`` is below 2e-3) the statement is scaled by it,
+with a safety factor 10 on the phase difference (:func:`pmdsim.render.results.phase_error`).
+Tested against SciPy's adaptive cubature: >= 95 % of pixels bounded, median stated/true
+about 50 (X) and 10 (Y) for the finest Fig. 3 fringe where the unscaled statement was 800
+and 90. Where the integrand is not smooth (a
 ``nearest`` monitor's pixel steps, dots, images) the rule converges slowly and the
 difference says little: there **randomised QMC** (``rqmc``: R independent Owen-scrambled
 Sobol sets of N / R points, :func:`sobol_points`) gives an unbiased mean and its standard
@@ -104,6 +113,25 @@ def embedded_order(order: tuple[int, int]) -> tuple[int, int]:
     """About 3/4 of the order in each coordinate (at least 1, and below the order where it
     is above 1): the embedded rule whose difference estimates the error."""
     return tuple(max(1, min(n - 1, int(round(0.75 * n)))) if n > 1 else 1 for n in order)
+
+
+def second_embedded_order(order: tuple[int, int]) -> tuple[int, int]:
+    """The second embedded rule, as far below the embedded rule as that is below the rule
+    (``2 m - n`` in each coordinate, at least 1; 8 x 32 -> 6 x 24 -> 4 x 16): its
+    difference gives the observed convergence factor (:func:`convergence_exponent`)."""
+    return tuple(max(1, 2 * m - n) for n, m in zip(order, embedded_order(order)))
+
+
+def convergence_exponent(order: tuple[int, int]) -> float | None:
+    """``k = (L0 - L1) / (L1 - L2)``, ``L = sqrt(n1 n2)`` (the rule's linear order) of the
+    rule, its embedded and its second embedded rule: an error falling exponentially in L,
+    ``E(L) ~ rho^L``, gives ``E(rule) / E(embedded) = (E(embedded) / E(second))^k``; None
+    when the three rules are not of decreasing order (orders of 1 or 2)."""
+    m1, m2 = embedded_order(order), second_embedded_order(order)
+    lin = [math.sqrt(a * b) for a, b in (order, m1, m2)]
+    if not lin[0] > lin[1] > lin[2]:
+        return None
+    return (lin[0] - lin[1]) / (lin[1] - lin[2])
 
 
 def _lobe_radial_map(t, scale, theta_max, solid_angle):

@@ -15,8 +15,8 @@ and map the points to directions:
 
 - ``rule`` (default): a deterministic Gauss rule, :mod:`pmdsim.scene.quadrature` (cone:
   Gauss-Legendre theta x trapezoid phi; Gaussian lobes: Gauss-Hermite in slope space),
-  no P; each sum's numerical error is the difference to the embedded rule of about 3/4
-  the order (a second, smaller pass: :meth:`ConeSampling.error_passes`). Where the
+  no P; each sum's numerical error comes from the embedded rules of about 3/4 and 1/2
+  the order (two smaller passes: :meth:`ConeSampling.error_passes`). Where the
   integrand is not smooth (a ``nearest`` monitor, dots, images, tabulated or grating-order
   slope densities) the renderer uses ``rqmc`` instead (and says so: ``Simulation.plan``);
 - ``rqmc``: ``replicates`` independent scrambled Sobol sets of ``n_rays / replicates``
@@ -63,8 +63,8 @@ class ConeSampling:
     the cone. ``lobe_gaussian``: the radiometric sampler maps Gaussian slopes (Ward,
     Beckmann: Gauss-Hermite rule) rather than a tabulated CDF (Gauss-Legendre in the unit
     square; not smooth at the cells' edges). ``part``: which pass of an error estimate this
-    set is (0: the rendered rule; in mode ``rule`` 1 = the embedded rule; in mode ``rqmc``
-    the replicate index).
+    set is (0: the rendered rule; in mode ``rule`` 1 = the embedded rule, 2 = the second
+    embedded rule; in mode ``rqmc`` the replicate index).
     """
 
     n_rays: int = 100
@@ -117,20 +117,25 @@ class ConeSampling:
             return quad.Rule(u1, u2, np.full(u1.size, 1.0 / max(self.n_rays, 1)),
                              (u1.size, 1), "lattice")
         if lobe:
-            order = quad.square_order(self.n_rays)
-            if self.part == 1:
-                order = quad.embedded_order(order)
+            order = self._part_order(quad.square_order(self.n_rays))
             return quad.hermite_rule(order) if self.lobe_gaussian else quad.unit_rule(order)
-        order = quad.cone_order(self.n_rays)
-        if self.part == 1:
-            order = quad.embedded_order(order)
+        order = self._part_order(quad.cone_order(self.n_rays))
         return quad.cone_rule(order, self.scheme, self.theta_max, self.lobe_sigma)
 
+    def _part_order(self, order: tuple[int, int]) -> tuple[int, int]:
+        """The order of this pass of the rule ``order`` (:attr:`part`)."""
+        if self.part == 1:
+            return quad.embedded_order(order)
+        if self.part == 2:
+            return quad.second_embedded_order(order)
+        return order
+
     def error_passes(self) -> tuple["ConeSampling", ...]:
-        """The sets whose renders give the value and its error: (rule, embedded rule) in
-        mode ``rule``, the R replicates in mode ``rqmc``; (self,) otherwise."""
+        """The sets whose renders give the value and its error: (rule, embedded rule,
+        second embedded rule) in mode ``rule``, the R replicates in mode ``rqmc``; (self,)
+        otherwise."""
         if self.mode == "rule":
-            return (replace(self, part=0), replace(self, part=1))
+            return tuple(replace(self, part=p) for p in range(3))
         if self.mode == "rqmc":
             return tuple(replace(self, part=r) for r in range(self.replicates))
         return (self,)

@@ -14,8 +14,12 @@ All checks are arithmetic on the configuration and the scene objects (no ray is 
   ``falloff_table``); the cover glass or the flatness moves the emitting pixels by more than
   half the monitor, or to the part itself (``cover_glass_thickness_mm``,
   ``flatness_coefficients_mm``, ``flatness_map``);
-- **BRDF** (``[brdf.variation]``): ``rho_s`` times the largest ``rho_s_scale`` above 1 (an
-  albedo above 1 reflects more light than falls on the surface).
+- **BRDF** (``[brdf]``, ``[brdf.variation]``): ``rho_s`` times the largest ``rho_s_scale``
+  above 1 (an albedo above 1 reflects more light than falls on the surface), unless
+  ``diagnostics.allow_albedo_above_one`` says it is meant.
+
+``simulate`` and ``budget`` check their configuration, every sweep point, ``converge`` and
+``fit`` theirs (:func:`check_each` names the point) before any ray is traced.
 """
 
 from __future__ import annotations
@@ -187,41 +191,82 @@ def check_display(monitor, target) -> list[str]:
 
 # ----------------------------------------------------------------------------- BRDF
 def check_brdf(cfg) -> list[str]:
-    """Refuse an albedo above 1: ``rho_s`` times the largest ``rho_s_scale`` of
-    ``[brdf.variation]`` (tables or map)."""
+    """Refuse an albedo above 1: ``rho_s`` (the specular reflectance / Fresnel factor of every
+    model that has one) times the largest ``rho_s_scale`` of ``[brdf.variation]`` (tables or
+    map), unless ``diagnostics.allow_albedo_above_one`` (then a note)."""
     brdf = cfg.brdf
-    var = getattr(brdf, "variation", None)
     rho = getattr(brdf, "rho_s", None)
-    if var is None or rho is None:
+    if rho is None:
         return []
-    if var.file is not None:
+    var = getattr(brdf, "variation", None)
+    biggest, field = None, "brdf.rho_s"
+    if var is not None and var.file is not None:
         from ..config.files import read_variation_map
 
         scale = read_variation_map(var.file, var.quantity).get("rho_s_scale")
         biggest = None if scale is None else float(scale.max())
-    else:
-        biggest = None if var.rho_s_scale is None else float(max(var.rho_s_scale))
-    if biggest is not None and rho * biggest > 1.0:
-        raise _refuse("brdf.variation.rho_s_scale", f"rho_s = {rho:g} times the largest "
-                      f"rho_s_scale {biggest:g} is an albedo of {rho * biggest:.3g} > 1: the "
-                      "surface would reflect more light than falls on it; keep rho_s_scale "
-                      f"<= {1 / rho:.4g}")
-    return []
+    elif var is not None and var.rho_s_scale is not None:
+        biggest = float(max(var.rho_s_scale))
+    if biggest is not None:
+        field = "brdf.variation." + ("file" if var.file is not None else "rho_s_scale")
+    albedo = rho * (1.0 if biggest is None else biggest)
+    if albedo <= 1.0:
+        return []
+    what = (f"rho_s = {rho:g}" if biggest is None
+            else f"rho_s = {rho:g} times the largest rho_s_scale {biggest:g}")
+    text = (f"{what} is an albedo of {albedo:.3g} > 1: the surface would reflect more light "
+            "than falls on it")
+    if getattr(cfg.diagnostics, "allow_albedo_above_one", False):
+        return [f"{field}: {text} (accepted: diagnostics.allow_albedo_above_one = true)"]
+    fix = ("keep rho_s <= 1" if biggest is None else f"keep rho_s_scale <= {1 / rho:.4g}")
+    raise _refuse(field, f"{text}; {fix}, or set diagnostics.allow_albedo_above_one = true "
+                  "to use it as a relative brightness on purpose")
 
 
-def check_physics(cfg, scene) -> list[str]:
-    """All checks of this module for a run configuration and its
-    :class:`~pmdsim.scene.Scene`; raises :class:`ConfigError` naming the field, returns
+def check_physics(cfg, scene=None) -> list[str]:
+    """All checks of this module for a run configuration (and its
+    :class:`~pmdsim.scene.Scene`, when built: only its monitor is used; without one the
+    monitor is built from ``cfg``); raises :class:`ConfigError` naming the field, returns
     notes (each naming the field and the share it affects)."""
+    from .monitor import Monitor
     from .sensor import Sensor
 
     notes = check_sensor(Sensor.from_config(cfg.sensor))
     target = cfg.camera.look_at_mm
     if target is None:
         target = getattr(cfg.surface, "centre_mm", (0.0, 0.0, 0.0))
-    notes += check_display(scene.monitor, np.asarray(target, np.float64))
+    monitor = scene.monitor if scene is not None else Monitor.from_config(cfg.monitor)
+    notes += check_display(monitor, np.asarray(target, np.float64))
     notes += check_brdf(cfg)
     return notes
 
 
-__all__ = ["check_physics", "check_sensor", "check_display", "check_brdf"]
+def physics_key(cfg) -> str:
+    """What :func:`check_physics` reads of ``cfg`` (configurations with the same key get the
+    same answer): the sensor (but its seed), monitor, BRDF, camera target, surface and the
+    diagnostics' overrides."""
+    d = cfg.model_dump(mode="json", include={"sensor", "monitor", "brdf", "camera", "surface",
+                                               "diagnostics"})
+    (d.get("sensor") or {}).pop("seed", None)
+    return repr(sorted(d.items()))
+
+
+def check_each(configs, labels) -> list[str]:
+    """:func:`check_physics` of every configuration of a study (sweep points, ...), each
+    distinct one once; a refusal names the configuration by its label
+    (``invalid configuration (<label>):``); returns the notes, each with its label."""
+    seen: dict[str, list[str]] = {}
+    notes: list[str] = []
+    for cfg, label in zip(configs, labels):
+        key = physics_key(cfg)
+        if key not in seen:
+            try:
+                seen[key] = check_physics(cfg)
+            except ConfigError as err:
+                head, _, rest = str(err).partition("\n")
+                raise ConfigError(f"invalid configuration ({label}):\n{rest or head}") from None
+            notes += [f"{label}: {n}" for n in seen[key]]
+    return notes
+
+
+__all__ = ["check_physics", "check_each", "check_sensor", "check_display", "check_brdf"]

@@ -141,7 +141,7 @@ def zernike_monomials(j: int) -> np.ndarray:
 def load_height_map(path, field: str = "surface.file", spacing_mm=(1.0, 1.0), height_unit="mm",
                     **options):
     """A (H, W) float64 height grid in mm and its spacing (dx, dy) in mm from an instrument
-    file (X3P, .sur, .plu, ...: units and spacing from the file) or a plain array (.npy,
+    file (X3P, .sur, .sdf, ...: units and spacing from the file) or a plain array (.npy,
     .csv/.txt, 32/64-bit float .tif/.tiff: ``spacing_mm``, ``height_unit``;
     :func:`pmdsim.config.files.read_height_map`) through
     :func:`pmdsim.topofile.read_topography` (``options``: ``level``, ``fill``,

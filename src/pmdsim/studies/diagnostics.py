@@ -412,13 +412,13 @@ def phase_error_seeds(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
 def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
                      directions: Sequence[str] = ("x", "y")) -> np.ndarray:
     """The stated numerical phase error (n_directions, n_widths, gr, gc), rad, of the sample
-    sets the run actually renders (mode ``rule``: the rule against its embedded rule; mode
+    sets the run actually renders (mode ``rule``: the rule against its embedded rules; mode
     ``rqmc``: the replicates' spread), at the grid pixels: the same statement as
     :meth:`pmdsim.render.FringeResult.phase_error`, from the rays of
     :meth:`~pmdsim.render.Simulation.transport` (linear fringes, as the other methods)."""
     from ..render import Simulation
-    from ..render.results import phase_error
-    from ..scene.quadrature import student_t975
+    from ..render.results import convergence_factor, phase_error
+    from ..scene.quadrature import convergence_exponent, student_t975
 
     nearest = sim.scene.monitor.pixel_model == "nearest"
     rows, cols = grid.pixel_rows, grid.pixel_cols
@@ -434,7 +434,11 @@ def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
     if len(passes) == 1:
         se = np.full(z.shape[1:], np.nan)
     elif passes[0].mode == "rule":
-        se = phase_error(z[0], z[0] - z[1], "embedded")
+        conv = None
+        if len(passes) > 2:  # the observed convergence against the second embedded rule
+            conv = convergence_factor(z[0], z[0] - z[1], z[0] - z[2], convergence_exponent(
+                passes[0].rule(sim._lobe).order), pixel_axes=1)
+        se = phase_error(z[0], z[0] - z[1], "embedded", conv)
     else:
         r = z.shape[0]
         half = student_t975(r - 1) / math.sqrt(r)

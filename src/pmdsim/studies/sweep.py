@@ -398,15 +398,20 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
         fringes = replace(fringes, images=capture_dn(sensor, fringes.images, 0))
     decoded = chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
                                    sensor.saturation_dn if sensor.enabled else None)
+    from .coverage import off_monitor_mask  # as simulate: lobes off the monitor are not valid
+
+    off = off_monitor_mask(fringes.f_total, fringes.f_hit, geometry.surface_mask,
+                           cfg.diagnostics.max_off_monitor_fraction)
     del fringes
     measured = chain.compare(decoded, ref_decoded, geometry, distance,
                              cfg.monitor.pixel_pitch_mm, cfg.decode, fr_cfg.shifts,
                              slope_geometry=chain.SlopeGeometry(
-                                 geometry.points, sim.scene.camera.position, sim.scene.monitor))
+                                 geometry.points, sim.scene.camera.position, sim.scene.monitor),
+                             off_monitor=off)
     dcs = [measured.directions[d] for d in fr_cfg.directions]
-    stats = np.array([[[np.nan if (x := chain.direction_quantity_stats(dc)[q][s]) is None
-                        else x for s in STATISTICS] for q in QUANTITIES] for dc in dcs],
-                     np.float64)
+    per_direction = [chain.direction_quantity_stats(dc) for dc in dcs]  # once each
+    stats = np.array([[[np.nan if (x := st[q][s]) is None else x for s in STATISTICS]
+                       for q in QUANTITIES] for st in per_direction], np.float64)
 
     def median(a, where):
         a = np.asarray(a, np.float64)[where]

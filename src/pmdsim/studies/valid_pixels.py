@@ -98,4 +98,21 @@ def check_valid(statistics: dict, camera_pixels: int, allow: bool, name: str = "
                       "diagnostics.allow_no_valid_pixels = true to keep such a run)")
 
 
-__all__ = ["STAGES", "removed_by_stage", "culprit", "explain", "check_valid"]
+def check_rows(rows, allow: bool, command: str, describe) -> list[str]:
+    """Refuse the result of a study (``budget``'s rows, ``converge``'s rows: dicts with
+    ``n_valid``) in which some row has no valid pixel, naming each such row
+    (``describe(row)``); with ``allow`` (``diagnostics.allow_no_valid_pixels``) return a
+    note instead. Nothing of the study is written when it is refused."""
+    empty = [describe(r) for r in rows if int(r.get("n_valid", 1)) == 0]
+    if not empty:
+        return []
+    text = f"no valid pixel in {len(empty)} of {len(rows)} rows: " + "; ".join(empty)
+    if allow:
+        return [f"{command}: {text} (kept because diagnostics.allow_no_valid_pixels = true)"]
+    raise ConfigError(f"invalid set-up:\n  diagnostics.allow_no_valid_pixels: {command}: {text}; "
+                      "nothing was written. Run the configuration with pmdsim simulate to see "
+                      "which stage removes the pixels, or set "
+                      "diagnostics.allow_no_valid_pixels = true to keep such rows")
+
+
+__all__ = ["STAGES", "removed_by_stage", "culprit", "explain", "check_valid", "check_rows"]
