@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/bench_render.py [--baseline 4c74c4d] [--config examples/paper_fig3.toml]
                                       [--repeat 5] [--workers 2] [--no-compile] [--rounds 1]
+                                      [--set sampling.n_rays=100 --set monitor.pixel_model=nearest]
 
 The baseline commit (default ``4c74c4d``, the tree before issue 13's kernel work) is checked
 out with ``git worktree`` into a temporary folder. Both trees are measured by the same code
@@ -24,6 +25,11 @@ in fresh subprocesses, alternately, with the same settings:
 With ``--rounds R`` the cached-kernel measurements alternate between the trees R times
 (baseline, this tree, baseline, ...) and each figure is the median over the rounds, so
 that a change of the machine's load during the run hits both trees alike.
+
+``--set SECTION.KEY=VALUE`` overrides a value of the configuration in both trees (the
+issue's N = 100 aim: ``--set sampling.n_rays=100``; the nearest-pixel monitor:
+``--set monitor.pixel_model=nearest``). Rays per CPU-second count every ray traced,
+including the passes of the error estimate (the embedded rule, the replicates).
 
 It prints both columns, their ratio, the issue's aims (>= 200 M rays per CPU-second at
 N = 100; the Fig. 3 sequence in <= 0.3 s wall on 2 cores) and the load average before and
@@ -46,12 +52,19 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 CODE = r"""
-import json, sys, time
+import json, sys, time, tomllib
 import numpy as np
-from pmdsim.config import load_config
+from pmdsim.config import parse_config
 from pmdsim.render import Simulation
 config, repeat, workers, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
-cfg = load_config(config)
+raw = tomllib.load(open(config, "rb"))
+for item in json.loads(sys.argv[5]):  # --set SECTION.KEY=VALUE overrides
+    *path, key = item[0].split(".")
+    node = raw
+    for part in path:
+        node = node.setdefault(part, {})
+    node[key] = item[1]
+cfg = parse_config(raw)
 sim = Simulation.from_config(cfg)
 sim.num_workers = workers
 fr = cfg.patterns.fringes
@@ -70,7 +83,10 @@ for _ in range(repeat):
     res, w, c = timed(lambda: sim.render_fringes(widths, dirs, shifts))
     seq.append((w, c))
 np.save(out, res.images[:, :, :, ::8, ::8])
-rays = int(mask.sum()) * sim.scene.rays_per_pixel
+# every ray traced: the passes of the error estimate (embedded rule, replicates) count too
+plan = getattr(sim, "plan", None)
+passes = plan(sim.fringes_smooth()) if plan is not None else (sim.scene.sampling,)
+rays = int(mask.sum()) * sum(sim.scene.replace(sampling=p).rays_per_pixel for p in passes)
 print(json.dumps({"first": first, "first_cpu": first_cpu, "one_wall": min(w for w, _ in one),
                   "one_cpu": min(c for _, c in one), "seq_wall": min(w for w, _ in seq),
                   "seq_cpu": min(c for _, c in seq), "rays": rays}))
@@ -95,7 +111,17 @@ def main():
     ap.add_argument("--no-compile", action="store_true", help="skip the empty-cache compile runs")
     ap.add_argument("--rounds", type=int, default=1,
                     help="alternate the cached-kernel runs of the two trees this many times")
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                    help="override a configuration value (VALUE as JSON, else a string), e.g. "
+                    "--set sampling.n_rays=100 --set monitor.pixel_model=nearest")
     args = ap.parse_args()
+    sets = []
+    for item in args.set:
+        key, _, val = item.partition("=")
+        try:
+            sets.append((key, json.loads(val)))
+        except json.JSONDecodeError:
+            sets.append((key, val))
 
     print(f"load average before: {os.getloadavg()}  ({os.cpu_count()} cores)", flush=True)
     tmp = Path(tempfile.mkdtemp(prefix="pmdsim-bench-render-"))
@@ -111,12 +137,14 @@ def main():
         for i, (name, src) in enumerate(trees.items()):
             if not args.no_compile:  # empty cache: the first call compiles the kernels
                 print(f"[{name}] empty NUMBA_CACHE_DIR ...", flush=True)
-                cold[name] = _run(src, cache[name], common + [str(tmp / f"cold-{i}.npy")])
+                cold[name] = _run(src, cache[name],
+                                  common + [str(tmp / f"cold-{i}.npy"), json.dumps(sets)])
         runs = {name: [] for name in trees}
         for r in range(max(args.rounds, 1)):
             for i, (name, src) in enumerate(trees.items()):
                 print(f"[{name}] cached kernels, round {r + 1} ...", flush=True)
-                runs[name].append(_run(src, cache[name], common + [str(tmp / f"img-{i}.npy")]))
+                runs[name].append(_run(src, cache[name],
+                                       common + [str(tmp / f"img-{i}.npy"), json.dumps(sets)]))
         for name in trees:
             warm = {k: float(np.median([run[k] for run in runs[name]])) for k in runs[name][0]}
             warm["compile"] = (None if args.no_compile
@@ -145,7 +173,8 @@ def main():
         ("Fig. 3 sequence: wall, s", "seq_wall", 1.0, 0.3),
         ("Fig. 3 sequence: CPU, s", "seq_cpu", 1.0, None),
     ]
-    print(f"\n{rays / 1e6:.0f} M scattered rays per Fig. 3 frame set, {args.workers} workers")
+    print(f"\n{rays / 1e6:.0f} M scattered rays per Fig. 3 frame set (every pass), "
+          f"{args.workers} workers, settings {sets or 'as configured'}")
     print(f"{'':46s} {'baseline':>10s} {'this tree':>10s} {'ratio':>7s} {'aim':>8s}")
     for label, key, scale, aim in rows:
         vals = []

@@ -5,8 +5,10 @@ plane, z = normal), with ``i`` pointing from the surface to the camera and ``o``
 surface to the monitor, samples outgoing directions from unit-square points the caller
 passes in (``sample``: deterministic, so testable and seedable outside), gives the density
 of those samples per solid angle (``pdf``), and exposes a parameter vector for the compiled
-kernels (``pmdsim.kernels.bundle.B_*``). Adding a model is one new file here plus its case
-in the kernels' weight loops (cone: ``_phase1``; radiometric: ``_phase1_lobe``).
+kernels (``pmdsim.kernels.bundle.B_*``). Adding a model is one new file here plus its
+weight functions and one row in ``pmdsim.kernels.bundle.MODELS`` (per-pixel constants and
+ray weight for the cone estimators; micro-normal draw, constants and weight for the
+radiometric one).
 
 The NumPy methods here are the reference the compiled kernels are tested against.
 """
