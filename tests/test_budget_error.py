@@ -110,13 +110,7 @@ def test_rows_are_value_with_error(orders):
 
 
 @pytest.mark.parametrize("which", [
-    pytest.param("surface_ideal", marks=pytest.mark.xfail(strict=True, reason=(
-        "the render's stated error (two embedded rules, merged from main at the end of wave "
-        "4) is too small on this lobe: vs 1024 nodes it bounds the true error in 88 % (64 "
-        "nodes) and 80 % (128 nodes) of the pixels, and the row moves 0.0026 mrad where "
-        "0.00038 is stated; with the previous estimate (embedded difference + 0.1 floor) "
-        "this passed. Remove the mark when the estimate bounds it again."))),
-    "surface"])
+    "surface_ideal", "surface"])
 def test_rows_change_less_than_their_error_when_the_order_doubles(orders, which):
     """Issue 18's acceptance on a reduced configuration (the realistic example's code
     path with a continuous linear monitor): each row at the default order and at twice it

@@ -313,7 +313,7 @@ class Simulation:
         err = None
         if len(passes) > 1:
             err = "embedded" if first.mode == "rule" else "replicates"
-        d = {"mode": first.mode, "rule": rule.describe(), "nodes": rule.n,
+        d = {"mode": first.mode, "rule": rule.describe(), "kind": rule.kind, "nodes": rule.n,
              "order": list(rule.order), "passes": len(passes), "error": err, "smooth": smooth}
         if err == "embedded":
             d["embedded_rule"] = " and ".join(p.rule(self._lobe).describe() for p in passes[1:])
@@ -486,7 +486,8 @@ class Simulation:
             sums_err = np.empty((nd, nw, h, w_), np.complex128)
             for di, wi in cols:
                 sums_err[di, wi] = fringe_sum(diffs[0], di, wi)
-            kexp = convergence_exponent(tuple(info["order"])) if len(diffs) > 1 else None
+            kexp = (convergence_exponent(tuple(info["order"]), info["kind"]) if len(diffs) > 1
+                    else None)
             if kexp is not None:  # the observed convergence from the second embedded rule
                 convergence = np.ones((nd, nw))  # fringe by fringe: one (H, W) copy at a time
                 for di, wi in cols:

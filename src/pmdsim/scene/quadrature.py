@@ -39,7 +39,8 @@ converges fast. ``|dS1| / |dS2|`` (median over the pixels of a fringe) is the ob
 convergence factor per step; when it shows the asymptotic regime (its prediction
 ``q = median(|dS1| / |dS2|)^k`` for ``E(rule) / E(embedded)``, :func:`convergence_exponent`,
 is below 1/10 and the median ``|dS1| / |S|`` is below 2e-3) the statement is scaled by it,
-with a safety factor 10 on the phase difference (:func:`pmdsim.render.results.phase_error`).
+with a safety factor 10 on the phase difference (:func:`pmdsim.render.results.phase_error`;
+cone rules only: Gauss-Hermite rules keep the unscaled statement, :func:`convergence_exponent`).
 Tested against SciPy's adaptive cubature: >= 95 % of pixels bounded, median stated/true
 about 50 (X) and 10 (Y) for the finest Fig. 3 fringe where the unscaled statement was 800
 and 90. Where the integrand is not smooth (a
@@ -122,11 +123,17 @@ def second_embedded_order(order: tuple[int, int]) -> tuple[int, int]:
     return tuple(max(1, 2 * m - n) for n, m in zip(order, embedded_order(order)))
 
 
-def convergence_exponent(order: tuple[int, int]) -> float | None:
+def convergence_exponent(order: tuple[int, int], kind: str = "cone") -> float | None:
     """``k = (L0 - L1) / (L1 - L2)``, ``L = sqrt(n1 n2)`` (the rule's linear order) of the
     rule, its embedded and its second embedded rule: an error falling exponentially in L,
     ``E(L) ~ rho^L``, gives ``E(rule) / E(embedded) = (E(embedded) / E(second))^k``; None
-    when the three rules are not of decreasing order (orders of 1 or 2)."""
+    when the three rules are not of decreasing order (orders of 1 or 2), and for rules other
+    than the cone's product rule (``kind``): the scaling was validated on cone rules only; on
+    the radiometric Gauss-Hermite rules (8 x 8 to 11 x 11, a Ward lobe with unequal alphas
+    under 16 px fringes) the scaled statement bounded the true error in only 80-88 % of the
+    pixels (``tests/test_budget_error.py``), so they keep the unscaled embedded statement."""
+    if kind != "cone":
+        return None
     m1, m2 = embedded_order(order), second_embedded_order(order)
     lin = [math.sqrt(a * b) for a, b in (order, m1, m2)]
     if not lin[0] > lin[1] > lin[2]:

@@ -436,8 +436,9 @@ def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
     elif passes[0].mode == "rule":
         conv = None
         if len(passes) > 2:  # the observed convergence against the second embedded rule
+            rule = passes[0].rule(sim._lobe)
             conv = convergence_factor(z[0], z[0] - z[1], z[0] - z[2], convergence_exponent(
-                passes[0].rule(sim._lobe).order), pixel_axes=1)
+                tuple(rule.order), rule.kind), pixel_axes=1)
         se = phase_error(z[0], z[0] - z[1], "embedded", conv)
     else:
         r = z.shape[0]
