@@ -6,27 +6,17 @@ check that every case of the issue reaches the user as bad input."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from conftest import base_dict, merge
+from test_cli_bad_input import _toml
 from test_physics_sanity import REFUSED
 from test_user_files import GRID_CASES, LUT_CASES, _write_case
 
 LENS = {"focal_length_mm": 16.0, "pixel_pitch_mm": 0.2, "focal_length_px": None}
 HEIGHT_MAP = {"type": "height_map", "spacing_mm": [1.0, 1.5]}
-
-
-def _toml(data: dict, prefix: str = "") -> str:
-    plain = [f"{k} = {json.dumps(v)}" for k, v in data.items() if not isinstance(v, dict)]
-    out = ([f"[{prefix}]"] if prefix and plain else []) + plain
-    for k, v in data.items():
-        if isinstance(v, dict):
-            out.append(_toml(v, f"{prefix}.{k}" if prefix else k))
-    return "\n".join(out) + "\n"
 
 
 def _invoke(*args):
