@@ -46,12 +46,13 @@ def test_fit_defaults_to_the_radiometric_estimator_unless_set():
     from pmdsim.config import parse_config
 
     cfg = fit_config(parse_config(d))
-    assert (cfg.sampling.estimator, cfg.sampling.mode) == ("radiometric", "rule")
+    assert (cfg.sampling.estimator, cfg.sampling.mode) == ("radiometric", "stratified")
     assert cfg.sampling.error_estimate is False  # the fit refines instead
     from pmdsim.config import with_target_error
 
     tgt = fit_config(with_target_error(parse_config(d), 0.2))  # the target needs the estimate
     assert tgt.sampling.error_estimate is True and tgt.sampling.target_error_mrad == 0.2
+    assert tgt.sampling.mode == "rule"  # the target is the rule's
     own = fit_config(parse_config(d | {"sampling": {"estimator": "paper", "mode": "random",
                                                     "error_estimate": True}}))
     assert (own.sampling.estimator, own.sampling.mode) == ("paper", "random")

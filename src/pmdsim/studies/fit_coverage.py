@@ -4,7 +4,7 @@ Each case (:func:`coverage_cases`) draws, from one seed, Ward alphas (log-unifor
 in x and y), the angle of incidence (camera and monitor tilted about the plate's x axis)
 and the noise (exposure and dark noise of a 12-bit EMVA sensor). Its "measured" images are
 rendered with a converged model (radiometric estimator, the Gauss rule with ``TRUTH_RAYS``
-nodes, 40x the fit's default order) and captured by the sensor; the fit then runs
+nodes: another kind of sample set than the fit's lattice, 40x larger) and captured by the sensor; the fit then runs
 with the **default settings** (a configuration without a ``[sampling]`` section: the fit's
 defaults, :func:`pmdsim.studies.fit.fit_config`). A case covers the truth when both alphas
 lie inside their k = 2 intervals. Small cameras (20 x 16 px) keep a case to seconds.
