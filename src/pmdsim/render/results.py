@@ -104,7 +104,13 @@ def worst_phase_error(fr, min_modulation: float = 0.05) -> float | None:
     if pe is None:
         return None
     with np.errstate(divide="ignore", invalid="ignore"):
-        mod = np.abs(fr.sums) / fr.f_hit
+        if fr.sums is not None:
+            mod = np.abs(fr.sums) / fr.f_hit
+        else:  # a non-linear display: the decoder's modulation B / A of the images
+            z = np.abs(np.tensordot(np.exp(-1j * np.asarray(fr.shifts)),
+                                    np.moveaxis(fr.images.astype(np.float64), 2, 0), axes=1))
+            k = len(fr.shifts)
+            mod = 2 * z / k / (np.sum(fr.images.astype(np.float64), axis=2) / k)
     worst = None
     for di in range(pe.shape[0]):
         for wi in range(pe.shape[1]):
@@ -158,6 +164,10 @@ class FringeResult:
         Mode ``rule``: the observed convergence factor of each fringe
         (:func:`convergence_factor`; 1 where the rule is not clearly asymptotic), None
         without the second embedded rule.
+    stated_phase_error : (n_directions, n_widths, H, W) float64 or None
+        The phase error (rad) where the render states it directly: a non-linear display on
+        a nearest-pixel monitor (:mod:`pmdsim.render.control`: the error of the shifted
+        images' fringe sum ``sum_k I_k exp(-i delta_k)``), else None.
     """
 
     directions: tuple[str, ...]
@@ -170,6 +180,7 @@ class FringeResult:
     sums_err: np.ndarray | None = None
     sampling: dict | None = None
     convergence: np.ndarray | None = None
+    stated_phase_error: np.ndarray | None = None
 
     def image(self, direction: str, width: float, k: int) -> np.ndarray:
         return self.images[self.directions.index(direction), self.widths.index(width), k]
@@ -181,7 +192,10 @@ class FringeResult:
         :func:`phase_error` (the embedded rule's phase difference and a floor, scaled by
         the observed :attr:`convergence` where the rule is asymptotic),
         ``sqrt((e_re sin phi)^2 + (e_im cos phi)^2) / |S|`` for the rqmc errors; None
-        without :attr:`sums_err`."""
+        without :attr:`sums_err`; :attr:`stated_phase_error` where the render stated the
+        phase error itself."""
+        if self.stated_phase_error is not None:
+            return self.stated_phase_error
         if self.sums_err is None or self.sums is None:
             return None
         return phase_error(self.sums, self.sums_err, (self.sampling or {}).get("error"),

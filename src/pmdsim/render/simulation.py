@@ -37,6 +37,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..kernels import bundle as kb
+from . import control
 from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
@@ -425,6 +426,7 @@ class Simulation:
         # Build the per-direction work lists: each entry is a profile table (nearest) or a
         # frequency (continuous).
         per_dir: dict[str, list] = {"x": [], "y": []}
+        cv_info = None
         if not continuous:
             for d in directions:
                 c = coords[d]
@@ -438,8 +440,13 @@ class Simulation:
             tu = np.array(per_dir["x"]).reshape(-1, mon.width)
             tv = np.array(per_dir["y"]).reshape(-1, mon.height)
             ncols = kb.OUT_FIRST + tu.shape[0] + tv.shape[0]
-            out, err = self._render(kb.MODE_TABLES, ncols, smooth=self.fringes_smooth(),
-                                    table_u=tu, table_v=tv, progress=progress)
+            if control.applies(self):  # the Gauss rule + rqmc of the staircase residual
+                out, cv_err, cv_stated, cv_info = control.render_fringes_cv(
+                    self, directions, widths, deltas, linear, tu, tv, progress)
+                err = None
+            else:
+                out, err = self._render(kb.MODE_TABLES, ncols, smooth=self.fringes_smooth(),
+                                        table_u=tu, table_v=tv, progress=progress)
         else:
             harm = 1 if linear else GAMMA_HARMONICS
             for d in directions:
@@ -460,11 +467,9 @@ class Simulation:
         n_u = sum(1 for d in directions if d == "x")
         per_width = (2 if linear else len(deltas)) if not continuous else 2 * (1 if linear else GAMMA_HARMONICS)
         base = {"x": kb.OUT_FIRST, "y": kb.OUT_FIRST + n_u * nw * per_width}
-        if not linear and continuous:
-            theta = 2 * np.pi * np.arange(4096) / 4096
-            g = mon.luminance(0.5 + 0.5 * np.cos(theta))
-            coef = np.fft.rfft(g).real / theta.size
-            coef[1:] *= 2  # g(theta) = sum_m coef_m cos(m theta)
+        if not linear and continuous:  # g(theta) = sum_m coef_m cos(m theta)
+            coef = control.response_coefficients(mon)
+            g = mon.luminance(0.5 + 0.5 * np.cos(2 * np.pi * np.arange(4096) / 4096))
         if linear:  # every direction and width in one pass over the kernel's output rows
             cols = np.array([base[d] + wi * per_width for d in directions for wi in range(nw)],
                             np.int64)
@@ -473,8 +478,12 @@ class Simulation:
                 np.cos(deltas), np.sin(deltas), black, white,
                 sums.reshape(nd * nw, h * w_), images.reshape(nd * nw, len(deltas), h * w_),
             )
-        sums_err = convergence = None
+        sums_err = convergence = stated = None
         info = self.describe_sampling(self.fringes_smooth())
+        if cv_info is not None:  # the control variate's error of every fringe sum
+            info, stated = cv_info, cv_stated
+            if linear:
+                sums_err = cv_err * np.abs(norm)
         if linear and err is not None:  # the error of every normalised complex sum
             diffs = err if isinstance(err, tuple) else (err,)
             cols = {(di, wi): base[d] + wi * per_width for di, d in enumerate(directions)
@@ -513,7 +522,7 @@ class Simulation:
                         # to [min, max] luminance x the weight on the monitor (never < 0)
                         images[di, wi, k] = np.clip(acc, g.min() * f_hit, g.max() * f_hit)
         return FringeResult(directions, widths, deltas, images, sums, f_total, f_hit, sums_err,
-                            info, convergence)
+                            info, convergence, stated)
 
     def render_images(self, levels: np.ndarray, progress: ProgressFn | None = None,
                       with_error: bool = False):

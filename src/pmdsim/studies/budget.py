@@ -153,8 +153,10 @@ class Decoded:
     sampling: dict | None = None
 
 
-def decode_config(cfg: RunConfig, stream: int = 0) -> Decoded:
-    """Render the fringes of ``cfg``, capture them with its sensor, decode every direction."""
+def decode_config(cfg: RunConfig, stream: int = 0, noise_free: bool = False):
+    """Render the fringes of ``cfg``, capture them with its sensor, decode every direction.
+    ``noise_free``: (the decoding, the same render decoded without the sensor) -- the second
+    None without a sensor."""
     from ..measure.numerical import finest_phase_error
 
     t0 = time.perf_counter()
@@ -168,6 +170,12 @@ def decode_config(cfg: RunConfig, stream: int = 0) -> Decoded:
                     for d in fr.directions}
     sensor = Sensor.from_config(cfg.sensor)
     level = None
+    clean = None
+    if noise_free and sensor.enabled:
+        dn = decode_fringes(res, cfg.monitor.resolution, cfg.decode, None)
+        clean = Decoded({d: np.asarray(r.monitor_coord_px, np.float64) for d, r in dn.items()},
+                        {d: np.asarray(r.valid, bool) for d, r in dn.items()}, 0.0, error_px,
+                        res.sampling)
     if sensor.enabled:
         # coupled shot noise: two orders of one render differ by the render, not a new draw
         res = replace(res, images=capture_dn(sensor, res.images, stream, coupled=True))
@@ -175,7 +183,8 @@ def decode_config(cfg: RunConfig, stream: int = 0) -> Decoded:
     dec = decode_fringes(res, cfg.monitor.resolution, cfg.decode, level)
     coord = {d: np.asarray(r.monitor_coord_px, np.float64) for d, r in dec.items()}
     valid = {d: np.asarray(r.valid, bool) for d, r in dec.items()}
-    return Decoded(coord, valid, time.perf_counter() - t0, error_px, res.sampling)
+    dec = Decoded(coord, valid, time.perf_counter() - t0, error_px, res.sampling)
+    return (dec, clean) if noise_free else dec
 
 
 @dataclass(frozen=True, eq=False)
@@ -483,7 +492,7 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
 
     def surface(name, label, c, ref, ref_name):
         say(f"surface: {label}")
-        dec = decode_config(c, stream=1)
+        dec, clean = decode_config(c, stream=1, noise_free=True)
         err, how = dec.error_px, "the render's stated error (finest fringe)"
         n_used = int((dec.sampling or {}).get("n_rays") or c.sampling.n_rays)
         if err is None or c.sensor.enabled:  # the same chain once more (budget_error)
@@ -497,6 +506,17 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
                 err = {d: np.fmax(err[d], diff[d]) for d in dirs}
                 how = f"the larger of {how} and the {how2} (through the sensor)"
         sampling[name] = {**(dec.sampling or {}), "n_rays": n_used, "error_from": how}
+        if clean is not None:  # the same renders without the sensor: the row less its noise
+            say(f"surface: {label}, without the sensor's noise")
+            ref_clean = decode_config(mirror(c.model_copy(update={"sensor": c.sensor.model_copy(
+                update={"enabled": False})})))
+            for d in dirs:
+                ok = clean.valid[d] & ref_clean.valid[d]
+                e = clean.error_px[d] if clean.error_px is not None else err[d]
+                rows.append(_row(f"{name}_noise_free", f"{label}, without the sensor", "surface",
+                                 d, clean.coord[d] - ref_clean.coord[d], ok, truth, 0.0, e))
+                numerical.setdefault(f"{name}_noise_free", {})[d] = (
+                    e, ok, clean.coord[d] - ref_clean.coord[d])
         for d in dirs:
             ok = dec.valid[d] & ref.valid[d]
             dev = dec.coord[d] - ref.coord[d]
@@ -525,13 +545,16 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
         if target is not None:  # the order the ideal system's render chose
             full = at_order(full, n_ideal)
         surface("surface", "surface scattering, through the full system", full, ref_full, "all_system")
-        for name, label in (("surface_ideal", "ideal system"), ("surface", "full system")):
+        for name, label in (("surface_ideal", "ideal system"), ("surface", "full system"),
+                            ("surface_noise_free", "full system without the sensor")):
+            if name not in numerical:
+                continue
             label = f"numerical error of the surface row ({label}; quadrature)"
             for d in dirs:
                 e, ok, dev = numerical[name][d]
                 rows.append({**numerical_row(d, e, ok, truth, dev, label),
                              "effect": f"numerical_{name}"})
-            if heights:
+            if heights and name in numerical_h:
                 hrows.append({**height_row(f"numerical_{name}", label, "numerical", numerical_h[name]),
                               "zernike_noll_nm": [], "zernike_fringe_nm": [],
                               "how": "per node, the larger change of the row's slope and height "

@@ -146,7 +146,7 @@ def second_estimate(cfg: RunConfig, n_rays: int, mode: str | None) -> tuple[RunC
     with an independent seed (the difference is about sqrt(2) times the error), a
     deterministic one with half the nodes (the lower order's error, larger than the
     rendered one's)."""
-    if mode in ("rqmc", "random"):
+    if mode in ("rqmc", "random", "rule+rqmc"):
         c = at_order(cfg, n_rays)
         seed = (cfg.sampling.seed + 7919) % 2**63
         return with_sampling(c, seed=seed), f"decoded difference to an independent seed ({seed})"
