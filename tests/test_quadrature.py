@@ -254,12 +254,12 @@ def test_fig3_radiometric_gauss_hermite_within_0p1_mrad(brdf):
 
 
 # ----------------------------------------------------------------------------- nearest monitor
-def test_nearest_monitor_uses_rqmc_and_its_error_bounds_the_true_one():
-    """A nearest-pixel monitor (steps in the integrand): mode 'rule' renders randomised QMC
-    (8 scrambled Sobol replicates), whose stated 95 % error must bound the error against a
-    converged reference of another method (the Cranley-Patterson-rotated lattice, 64 x the
-    rays) in about 95 % of the pixels."""
-    cfg = make_config(sampling={"n_rays": 256, "mode": "rule"}, monitor={"pixel_model": "nearest"})
+def test_nearest_monitor_rqmc_error_bounds_the_true_one():
+    """A nearest-pixel monitor (steps in the integrand) in mode 'rqmc' (8 scrambled Sobol
+    replicates): the stated 95 % error must bound the error against a converged reference
+    of another method (the Cranley-Patterson-rotated lattice, 64 x the rays) in about 95 %
+    of the pixels. (Mode 'rule' renders the control variate: tests/test_control_variate.py.)"""
+    cfg = make_config(sampling={"n_rays": 256, "mode": "rqmc"}, monitor={"pixel_model": "nearest"})
     sim = Simulation.from_config(cfg)
     fr = sim.render_fringes([20.0], ["x", "y"])
     assert fr.sampling["mode"] == "rqmc" and fr.sampling["error"] == "replicates"

@@ -52,7 +52,8 @@ from ..measure.reconstruct import Reconstruction, reconstruct
 from ..render import Simulation
 from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
-from .budget_error import (HEIGHT_STATS, ROW_STATS, at_order, difference_error, error_stats,
+from .budget_error import (HEIGHT_COLUMNS, HEIGHT_STATS, ROW_STATS, TABLE_COLUMNS,  # noqa: F401
+                           at_order, difference_error, error_stats, estimator_label,
                            height_error_bounds, node_errors, second_estimate, stat_error,
                            unknown_share)
 
@@ -590,22 +591,3 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
                   for r in calibration_rows(cfg, scene, ideal_dec, recs["ideal"], spec, disc)]
         settings["calibration"] = cfg.budget.calibration.model_dump()
     return Budget(rows, hrows, settings)
-
-
-def estimator_label(sampling) -> str:
-    """The estimator as tables and figures name it; the cone (``theta_max_deg``) only for
-    the cone estimators, which use it."""
-    if sampling.estimator == "radiometric":
-        return "radiometric (the rendering integral over the whole lobe)"
-    return f"{sampling.estimator} (cone {sampling.theta_max_deg:g} deg)"
-
-
-TABLE_COLUMNS = ("effect", "part", "direction", "rms_mrad", "rms_mrad_err", "p95_mrad",
-                 "p95_mrad_err", "rms_px", "rms_px_err", "p95_px", "p95_px_err", "rms_mm",
-                 "rms_mm_err", "p95_mm", "p95_mm_err", "rms_urad", "rms_urad_err", "p95_urad",
-                 "p95_urad_err", "mean_px", "n_valid", "seconds", "label")
-HEIGHT_COLUMNS = ("effect", "part", "slope_rms_x_urad", "slope_rms_x_urad_err", "slope_rms_y_urad",
-                  "slope_rms_y_urad_err", "slope_p95_x_urad", "slope_p95_x_urad_err",
-                  "slope_p95_y_urad", "slope_p95_y_urad_err", "height_rms_nm", "height_rms_nm_err",
-                  "height_pv_nm", "height_pv_nm_err", "height_p95_nm", "height_p95_nm_err",
-                  "n_nodes", "rim_excluded", "removed", "seconds", "label", "how")

@@ -159,3 +159,23 @@ def at_order(cfg: RunConfig, n_rays: int) -> RunConfig:
     s = cfg.sampling
     n = max(int(n_rays), 2 * s.replicates) if s.mode == "rqmc" else int(n_rays)
     return with_sampling(cfg, n_rays=n, target_error_mrad=None, max_rays=max(n, s.max_rays))
+
+
+# ------------------------------------------------------- the budget's tables (budget.py)
+def estimator_label(sampling) -> str:
+    """The estimator as tables and figures name it; the cone (``theta_max_deg``) only for
+    the cone estimators, which use it."""
+    if sampling.estimator == "radiometric":
+        return "radiometric (the rendering integral over the whole lobe)"
+    return f"{sampling.estimator} (cone {sampling.theta_max_deg:g} deg)"
+
+
+TABLE_COLUMNS = ("effect", "part", "direction", "rms_mrad", "rms_mrad_err", "p95_mrad",
+                 "p95_mrad_err", "rms_px", "rms_px_err", "p95_px", "p95_px_err", "rms_mm",
+                 "rms_mm_err", "p95_mm", "p95_mm_err", "rms_urad", "rms_urad_err", "p95_urad",
+                 "p95_urad_err", "mean_px", "n_valid", "seconds", "label")
+HEIGHT_COLUMNS = ("effect", "part", "slope_rms_x_urad", "slope_rms_x_urad_err", "slope_rms_y_urad",
+                  "slope_rms_y_urad_err", "slope_p95_x_urad", "slope_p95_x_urad_err",
+                  "slope_p95_y_urad", "slope_p95_y_urad_err", "height_rms_nm", "height_rms_nm_err",
+                  "height_pv_nm", "height_pv_nm_err", "height_p95_nm", "height_p95_nm_err",
+                  "n_nodes", "rim_excluded", "removed", "seconds", "label", "how")
