@@ -97,3 +97,20 @@ def test_only_nearest_rule_renders_use_the_control_variate():
     assert cont.render_fringes([20.0], ["x"]).sampling["mode"] == "rule"
     rq = Simulation.from_config(make_config(sampling={"n_rays": 64, "mode": "rqmc"}, monitor=NEAREST))
     assert rq.render_fringes([20.0], ["x"]).sampling["mode"] == "rqmc"
+
+
+def test_diagnostics_state_the_control_variates_error():
+    """The run's diagnostics (``diag_phase_se``) state, from the rays of ``transport``, the
+    same phase error the control-variate render states at those pixels (same sample sets;
+    a NumPy sum, independent of the kernel's pattern phase)."""
+    from pmdsim.studies import diagnostics as dg
+
+    cfg = make_config(sampling={"n_rays": 64, "mode": "rule"}, monitor=NEAREST)
+    sim = Simulation.from_config(cfg)
+    fr = sim.render_fringes([20.0], ["x", "y"])
+    grid = dg.PixelGrid(np.arange(6, 27, 5), np.arange(8, 33, 6), sim.shape)
+    se = dg.phase_error_rule(sim, grid, (20.0,), ("x", "y"))
+    want = fr.phase_error()[:, :, grid.rows[:, None], grid.cols[None, :]]
+    ok = np.isfinite(se) & np.isfinite(want)
+    assert ok.sum() >= 30
+    np.testing.assert_allclose(se[ok], want[ok], rtol=1e-6)

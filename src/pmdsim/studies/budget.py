@@ -13,7 +13,9 @@ falloff, noise-free), then with all the configuration's effects together:
 
 - **system** rows: decoded minus ground truth, ideal mirror;
 - **surface** rows: the scattering surface decoded minus the ideal mirror decoded through
-  the same system (all effects on; and with the ideal system, the scattering alone).
+  the same system (all effects on; and with the ideal system, the scattering alone); with
+  a sensor, also the same renders decoded without it (``surface_noise_free``: the row less
+  the noise of both captures).
 
 Deviations per fringe direction in phase of the finest width (mrad), monitor coordinate
 (monitor px and mm) and surface slope (urad: the exact 3-D conversion of
@@ -514,7 +516,7 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             for d in dirs:
                 ok = clean.valid[d] & ref_clean.valid[d]
                 e = clean.error_px[d] if clean.error_px is not None else err[d]
-                rows.append(_row(f"{name}_noise_free", f"{label}, without the sensor", "surface",
+                rows.append(_row(f"{name}_noise_free", "surface scattering, full system, no sensor", "surface",
                                  d, clean.coord[d] - ref_clean.coord[d], ok, truth, 0.0, e))
                 numerical.setdefault(f"{name}_noise_free", {})[d] = (
                     e, ok, clean.coord[d] - ref_clean.coord[d])
@@ -547,7 +549,7 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             full = at_order(full, n_ideal)
         surface("surface", "surface scattering, through the full system", full, ref_full, "all_system")
         for name, label in (("surface_ideal", "ideal system"), ("surface", "full system"),
-                            ("surface_noise_free", "full system without the sensor")):
+                            ("surface_noise_free", "no sensor")):
             if name not in numerical:
                 continue
             label = f"numerical error of the surface row ({label}; quadrature)"

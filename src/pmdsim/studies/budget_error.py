@@ -10,12 +10,11 @@ the rendering integral, whose per-pixel error the budget carries to every statis
   as monitor px, ``e = delta phi w / (2 pi)``. Where the render states none (a display with
   gamma != 1 or a LUT: its images are not linear in the fringe sums), the surface is
   decoded once more through the same chain (same sensor noise) and ``e`` is the decoded
-  difference (:func:`difference_error`): for a randomised set (``rqmc``: the nearest-pixel
-  monitor) with an independent seed at the same order (about sqrt(2) times the random part
-  of either; it misses what both seeds share, e.g. the decoding's bias at few points per
-  replicate: on the realistic example at N = 100 it stated 1.7 px where doubling N moved
-  the row by 2.3 px, docs/system.md), for a deterministic rule with half the nodes (the
-  lower order's error, larger than the rendered one's) (:func:`second_estimate`). Through a sensor the same decoded
+  difference (:func:`difference_error`): for a randomised set (``rqmc``, and the nearest
+  monitor's control variate ``rule+rqmc``, :mod:`pmdsim.render.control`) with an
+  independent seed at the same order (about sqrt(2) times the random part of either), for
+  a deterministic rule with half the nodes (the lower order's error, larger than the
+  rendered one's) (:func:`second_estimate`). Through a sensor the same decoded
   difference is taken as well and the larger of the two is the error: the shot noise is
   drawn coupled (:meth:`pmdsim.scene.sensor.Sensor.capture`), but a signal change of a
   fraction of an electron still moves some pixels by one electron or one DN, a discrete

@@ -413,25 +413,42 @@ def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
                      directions: Sequence[str] = ("x", "y")) -> np.ndarray:
     """The stated numerical phase error (n_directions, n_widths, gr, gc), rad, of the sample
     sets the run actually renders (mode ``rule``: the rule against its embedded rules; mode
-    ``rqmc``: the replicates' spread), at the grid pixels: the same statement as
+    ``rqmc``: the replicates' spread; a nearest monitor's control variate: both), at the
+    grid pixels: the same statement as
     :meth:`pmdsim.render.FringeResult.phase_error`, from the rays of
     :meth:`~pmdsim.render.Simulation.transport` (linear fringes, as the other methods)."""
     from ..render import Simulation
     from ..render.results import convergence_factor, phase_error
     from ..scene.quadrature import convergence_exponent, student_t975
 
+    from ..render import control
+
     nearest = sim.scene.monitor.pixel_model == "nearest"
     rows, cols = grid.pixel_rows, grid.pixel_cols
     valid, _ = incidence(sim.scene, rows, cols)
-    passes = sim.plan(sim.fringes_smooth())
-    sums = []
-    for samp in passes:
+    cv = control.applies(sim)  # the nearest monitor's control variate: rule + rqmc residual
+    passes = sim.plan(True)[:2] if cv else sim.plan(sim.fringes_smooth())
+    reps = sim.scene.sampling.as_mode("rqmc").error_passes() if cv else ()
+    sums, res = [], []
+    for k, samp in enumerate(passes + reps):
         run = Simulation(sim.scene.replace(sampling=samp), sim.tile_rows, sim.scheduler,
                          sim.num_workers)
         u, v, w, _, _ = run.transport(rows, cols, directions=False)
-        sums.append(ray_sums(u, v, w, tuple(widths), tuple(directions), nearest))
+        smooth = ray_sums(u, v, w, tuple(widths), tuple(directions), nearest and not cv)
+        if k < len(passes):
+            sums.append(smooth)
+        else:
+            res.append(ray_sums(u, v, w, tuple(widths), tuple(directions), True) - smooth)
     z = np.stack(sums)  # (passes, nd, nw, K)
-    if len(passes) == 1:
+    if cv:
+        r = np.stack(res)
+        half = student_t975(len(res) - 1) / math.sqrt(len(res))
+        total = z[0] + r.mean(0)
+        se = phase_error(total, half * (r.real.std(0, ddof=1) + 1j * r.imag.std(0, ddof=1)),
+                         "replicates")
+        if len(passes) > 1:
+            se = se + phase_error(total, z[0] - z[1], "embedded")
+    elif len(passes) == 1:
         se = np.full(z.shape[1:], np.nan)
     elif passes[0].mode == "rule":
         conv = None
