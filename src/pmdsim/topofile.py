@@ -423,7 +423,7 @@ def _check_vk(path, field):
                          "the file is garbled or not a Keyence file")
     if len(data) < 12 + 68 + 304:
         raise InputError(f"{what}: {len(data)} bytes, shorter than its header: truncated")
-    conds_at, height_at = struct.unpack_from("<I", data, 12)[0], struct.unpack_from("<I", data, 36)[0]
+    (conds_at,), (height_at,) = struct.unpack_from("<I", data, 12), struct.unpack_from("<I", data, 36)
     size = struct.unpack_from("<I", data, conds_at)[0] if conds_at + 4 <= len(data) else 0
     if size < 304 or conds_at + size > len(data):
         raise InputError(f"{what}: the measurement conditions (byte {conds_at}, {size} bytes) "
