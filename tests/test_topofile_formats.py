@@ -4,7 +4,8 @@ The files are written here after the layouts independent open readers document
 (``topofile_writers.py``: Gwyddion's sensofar.c and keyence.c, SurfaceTopography's PLU.py,
 VK.py and DATX.py, prysm's io.py), with asymmetric heights, dx != dy and points not
 measured; .plu and .vk4/.vk3 are also read by Gwyddion itself (its gwyconvert, a test
-dependency) to show the files follow the layout Gwyddion reads. Checked: heights and
+dependency), .datx by prysm's reader, to show the files follow the layout those readers
+read. Checked: heights and
 their unit, orientation (rows along y), spacing, points not measured, and that truncated
 or garbled files are refused with an error naming the field and the file (exit 2)."""
 
@@ -133,6 +134,35 @@ def test_datx_reads_heights_units_spacing_and_no_data(tmp_path, unit, metadata):
     ok[1, 2] = ok[4, 0] = False
     np.testing.assert_allclose(t.heights[ok], z_um[ok] * 1e-3, rtol=1e-12)
     assert (t.dx, t.dy) == pytest.approx((DX_UM * 1e-3, DY_UM * 1e-3), rel=1e-12)
+
+
+def test_datx_file_is_read_alike_by_prysm(tmp_path):
+    """prysm's read_zygo_datx (MIT, an independent reader) finds the same heights (nm), the
+    same points not measured and the lateral resolution in the file pmdsim reads."""
+    pytest.importorskip("h5py")
+    prysm_io = pytest.importorskip("prysm.io")
+    z = _z_um() * 1e3
+    z[2, 5] = np.finfo(np.float64).max
+    path = tmp_path / "part.datx"
+    write_datx(path, z, DX_UM * 1e-6, DY_UM * 1e-6)
+    ours = read_topography(path, fill="mean")
+    theirs = prysm_io.read_zygo_datx(path)
+    phase = np.asarray(theirs["phase"])
+    assert phase.shape == ours.heights.shape and np.isnan(phase[2, 5])
+    ok = np.isfinite(phase)
+    assert ok.sum() == phase.size - 1 and ours.invalid == 1
+    np.testing.assert_allclose(phase[ok] * 1e-6, ours.heights[ok], rtol=1e-12)  # nm -> mm
+    assert theirs["meta"]["Lateral Resolution"] * 1e3 == pytest.approx(ours.dx, rel=1e-12)
+
+
+def test_datx_without_h5py_says_what_to_install(tmp_path, monkeypatch):
+    import sys
+
+    path = tmp_path / "part.datx"
+    path.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(64))
+    monkeypatch.setitem(sys.modules, "h5py", None)
+    with pytest.raises(InputError, match=r"surface\.file: .*part\.datx.*needs h5py: pip install"):
+        read_topography(path)
 
 
 @pytest.mark.parametrize("change,match", [

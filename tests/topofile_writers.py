@@ -18,7 +18,9 @@ readers document (not after pmdsim's or surfalize's readers), for the format tes
   ``Root`` through ``Measurement`` and ``Surface`` to the surface's ``Path``; the surface
   dataset under ``/Data/Surface`` with the attributes ``Unit``, ``No Data`` and the
   compound ``X/Y/Z Converter`` (Category, BaseUnit, Parameters; the lateral spacing in
-  metres is Parameters[1]).
+  metres is Parameters[1]); prysm also needs the surface's ``Wavelength`` (m),
+  ``Interferometric Scale Factor`` and ``Obliquity Factor`` and an ``Attributes`` group
+  (its last member's ``...Resolution:Value``, the lateral resolution in metres).
 
 Each writer takes the heights as (rows along y, columns along x) in the unit the format
 stores and the spacing; ``truncate``/garbling is done by the tests on the bytes.
@@ -115,3 +117,8 @@ def write_datx(path, z, dx_m, dy_m, *, unit="NanoMeters", no_data=None, metadata
         ds.attrs["X Converter"] = converter(lateral_category, "Pixels", [0.0, dx_m, 0.0, 0.0])
         ds.attrs["Y Converter"] = converter(lateral_category, "Pixels", [0.0, dy_m, 0.0, 0.0])
         ds.attrs["Z Converter"] = converter(z_category, unit, [0.0, 632.8e-9, 0.5, 1.0])
+        ds.attrs["Wavelength"] = np.array([632.8e-9])
+        ds.attrs["Interferometric Scale Factor"] = np.array([0.5])
+        ds.attrs["Obliquity Factor"] = np.array([1.0])
+        group = h5.create_group(f"Attributes/{surface}")
+        group.attrs["Data Context.Data Attributes.Resolution:Value"] = np.array([dx_m])
