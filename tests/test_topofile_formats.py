@@ -16,7 +16,8 @@ import warnings
 
 import numpy as np
 import pytest
-from topofile_writers import DATX_UNITS, PLU_NOT_MEASURED, write_datx, write_plu, write_vk4
+from topofile_writers import (DATX_UNITS, PLU_NOT_MEASURED, write_datx, write_plu, write_plux,
+                              write_vk4)
 
 from pmdsim.config import InputError
 from pmdsim.topofile import NOT_READ, OWN_SUFFIXES, SURFALIZE_SUFFIXES, read_topography
@@ -92,6 +93,25 @@ def test_plu_without_the_grid_size_or_of_another_kind_is_refused(tmp_path):
         read_topography(path, "brdf.file")
     write_plu(path, z, DX_UM, DY_UM, measurement_type=1)
     with pytest.raises(InputError, match=r"a profile, not a topography"):
+        read_topography(path)
+
+
+def test_plux_reads_heights_spacing_and_points_not_measured(tmp_path):
+    """Sensofar's newer .plux (ZIP) through surfalize, on a file written after
+    SurfaceTopography's layout (which read it alike, checked by hand); a layer whose size
+    disagrees with index.xml is refused."""
+    pytest.importorskip("surfalize")
+    z = _z_um().astype(np.float32)
+    z[2, 3] = np.nan
+    path = tmp_path / "part.plux"
+    write_plux(path, z, DX_UM, DY_UM)
+    t = read_topography(path, fill="nearest")
+    ok = np.isfinite(z)
+    assert t.heights.shape == (5, 7) and t.invalid == 1 and t.reader == "surfalize"
+    np.testing.assert_allclose(t.heights[ok], z[ok].astype(float) * 1e-3, rtol=0, atol=1e-15)
+    assert (t.dx, t.dy) == pytest.approx((DX_UM * 1e-3, DY_UM * 1e-3), rel=1e-12)
+    write_plux(path, np.vstack([z, z[:1]]), DX_UM, DY_UM, stated_shape=(5, 7))
+    with pytest.raises(InputError, match=r"LAYER_0\.raw holds 168 bytes, index\.xml states 5 x 7"):
         read_topography(path)
 
 
@@ -187,6 +207,8 @@ def _good(tmp_path, suffix):
         write_plu(path, _z_um(), DX_UM, DY_UM)
     elif suffix == ".datx":
         write_datx(path, _z_um() * 1e3, DX_UM * 1e-6, DY_UM * 1e-6)
+    elif suffix == ".plux":
+        write_plux(path, _z_um(), DX_UM, DY_UM)
     else:
         write_vk4(path, 1000 + np.arange(35).reshape(5, 7), 400_000, 700_000, 1000,
                   version=int(suffix[-1]))
@@ -199,7 +221,7 @@ def _damaged(data, how):
             "garbled": data[:4] + bytes(b ^ 0x5A for b in data[4:520]) + data[520:]}[how]
 
 
-@pytest.mark.parametrize("suffix", [".plu", ".vk4", ".vk3", ".datx"])
+@pytest.mark.parametrize("suffix", [".plu", ".vk4", ".vk3", ".datx", ".plux"])
 @pytest.mark.parametrize("how", ["empty", "head", "middle", "tail", "garbled"])
 def test_truncated_or_garbled_files_are_refused_naming_field_and_file(tmp_path, suffix, how):
     pytest.importorskip("h5py" if suffix == ".datx" else "surfalize")
@@ -228,11 +250,12 @@ def test_cli_exits_2_on_a_damaged_file(tmp_path, suffix):
 def test_every_instrument_format_is_read_by_a_tested_reader_or_refused(tmp_path):
     """The formats read are those tested here and in test_topography.py; the rest of what
     surfalize reads is refused with its reason, the field, the file and what to export."""
-    assert set(SURFALIZE_SUFFIXES) == {".sur", ".al3d", ".tmd", ".sflz", ".sdf", ".vk4", ".vk3"}
+    assert set(SURFALIZE_SUFFIXES) == {".sur", ".al3d", ".tmd", ".sflz", ".sdf", ".vk4", ".vk3",
+                                       ".plux"}
     assert set(OWN_SUFFIXES) == {".plu", ".datx"}
     assert not set(NOT_READ) & set(SURFALIZE_SUFFIXES + OWN_SUFFIXES)
-    assert {".plux", ".vk6", ".xyz", ".opd"} <= set(NOT_READ)
-    for name in ("part.plux", "part.vk6"):
+    assert {".vk6", ".vk7", ".xyz", ".opd"} <= set(NOT_READ)
+    for name in ("part.vk7", "part.vk6"):
         (tmp_path / name).write_bytes(bytes(64))
         with pytest.raises(InputError) as info:
             read_topography(tmp_path / name, "brdf.file")

@@ -122,3 +122,23 @@ def write_datx(path, z, dx_m, dy_m, *, unit="NanoMeters", no_data=None, metadata
         ds.attrs["Obliquity Factor"] = np.array([1.0])
         group = h5.create_group(f"Attributes/{surface}")
         group.attrs["Data Context.Data Attributes.Resolution:Value"] = np.array([dx_m])
+
+
+def write_plux(path, z_um, dx_um, dy_um, *, stated_shape=None):
+    """A Sensofar .plux file after SurfaceTopography's PLUX.py (tested there on an S neox
+    file): a ZIP of ``index.xml`` (GENERAL: IMAGE_SIZE_X/Y, FOV_X/Y the spacing in
+    micrometres, DATE; INFO items; LAYER_0: FILENAME_Z), ``recipe.txt`` and the layer's
+    float32 heights in micrometres, row by row, NaN where not measured. ``stated_shape``:
+    the (rows, columns) index.xml states, if not the heights' own."""
+    import zipfile
+
+    z = np.asarray(z_um, "<f4")
+    ny, nx = stated_shape or z.shape
+    index = (f"<xml><GENERAL><DATE>2026-12-01T12:00:00</DATE><IMAGE_SIZE_X>{nx}</IMAGE_SIZE_X>"
+             f"<IMAGE_SIZE_Y>{ny}</IMAGE_SIZE_Y><FOV_X>{dx_um!r}</FOV_X><FOV_Y>{dy_um!r}</FOV_Y>"
+             "</GENERAL><INFO><ITEM_0><NAME>Device</NAME><VALUE>S neox</VALUE></ITEM_0></INFO>"
+             "<LAYER_0><FILENAME_Z>LAYER_0.raw</FILENAME_Z></LAYER_0></xml>")
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("index.xml", index)
+        archive.writestr("recipe.txt", "<xml><RECIPE>pmdsim test</RECIPE></xml>")
+        archive.writestr("LAYER_0.raw", z.tobytes())

@@ -11,8 +11,9 @@ non-measured points and outliers handled as asked:
   writer or by surfalize's own writer (values, orientation and dx != dy spacing checked,
   ``tests/test_topography.py``, ``tests/test_topofile_formats.py``): Digital Surf
   ``.sur``, ISO 25178-71 ``.sdf``, Alicona ``.al3d``, ``.tmd`` (TrueMap), surfalize's own
-  ``.sflz`` and Keyence ``.vk4``/``.vk3`` (files written after Gwyddion's ``keyence.c``
-  layout and read alike by Gwyddion itself); surfalize works in micrometres;
+  ``.sflz``, Keyence ``.vk4``/``.vk3`` (files written after Gwyddion's ``keyence.c``
+  layout and read alike by Gwyddion itself) and Sensofar ``.plux`` (after
+  SurfaceTopography's layout); surfalize works in micrometres;
 - Sensofar ``.plu`` and Zygo ``.datx`` by pmdsim's own readers below (:data:`OWN_SUFFIXES`),
   because surfalize 0.19.2 misreads the first (see :func:`_read_plu`) and reads no
   ``.datx`` at all; ``.datx`` (HDF5) needs **h5py** (``pmdsim[instruments]``);
@@ -44,12 +45,12 @@ from .config.files import MissingFileError as MissingInputError
 
 #: Suffixes read by x3pio, by surfalize, by pmdsim's own readers, and as plain arrays.
 X3P_SUFFIXES = (".x3p",)
-SURFALIZE_SUFFIXES = (".sur", ".sdf", ".al3d", ".tmd", ".sflz", ".vk4", ".vk3")
+SURFALIZE_SUFFIXES = (".sur", ".sdf", ".al3d", ".tmd", ".sflz", ".vk4", ".vk3", ".plux")
 OWN_SUFFIXES = (".plu", ".datx")
 #: Instrument formats that are refused, with the reason (module doc).
 _UNTESTED = ("surfalize reads it, but no file of it could be checked against an independent "
              "writer or a sample file, so its values and spacing are not trusted here")
-NOT_READ = dict.fromkeys((".plux", ".vk6", ".vk7", ".lext", ".oir", ".poir", ".opd", ".zon",
+NOT_READ = dict.fromkeys((".vk6", ".vk7", ".lext", ".oir", ".poir", ".opd", ".zon",
                           ".nms", ".os3d", ".gwy", ".hdat", ".zmg", ".fits", ".fit", ".fts",
                           ".dat"), _UNTESTED) | {
     ".xyz": "surfalize 0.19.2 takes the spacing as (max - min) / n instead of / (n - 1), and "
@@ -116,6 +117,8 @@ def read_topography(path, field: str = "surface.file", *, spacing_mm=None,
     elif suffix in SURFALIZE_SUFFIXES:
         if suffix in (".vk3", ".vk4"):
             _check_vk(path, field)
+        elif suffix == ".plux":
+            _check_plux(path, field)
         z, dx, dy, reader = _read_surfalize(path, field)
     elif suffix == ".plu":
         z, dx, dy, reader = _read_plu(path, field)
@@ -438,3 +441,28 @@ def _check_vk(path, field):
     if height_at + 796 + nbytes > len(data):
         raise InputError(f"{what}: the height image needs {height_at + 796 + nbytes} bytes, "
                          f"the file has {len(data)}: truncated")
+
+
+def _check_plux(path, field):
+    """Refuse a Sensofar .plux file (a ZIP: index.xml with GENERAL/IMAGE_SIZE_X, _Y and the
+    spacing FOV_X, _Y in micrometres; the float32 heights in LAYER_0.raw, the layout of
+    SurfaceTopography's PLUX.py) that surfalize would misread: its heights must be exactly
+    the grid the index states (surfalize reads the first nx x ny values whatever follows)."""
+    import zipfile
+    import xml.etree.ElementTree as ET
+
+    what = f"{field}: {path} (Sensofar .plux)"
+    try:
+        with zipfile.ZipFile(path) as archive:
+            root = ET.fromstring(archive.read("index.xml"))
+            raw = archive.getinfo("LAYER_0.raw").file_size
+    except Exception as err:  # noqa: BLE001 - zipfile/XML raise many kinds on damage
+        raise InputError(f"{what}: not a readable .plux archive ({type(err).__name__}: "
+                         f"{err}): truncated or garbled") from None
+    try:
+        nx, ny = (int(root.find(f"GENERAL/IMAGE_SIZE_{a}").text) for a in "XY")
+    except (AttributeError, TypeError, ValueError):
+        raise InputError(f"{what}: index.xml states no GENERAL/IMAGE_SIZE_X and _Y") from None
+    if nx < 1 or ny < 1 or raw != 4 * nx * ny:
+        raise InputError(f"{what}: LAYER_0.raw holds {raw} bytes, index.xml states {ny} x {nx} "
+                         f"float32 heights ({4 * nx * ny} bytes): inconsistent, not read")
