@@ -138,8 +138,9 @@ def test_vk_reads_heights_in_picometres_and_spacing(tmp_path, version, bits):
 
 # --- Zygo .datx ------------------------------------------------------------------------
 
-@pytest.mark.parametrize("unit,metadata", [("NanoMeters", True), ("MicroMeters", False)])
-def test_datx_reads_heights_units_spacing_and_no_data(tmp_path, unit, metadata):
+@pytest.mark.parametrize("unit,metadata,unit_attr", [("NanoMeters", True, None),
+                                                    ("MicroMeters", False, "\u00b5m")])
+def test_datx_reads_heights_units_spacing_and_no_data(tmp_path, unit, metadata, unit_attr):
     pytest.importorskip("h5py")
     z_um = _z_um()
     z = z_um * 1e-6 / DATX_UNITS[unit]
@@ -147,7 +148,7 @@ def test_datx_reads_heights_units_spacing_and_no_data(tmp_path, unit, metadata):
     z[1, 2], z[4, 0] = no_data, np.nan
     path = tmp_path / "part.datx"
     write_datx(path, z, DX_UM * 1e-6, DY_UM * 1e-6, unit=unit, no_data=no_data,
-               metadata=metadata)
+               metadata=metadata, unit_attr=unit_attr)
     t = read_topography(path, fill="nearest")
     assert t.heights.shape == (5, 7) and t.invalid == 2 and t.reader.startswith("pmdsim .datx")
     ok = np.ones_like(z, bool)

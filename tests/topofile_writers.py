@@ -112,7 +112,7 @@ def write_datx(path, z, dx_m, dy_m, *, unit="NanoMeters", no_data=None, metadata
             table = np.dtype([("Source", "S64"), ("Link", "S64"), ("Destination", "S64")])
             h5["MetaData"] = np.array([tuple(s.encode() for s in r) for r in rows], table)
         ds = h5.create_dataset(f"Data/Surface/{surface}", data=z)
-        ds.attrs["Unit"] = np.array([(unit_attr or unit).encode()])
+        ds.attrs["Unit"] = np.array([(unit_attr or unit).encode("utf-8")])
         ds.attrs["No Data"] = np.array([no_data], np.float64)
         ds.attrs["X Converter"] = converter(lateral_category, "Pixels", [0.0, dx_m, 0.0, 0.0])
         ds.attrs["Y Converter"] = converter(lateral_category, "Pixels", [0.0, dy_m, 0.0, 0.0])

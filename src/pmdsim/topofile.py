@@ -313,6 +313,8 @@ def _read_plu(path, field):
 # heights "HeightCat" in BaseUnit.
 DATX_HEIGHT_UNITS_MM = {"NanoMeters": 1e-6, "MicroMeters": 1e-3, "MilliMeters": 1.0,
                         "Meters": 1e3}
+_DATX_SHORT_UNITS = {"nm": "NanoMeters", "um": "MicroMeters", "\u00b5m": "MicroMeters",
+                     "\u03bcm": "MicroMeters", "mm": "MilliMeters", "m": "Meters"}
 
 
 def _read_datx(path, field):
@@ -346,7 +348,7 @@ def _read_datx(path, field):
                          f"{', '.join(DATX_HEIGHT_UNITS_MM)} (export the surface in a length "
                          "unit, not in fringes)")
     unit = _datx_text(np.asarray(attrs["Unit"]).reshape(-1)[0]) if "Unit" in attrs else base
-    if unit != base:
+    if _DATX_SHORT_UNITS.get(unit, unit) != base:
         raise InputError(f"{what}: the surface's Unit {unit!r} and its Z Converter's "
                          f"{base!r} disagree: the file is inconsistent, not read")
     bad = ~np.isfinite(z)
