@@ -493,6 +493,30 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
     numerical_h: dict = {}
     sampling: dict = {}
 
+    def emit(name, label, dec, ref, ref_name, err, seconds):
+        """The surface row of decoding ``dec`` minus ``ref`` (per direction, height row)."""
+        for d in dirs:
+            ok = dec.valid[d] & ref.valid[d]
+            dev = dec.coord[d] - ref.coord[d]
+            rows.append(_row(name, label, "surface", d, dev, ok, truth, seconds, err[d]))
+            numerical.setdefault(name, {})[d] = (err[d], ok, dev)
+        if heights:
+            rec, sec = rec_of(name, dec)
+            base = SurfaceMaps.of(recs[ref_name])
+            herr = height_error(SurfaceMaps.of(rec), base, spec, disc)
+            row = height_row(name, label, "surface", herr, seconds + sec,
+                             "surface's reconstruction minus the mirror's")
+            shifted = []
+            for sign in (1.0, -1.0):
+                moved = Decoded({d: dec.coord[d] + sign * np.nan_to_num(err[d], nan=0.0) for d in dirs},
+                                dec.valid, 0.0)
+                rm = reconstruct_decoded(cfg, scene, moved)
+                shifted.append(height_error(SurfaceMaps.of(rm), base, spec, disc))
+            hrows.append({**row, **height_error_bounds(herr, shifted)})
+            ne = node_errors(herr, shifted)
+            numerical_h[name] = HeightError(ne["slope_x_urad"], ne["slope_y_urad"], ne["height_nm"],
+                                            herr.form)
+
     def surface(name, label, c, ref, ref_name):
         say(f"surface: {label}")
         dec, clean = decode_config(c, stream=1, noise_free=True)
@@ -509,38 +533,16 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
                 err = {d: np.fmax(err[d], diff[d]) for d in dirs}
                 how = f"the larger of {how} and the {how2} (through the sensor)"
         sampling[name] = {**(dec.sampling or {}), "n_rays": n_used, "error_from": how}
+        emit(name, label, dec, ref, ref_name, err, dec.seconds)
         if clean is not None:  # the same renders without the sensor: the row less its noise
-            say(f"surface: {label}, without the sensor's noise")
+            say(f"surface: {label}, without the sensor")
             ref_clean = decode_config(mirror(c.model_copy(update={"sensor": c.sensor.model_copy(
                 update={"enabled": False})})))
-            for d in dirs:
-                ok = clean.valid[d] & ref_clean.valid[d]
-                e = clean.error_px[d] if clean.error_px is not None else err[d]
-                rows.append(_row(f"{name}_noise_free", "surface scattering, full system, no sensor", "surface",
-                                 d, clean.coord[d] - ref_clean.coord[d], ok, truth, 0.0, e))
-                numerical.setdefault(f"{name}_noise_free", {})[d] = (
-                    e, ok, clean.coord[d] - ref_clean.coord[d])
-        for d in dirs:
-            ok = dec.valid[d] & ref.valid[d]
-            dev = dec.coord[d] - ref.coord[d]
-            rows.append(_row(name, label, "surface", d, dev, ok, truth, dec.seconds, err[d]))
-            numerical.setdefault(name, {})[d] = (err[d], ok, dev)
-        if heights:
-            rec, sec = rec_of(name, dec)
-            base = SurfaceMaps.of(recs[ref_name])
-            herr = height_error(SurfaceMaps.of(rec), base, spec, disc)
-            row = height_row(name, label, "surface", herr, dec.seconds + sec,
-                             "surface's reconstruction minus the mirror's")
-            shifted = []
-            for sign in (1.0, -1.0):
-                moved = Decoded({d: dec.coord[d] + sign * np.nan_to_num(err[d], nan=0.0) for d in dirs},
-                                dec.valid, 0.0)
-                rm = reconstruct_decoded(cfg, scene, moved)
-                shifted.append(height_error(SurfaceMaps.of(rm), base, spec, disc))
-            hrows.append({**row, **height_error_bounds(herr, shifted)})
-            ne = node_errors(herr, shifted)
-            numerical_h[name] = HeightError(ne["slope_x_urad"], ne["slope_y_urad"], ne["height_nm"],
-                                            herr.form)
+            if heights:
+                rec_of(f"{ref_name}_noise_free", ref_clean)
+            emit(f"{name}_noise_free", "surface scattering, full system, no sensor", clean,
+                 ref_clean, f"{ref_name}_noise_free",
+                 err if clean.error_px is None else clean.error_px, 0.0)
         return n_used
 
     if not cfg.brdf.model == "mirror":
