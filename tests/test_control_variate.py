@@ -114,3 +114,14 @@ def test_diagnostics_state_the_control_variates_error():
     ok = np.isfinite(se) & np.isfinite(want)
     assert ok.sum() >= 30
     np.testing.assert_allclose(se[ok], want[ok], rtol=1e-6)
+
+
+def test_rays_traced_count_the_control_variates_passes():
+    """A control-variate render traces the rule (3 x 16 of n_rays = 48) and its embedded
+    rule (2 x 12), then the 8 replicates of 6 points twice (profiles and smooth part)."""
+    from pmdsim.render import control
+
+    sim = Simulation.from_config(make_config(sampling={"n_rays": 48, "mode": "rule"},
+                                             monitor=NEAREST))
+    assert control.applies(sim)
+    assert control.rays_share(sim) == pytest.approx((48 + 24) / 48 + 2.0)

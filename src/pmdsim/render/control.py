@@ -202,3 +202,10 @@ def table_fringe_sums(out, directions, widths, deltas, linear) -> np.ndarray:
     ncols = out.shape[-1]
     return _Layout(tuple(directions), tuple(widths), np.asarray(deltas), linear, None,
                    ncols).fringe_sums(out)
+
+
+def rays_share(sim) -> float:
+    """The rays of one control-variate fringe render per ``n_rays``: the rule and its
+    embedded rule, then the replicates twice (the profiles and the smooth part)."""
+    gauss = sim.plan(True)[:2]
+    return sum(p.rule(sim._lobe).n for p in gauss) / max(sim.scene.rays_per_pixel, 1) + 2.0

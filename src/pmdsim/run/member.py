@@ -140,6 +140,10 @@ def describe_error(sampling: dict | None) -> str:
                 "difference to the first embedded rule plus 0.1 |dS|/|S| (its error, a bound), "
                 "scaled where the rule is asymptotic by the convergence factor observed "
                 "against the second (times 10 on the phase difference)")
+    if s.get("control_variate"):
+        return (f"control variate: {s['control_variate']}; t(0.975) standard error of the "
+                f"residual's mean (95 % per pixel) plus the embedded {s.get('embedded_rule')}'s "
+                "statement of the smooth part")
     if s.get("error") == "replicates":
         return (f"t(0.975) standard error of the mean of {s.get('passes')} scrambled Sobol "
                 f"replicates of {s.get('nodes')} points (95 % per pixel)")
@@ -354,7 +358,11 @@ def result(m: Member) -> RunResult:
     sim = m.sim
     # every pass of a call: a rule's embedded rules add their nodes (rqmc's replicates
     # share n_rays; the other modes render one set)
-    n_calls = ((m.cfg.patterns.fringes is not None) * _passes_share(sim, sim.fringes_smooth())
+    from ..render import control
+
+    fringe_share = (control.rays_share(sim) if control.applies(sim)
+                    else _passes_share(sim, sim.fringes_smooth()))
+    n_calls = ((m.cfg.patterns.fringes is not None) * fringe_share
                + (bool(m.dots) + (m.inputs[2] is not None)) * _passes_share(sim, False))
     rays = sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel
     surface_pixels = int(m.geometry.surface_mask.sum())
