@@ -42,7 +42,9 @@ def test_control_variate_error_bounds_the_true_one(display, lattice_reference):
     """Mode 'rule' on a nearest monitor renders the control variate: its stated phase error
     bounds the error against the lattice reference in >= 95 % of the pixels, is no blanket
     (median stated / true < 20) and is several times smaller than plain rqmc's at the same
-    rays (what the control variate is for). Measured: coverage 0.98-1.0."""
+    rays (what the control variate is for). Measured (paper estimator, 20 px fringes on 1 mm
+    pixels, N = 256): coverage 0.967 (linear) and 0.969 (gamma 2.2), median stated / true
+    3.6; true error 9.5 mrad RMS against plain rqmc's 26.8, stated median 21 against 61."""
     mon = NEAREST if display == "linear" else GAMMA
     fr = Simulation.from_config(make_config(sampling={"n_rays": 256, "mode": "rule"},
                                             monitor=mon)).render_fringes([20.0], ["x", "y"])
