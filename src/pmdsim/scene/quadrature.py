@@ -66,13 +66,15 @@ class Rule:
     """Nodes ``(u1, u2)`` (M,) in the unit square and weights ``w`` (M,), sum 1.
 
     ``order``: (n1, n2) of a product rule ((M, 1) for point sets); ``kind``: one of
-    :data:`KINDS`."""
+    :data:`KINDS`; ``phi_rho``: the axis ratio of a cone rule's azimuth map
+    (:func:`phi_map`), None for the plain trapezoid."""
 
     u1: np.ndarray
     u2: np.ndarray
     w: np.ndarray
     order: tuple[int, int]
     kind: str
+    phi_rho: float | None = None
 
     @property
     def n(self) -> int:
@@ -84,7 +86,10 @@ class Rule:
                  "hermite": "Gauss-Hermite x Gauss-Hermite in slope space",
                  "unit": "Gauss-Legendre x Gauss-Legendre in the lobe's CDF coordinates",
                  "sobol": "scrambled Sobol points", "lattice": "Fibonacci lattice"}
-        return f"{names[self.kind]} {n1} x {n2}" if n2 > 1 else f"{names[self.kind]} ({n1})"
+        text = f"{names[self.kind]} {n1} x {n2}" if n2 > 1 else f"{names[self.kind]} ({n1})"
+        if self.phi_rho is not None:
+            text += f" (phi following the lobe, rho {self.phi_rho:.2f})"
+        return text
 
 
 def _gauss_legendre_unit(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -214,7 +219,7 @@ def cone_rule(order: tuple[int, int], scheme: str = "polar", theta_max: float = 
         u2 = np.where(u2 >= 1.0, 0.0, u2)  # mod of a tiny negative number rounds to 1
         w = np.outer(wt, dphi / nphi).ravel()
     U1, U2 = np.meshgrid(u1, u2, indexing="ij")
-    return Rule(U1.ravel().copy(), U2.ravel().copy(), w, (nt, nphi), "cone")
+    return Rule(U1.ravel().copy(), U2.ravel().copy(), w, (nt, nphi), "cone", phi_rho)
 
 
 def hermite_rule(order: tuple[int, int]) -> Rule:
