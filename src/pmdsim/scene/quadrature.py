@@ -114,13 +114,16 @@ def _gauss_legendre_unit(n: int) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 * (x + 1.0), 0.5 * w
 
 
-def cone_order(n_nodes: int) -> tuple[int, int]:
-    """(n_theta, n_phi) of the cone rule of at most ``n_nodes`` nodes: about four times as
-    many phi nodes as theta nodes (the integrand turns once round the cone in phi, its
-    radial profile is a fraction of a Gaussian in theta), ``n_phi >= 4``."""
+def cone_order(n_nodes: int, ratio: int = 4) -> tuple[int, int]:
+    """(n_theta, n_phi) of the cone rule of at most ``n_nodes`` nodes: about ``ratio`` = 4
+    times as many phi nodes as theta nodes (the integrand turns once round the cone in phi,
+    its radial profile is a fraction of a Gaussian in theta), ``n_phi >= 4``. ``ratio`` 2
+    where the azimuths follow a lobe much narrower than the cone across
+    (:func:`phi_map_ratio`, ``theta_max > 10 narrow``): the mapped azimuths need fewer nodes
+    and the radial profile (the lobe's narrow core and wide streak) more."""
     if n_nodes < 1:
         raise ValueError(f"n_nodes must be >= 1, got {n_nodes}")
-    nt = max(1, int(math.isqrt(max(n_nodes, 4) // 4)))
+    nt = max(1, int(math.isqrt(max(n_nodes, ratio) // ratio)))
     nphi = max(1, n_nodes // nt)
     return nt, nphi
 

@@ -122,8 +122,9 @@ class ConeSampling:
         if lobe:
             order = self._part_order(quad.square_order(self.n_rays))
             return quad.hermite_rule(order) if self.lobe_gaussian else quad.unit_rule(order)
-        order = self._part_order(quad.cone_order(self.n_rays))
         rho = self.phi_rho
+        wide = rho is not None and self.theta_max > 10.0 * self.lobe_narrow
+        order = self._part_order(quad.cone_order(self.n_rays, 2 if wide else 4))
         if rho is not None and order[1] > 1:
             # an even number of azimuths: the mapped nodes then come in pairs phi, phi + pi,
             # as the lobe's two halves do (an odd count errs 10-1000 x more on Fig. 3)
