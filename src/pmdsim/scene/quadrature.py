@@ -26,11 +26,14 @@ Rules (:func:`cone_rule`, :func:`hermite_rule`, :func:`unit_rule`):
   analytic and periodic: the trapezoid keeps its exponential convergence), with phi = 0
   on the lobe's long axis, onto which the render turns each pixel's cone basis
   (:meth:`pmdsim.scene.sampling.ConeSampling.orient`); an even number of azimuths (nodes in
-  pairs phi, phi + pi, as the lobe's halves). Fig. 3's lobe in a 4 deg cone, 16 x 64: <=
-  0.0007 mrad against SciPy's cubature, where the plain trapezoid errs 0.1-0.3 mrad; in
-  the 1 deg cone 8 x 32: <= 1e-4 mrad (was 9e-4). Its modulus converges more slowly than
-  its phase (the phi-integrated lobe falls as 1 / theta beyond the narrow width), so the
-  stated error is conservative there (4 deg, 16 x 64: median 0.3 mrad);
+  pairs phi, phi + pi, as the lobe's halves). Where the cone is much wider than the lobe's
+  narrow axis (``theta_max > 10 narrow``: Fig. 3's lobe in a 2 or 4 deg cone) the mapped
+  azimuths need fewer nodes and the radial profile more (the phi-integrated lobe has a
+  core as narrow as the lobe's narrow axis and falls as 1 / theta beyond it): two azimuths
+  per theta node (:func:`cone_order` ``ratio``). Against SciPy's cubature: Fig. 3's lobe
+  in a 4 deg cone, 1024 nodes (22 x 46): <= 3e-6 mrad, where the plain 16 x 64 rule errs
+  0.1-0.3 mrad (the mapped 16 x 64: 7e-4); in the 1 deg cone 8 x 32: <= 1e-4 mrad (was
+  9e-4);
 - radiometric estimator with a Gaussian slope density (Ward, Beckmann, ``gaussian``):
   Gauss-Hermite in both normalised slopes ``a / alpha_x``, ``b / alpha_y`` (the slope
   density is ``exp(-x^2 - y^2) / pi``), mapped to the kernel's
@@ -54,12 +57,12 @@ with a safety factor 10 on the phase difference (:func:`pmdsim.render.results.ph
 cone rules only: Gauss-Hermite rules keep the unscaled statement, :func:`convergence_exponent`).
 Tested against SciPy's adaptive cubature: >= 95 % of pixels bounded, median stated/true
 about 9 (X) and 140 (Y) for the finest Fig. 3 fringe (50 and 10 before the azimuths
-followed the lobe; the unscaled statement: 800 and 90). Known gap: with the azimuth map the
-phase error of a cone rule is set by its radial order and converges more slowly than the
-modulus, which dominates ``|dS1| / |dS2|``; on Fig. 3's 2 deg cone at 10 x 40 and 11 x 44
-the scaled statement bounded only 85-87 % of (pixel, fringe) against the 32 x 128 rule (Y,
-50 px; the unscaled one 100 %); a factor from the phase parts ``Im(dS conj S)`` alone
-bounded 100 % there (measured offline; docs/physics.md). Where the integrand is not smooth (a
+followed the lobe; the unscaled statement: 800 and 90); on 2 and 4 deg cones (4 x 16 to
+22 x 46) it bounded 100 % of (pixel, fringe) against the 45 x 90 rule, 4 deg 22 x 46 a median
+80-270 x the true error (with four azimuths per theta node on those cones the mapped rule's
+phase error, set by its radial order, converged more slowly than the modulus that
+dominates ``|dS1| / |dS2|``, and the scaled statement bounded only 85-87 % on 2 deg at
+10 x 40 and 11 x 44). Where the integrand is not smooth (a
 ``nearest`` monitor's pixel steps, dots, images) the rule converges slowly and the
 difference says little: there **randomised QMC** (``rqmc``: R independent Owen-scrambled
 Sobol sets of N / R points, :func:`sobol_points`) gives an unbiased mean and its standard
