@@ -26,15 +26,26 @@ from pathlib import Path
 def _write_part(ds, path: Path, create: bool) -> None:
     """Write ``ds`` (a part of a run dataset) into the store ``path``: create it, or add
     the part's variables to it. No consolidated metadata (see :func:`finish_store`). The
-    chunks are rounded and compressed on Dask's threaded scheduler, passed explicitly
-    (not through ``dask.config``, which is global: the run's other threads use their own)."""
-    from ..render import local_scheduler
+    camera-image variables are rounded as they are read (:func:`pmdsim.run.lazy.converted`),
+    one variable at a time, and Zarr compresses its chunks in its own threads; a part
+    holding Dask arrays (a loaded run's) is computed on Dask's threaded scheduler, passed
+    explicitly (not through ``dask.config``, which is global: the run's other threads use
+    their own)."""
+    import sys
+
     from .dataset import _encoding, storage_form
 
-    delayed = storage_form(ds, lazy=True).to_zarr(
-        path, mode="w-" if create else "a", consolidated=False, compute=False,
-        encoding=_encoding(ds), zarr_format=3)
-    delayed.compute(scheduler=local_scheduler("threads"))
+    stored = storage_form(ds, lazy=True)
+    da = sys.modules.get("dask.array")
+    lazy = da is not None and any(isinstance(v.data, da.Array) for v in stored.variables.values())
+    kwargs = dict(mode="w-" if create else "a", consolidated=False, encoding=_encoding(ds),
+                  zarr_format=3)
+    if not lazy:
+        stored.to_zarr(path, **kwargs)
+        return
+    from ..render import local_scheduler
+
+    stored.to_zarr(path, compute=False, **kwargs).compute(scheduler=local_scheduler("threads"))
 
 
 def finish_store(path: Path, attrs: dict) -> None:
