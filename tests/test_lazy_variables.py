@@ -82,3 +82,31 @@ print("ok")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().endswith("ok")
+
+
+def test_written_in_groups_byte_for_byte_as_at_once(tmp_path, monkeypatch):
+    """The writer stores a part's variables a group at a time (memory: xarray reads all
+    variables of one call first): every file of the store is the same as one call's."""
+    from pmdsim.run import writing
+
+    a, b = _parts()
+    ds = xr.Dataset({
+        "phase_deviation": (("direction", "row", "col"), lazy_stack([a, b])),
+        "modulation": (("width", "row", "col"), np.stack([a, b, a * 2]).astype(np.float32)),
+        "valid": (("direction", "row", "col"), lazy_stack([a > 0, b > 0])),
+        "deviation_stats": (("direction", "statistic"), np.arange(6.0).reshape(2, 3)),
+    }, coords={"direction": ["x", "y"], "width": [50.0, 400.0, 3200.0],
+               "row": np.arange(5), "col": np.arange(7) * 2})
+    monkeypatch.setattr(writing, "GROUP_BYTES", 1)
+    assert len(writing._groups(ds)) == 3  # the small variables with the first, then one each
+    stores = {}
+    for label, limit in (("once", 2**40), ("groups", 1)):
+        monkeypatch.setattr(writing, "GROUP_BYTES", limit)
+        path = tmp_path / f"{label}.zarr"
+        writing._write_part(ds, path, create=True)
+        writing.finish_store(path, {"name": "t"})
+        stores[label] = {p.relative_to(path): p.read_bytes() for p in sorted(path.rglob("*"))
+                         if p.is_file()}
+    assert stores["once"].keys() == stores["groups"].keys()
+    for k in stores["once"]:
+        assert stores["once"][k] == stores["groups"][k], k

@@ -23,29 +23,61 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 
+#: Variables of a part written per call of ``to_zarr`` up to this many bytes: xarray encodes
+#: (reads) every variable of a call before it writes any, so a call's variables are in
+#: memory at once (a variable larger than this is written alone).
+GROUP_BYTES = 64 * 2**20
+
+
+def _groups(ds) -> list[list[str]]:
+    """The data variables of ``ds`` in groups of at most :data:`GROUP_BYTES` (as stored:
+    float32 for floats), in order; the small ones with the first group."""
+    small, big = [], []
+    for name, var in ds.data_vars.items():
+        (big if var.ndim >= 2 and var.dims[-2:] == ("row", "col") else small).append(name)
+    groups, size = [list(small)], 0
+    for name in big:
+        var = ds[name]
+        nbytes = var.size * (4 if var.dtype.kind == "f" else var.dtype.itemsize)
+        if size and size + nbytes > GROUP_BYTES:
+            groups.append([])
+            size = 0
+        groups[-1].append(name)
+        size += nbytes
+    return [g for g in groups if g]
+
+
 def _write_part(ds, path: Path, create: bool) -> None:
     """Write ``ds`` (a part of a run dataset) into the store ``path``: create it, or add
     the part's variables to it. No consolidated metadata (see :func:`finish_store`). The
     camera-image variables are rounded as they are read (:func:`pmdsim.run.lazy.converted`),
-    one variable at a time, and Zarr compresses its chunks in its own threads; a part
-    holding Dask arrays (a loaded run's) is computed on Dask's threaded scheduler, passed
-    explicitly (not through ``dask.config``, which is global: the run's other threads use
-    their own)."""
+    a group of at most :data:`GROUP_BYTES` at a time, and Zarr compresses their chunks in
+    its own threads; a part holding Dask arrays (a loaded run's) is computed on Dask's
+    threaded scheduler, passed explicitly (not through ``dask.config``, which is global:
+    the run's other threads use their own)."""
     import sys
 
     from .dataset import _encoding, storage_form
 
     stored = storage_form(ds, lazy=True)
     da = sys.modules.get("dask.array")
-    lazy = da is not None and any(isinstance(v.data, da.Array) for v in stored.variables.values())
-    kwargs = dict(mode="w-" if create else "a", consolidated=False, encoding=_encoding(ds),
-                  zarr_format=3)
-    if not lazy:
-        stored.to_zarr(path, **kwargs)
-        return
-    from ..render import local_scheduler
+    if da is not None and any(isinstance(v.data, da.Array) for v in stored.variables.values()):
+        from ..render import local_scheduler
 
-    stored.to_zarr(path, compute=False, **kwargs).compute(scheduler=local_scheduler("threads"))
+        stored.to_zarr(path, mode="w-" if create else "a", consolidated=False,
+                       encoding=_encoding(ds), zarr_format=3, compute=False).compute(
+            scheduler=local_scheduler("threads"))
+        return
+    written: set = set()
+    for k, names in enumerate(_groups(stored)):
+        part = stored[names]
+        # coordinates of the part that came without a variable of this group
+        part = part.assign_coords({c: stored.coords[c] for c in stored.coords
+                                   if c not in part.coords and k == 0})
+        part = part.drop_vars([c for c in part.coords if c in written])
+        part.to_zarr(path, mode="w-" if create and k == 0 else "a", consolidated=False,
+                     encoding=_encoding(part), zarr_format=3)
+        written.update(part.coords)
 
 
 def finish_store(path: Path, attrs: dict) -> None:
