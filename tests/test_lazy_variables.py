@@ -110,3 +110,26 @@ def test_written_in_groups_byte_for_byte_as_at_once(tmp_path, monkeypatch):
     assert stores["once"].keys() == stores["groups"].keys()
     for k in stores["once"]:
         assert stores["once"][k] == stores["groups"][k], k
+
+
+def test_a_large_variable_is_written_chunk_by_chunk_with_the_same_bytes(tmp_path, monkeypatch):
+    """A camera-image variable above LARGE_BYTES goes through Dask one image at a time (a
+    5 MP run's fringe images): the same files as from one converted copy."""
+    from pmdsim.run import writing
+
+    a, b = _parts()
+    ds = xr.Dataset({
+        "phase_deviation": (("direction", "row", "col"), lazy_stack([a, b])),
+        "fringes": (("width", "row", "col"), np.stack([a, b, a * 2]).astype(np.float32)),
+    }, coords={"direction": ["x", "y"], "row": np.arange(5), "col": np.arange(7) * 2})
+    stores = {}
+    for label, limit in (("copy", 2**40), ("chunks", 1)):
+        monkeypatch.setattr(writing, "LARGE_BYTES", limit)
+        path = tmp_path / f"{label}.zarr"
+        writing._write_part(ds, path, create=True)
+        writing.finish_store(path, {"name": "t"})
+        stores[label] = {p.relative_to(path): p.read_bytes() for p in sorted(path.rglob("*"))
+                         if p.is_file()}
+    assert stores["copy"].keys() == stores["chunks"].keys()
+    for k in stores["copy"]:
+        assert stores["copy"][k] == stores["chunks"][k], k

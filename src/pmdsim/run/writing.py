@@ -27,6 +27,15 @@ from pathlib import Path
 #: (reads) every variable of a call before it writes any, so a call's variables are in
 #: memory at once (a variable larger than this is written alone).
 GROUP_BYTES = 64 * 2**20
+#: A camera-image variable larger than this (as stored) is written chunk by chunk through
+#: Dask (one image at a time, as all were before: 5 MP runs keep their memory) instead of
+#: from one converted copy; none of the Fig. 3 run's is (the largest, its fringe images,
+#: is 126 MB), so it never imports ``dask.array``.
+LARGE_BYTES = 256 * 2**20
+
+
+def _stored_bytes(var) -> int:
+    return var.size * (4 if var.dtype.kind == "f" else var.dtype.itemsize)
 
 
 def _groups(ds) -> list[list[str]]:
@@ -38,7 +47,7 @@ def _groups(ds) -> list[list[str]]:
     groups, size = [list(small)], 0
     for name in big:
         var = ds[name]
-        nbytes = var.size * (4 if var.dtype.kind == "f" else var.dtype.itemsize)
+        nbytes = _stored_bytes(var)
         if size and size + nbytes > GROUP_BYTES:
             groups.append([])
             size = 0
@@ -59,7 +68,13 @@ def _write_part(ds, path: Path, create: bool) -> None:
 
     from .dataset import _encoding, storage_form
 
+    from . import lazy
+
     stored = storage_form(ds, lazy=True)
+    large = {n: lazy.as_dask(v.variable._data) for n, v in stored.data_vars.items()
+             if _stored_bytes(v) > LARGE_BYTES and lazy.is_lazy(v.variable._data)}
+    if large:  # chunk by chunk, as a loaded run's Dask arrays below
+        stored = stored.assign({n: stored[n].copy(data=a) for n, a in large.items()})
     da = sys.modules.get("dask.array")
     if da is not None and any(isinstance(v.data, da.Array) for v in stored.variables.values()):
         from ..render import local_scheduler
