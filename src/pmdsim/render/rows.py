@@ -1,5 +1,6 @@
-"""Per-pixel geometry rows of the vision rays for the bundle kernels, and the reduction of
-a pixel's sub-ray sums (moved from :mod:`pmdsim.render.simulation`, which re-exports them)."""
+"""Per-pixel geometry rows of the vision rays for the bundle kernels, the reduction of a
+pixel's sub-ray sums (moved from :mod:`pmdsim.render.simulation`, which re-exports them), and
+the fringes' finishing step run in the render's tile tasks (:class:`FringeFinish`)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import numpy as np
 
 from ..kernels import bundle as kb
 from ..kernels import primary as kprim
+from ..kernels.synth import fringe_rows
 from ..scene import Scene
 
 
@@ -107,3 +109,65 @@ def reduce_subrays(out: np.ndarray, estimator: str) -> np.ndarray:
         summed[:, kb.OUT_FTOTAL] = 1.0
     summed[~hit.any(axis=1)] = np.nan
     return summed
+
+
+class FringeFinish:
+    """The linear fringes' estimator values, finished tile by tile inside the render.
+
+    ``Simulation._render_brdf`` calls the instance (``finish=``, :meth:`kw`) in each tile's
+    task right after the bundle kernel wrote the tile's rows, while they are in cache:
+    :func:`~pmdsim.kernels.synth.fringe_rows` writes the normalisation, f_total, f_hit, the
+    normalised complex sums ``sums`` (B blocks, (direction, width) order) and the shifted
+    ``images`` (B, K) of those rows. Only for a render whose first pass is its result (one
+    pass, or mode ``rule``, whose embedded passes only give the error) and without a
+    specular peak (a second, mirror pass is added after the tiles); :meth:`complete` then
+    finishes whatever rows no tile did (another scheduler, the mean of rqmc replicates).
+    """
+
+    def __init__(self, sim, images, sums, cols, deltas, black: float, white: float):
+        from .specular import specular_reflectance
+
+        h, w = sim.shape
+        passes = sim.plan(sim.fringes_smooth())
+        single = len(passes) == 1 or passes[0].mode == "rule"
+        nospec = sim.scene.brdf.is_delta or specular_reflectance(sim.scene.brdf) == 0
+        self.sampling = passes[0] if single and nospec else None
+        self.shape = (h, w)
+        self.workers = sim.num_workers
+        self.ratio = sim.scene.estimator == "weighted_mean"
+        self.inv_n = 1.0 / sim.scene.rays_per_pixel
+        self.norm, self.f_total, self.f_hit = (np.empty((h, w)) for _ in range(3))
+        nb, nk = len(cols), len(deltas)
+        self.sums = sums.reshape(nb, h * w)
+        self.images = images.reshape(nb, nk, h * w)
+        self.cols = np.asarray(cols, np.int64)
+        self.cos_d, self.sin_d = np.cos(deltas), np.sin(deltas)
+        self.black, self.white = float(black), float(white)
+        self.done: list = []  # (sums array, rows) per finished tile (list.append: atomic)
+
+    def kw(self) -> dict:
+        """The ``finish`` keyword of the render (empty when the tiles cannot finish)."""
+        return {} if self.sampling is None else {"finish": (self.sampling, self)}
+
+    def __call__(self, r0: int, r1: int, full: np.ndarray) -> None:
+        w = self.shape[1]
+        p0, p1 = r0 * w, r1 * w
+        fringe_rows(full.reshape(-1, full.shape[-1])[p0:p1], self.cols, self.ratio, self.inv_n,
+                    self.cos_d, self.sin_d, self.black, self.white,
+                    self.norm.reshape(-1)[p0:p1], self.f_total.reshape(-1)[p0:p1],
+                    self.f_hit.reshape(-1)[p0:p1], self.sums[:, p0:p1],
+                    self.images[:, :, p0:p1])
+        self.done.append((full, r1 - r0))
+
+    def complete(self, out: np.ndarray):
+        """Finish from the render's result ``out`` (H, W, C) unless its tiles did; returns
+        (norm, f_total, f_hit), each (H, W)."""
+        h = self.shape[0]
+        if sum(n for a, n in self.done if a is out) != h:
+            from concurrent.futures import ThreadPoolExecutor
+
+            step = max(1, -(-h // 32))
+            with ThreadPoolExecutor(self.workers) as pool:  # the kernel releases the GIL
+                list(pool.map(lambda r: self(r, min(r + step, h), out), range(0, h, step)))
+        self.done.clear()
+        return self.norm, self.f_total, self.f_hit

@@ -40,12 +40,11 @@ from ..kernels import bundle as kb
 from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
-from ..kernels.synth import shifted_images
 from ..scene.quadrature import convergence_exponent
 from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, convergence_factor,  # noqa: F401
                       phase_error, value_error, worst_phase_error)
-from .rows import (local_scheduler, reduce_subrays, scene_geometry_rows,  # noqa: F401
-                   vision_geometry_rows)
+from .rows import (FringeFinish, local_scheduler, reduce_subrays,  # noqa: F401
+                   scene_geometry_rows, vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
@@ -195,7 +194,11 @@ class Simulation:
         return out
 
     def _render_brdf(self, scene, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
-                     images=None, dots=None, progress=None):
+                     images=None, dots=None, progress=None, finish=None):
+        """Pixel sums (H, W, ncols) of one pass. ``finish``: optional ``(sampling, fn)``:
+        when this pass renders with that sample set on an in-process scheduler, each tile
+        task calls ``fn(r0, r1, sums)`` (``sums`` the whole (H, W, ncols) array, rows
+        ``r0:r1`` final) right after its kernel, while the rows are in cache."""
         delta = scene.brdf.is_delta
         samp = scene.sampling
         lobe = scene.estimator == "radiometric" and not delta
@@ -228,6 +231,8 @@ class Simulation:
         # per-tile result arrays, no concatenation copy: half the render's peak memory).
         full = (np.empty((cam.height, width, ncols))
                 if self.scheduler in ("threads", "synchronous") else None)
+        fin = (finish[1] if finish is not None and full is not None
+               and scene.sampling == finish[0] else None)
 
         var = None if delta else scene.brdf_variation
 
@@ -274,6 +279,8 @@ class Simulation:
                 rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
                 if full is not None:
                     kernel(geo, rot, full[r0:r1].reshape(-1, ncols))
+                    if fin is not None:
+                        fin(r0, r1, full)
                     return None
                 return kernel(geo, rot).reshape(r1 - r0, width, ncols)
             # camera optics: S vision rays per pixel, each with its own scattered bundle,
@@ -287,6 +294,8 @@ class Simulation:
                     rot = np.random.default_rng([samp.seed, r]).random((geo.shape[0], 2))
                 out = kernel(geo, rot).reshape(width, n_sub, ncols)
                 res[r - r0] = reduce_subrays(out, scene.estimator)
+            if fin is not None:
+                fin(r0, r1, full)
             return None if full is not None else res
 
         parts = self._compute(tile, self._tiles(), progress)
@@ -425,6 +434,17 @@ class Simulation:
         # Build the per-direction work lists: each entry is a profile table (nearest) or a
         # frequency (continuous).
         per_dir: dict[str, list] = {"x": [], "y": []}
+        h, w_ = self.shape
+        images = np.empty((nd, nw, len(deltas), h, w_), np.float32)
+        # Column offsets of each direction's block.
+        n_u = sum(1 for d in directions if d == "x")
+        per_width = (2 if linear else len(deltas)) if not continuous else 2 * (1 if linear else GAMMA_HARMONICS)
+        base = {"x": kb.OUT_FIRST, "y": kb.OUT_FIRST + n_u * nw * per_width}
+        fused = None
+        if linear:  # normalisation, sums and shifted images finished tile by tile
+            sums = np.empty((nd, nw, h, w_), np.complex128)
+            cols = [base[d] + wi * per_width for d in directions for wi in range(nw)]
+            fused = FringeFinish(self, images, sums, cols, deltas, black, white)
         if not continuous:
             for d in directions:
                 c = coords[d]
@@ -439,7 +459,8 @@ class Simulation:
             tv = np.array(per_dir["y"]).reshape(-1, mon.height)
             ncols = kb.OUT_FIRST + tu.shape[0] + tv.shape[0]
             out, err = self._render(kb.MODE_TABLES, ncols, smooth=self.fringes_smooth(),
-                                    table_u=tu, table_v=tv, progress=progress)
+                                    table_u=tu, table_v=tv, progress=progress,
+                                    **({} if fused is None else fused.kw()))
         else:
             harm = 1 if linear else GAMMA_HARMONICS
             for d in directions:
@@ -448,31 +469,20 @@ class Simulation:
             ku, kv = np.array(per_dir["x"]), np.array(per_dir["y"])
             ncols = kb.OUT_FIRST + 2 * (ku.size + kv.size)
             out, err = self._render(kb.MODE_HARMONIC, ncols, smooth=self.fringes_smooth(),
-                                    k_u=ku, k_v=kv, progress=progress)
+                                    k_u=ku, k_v=kv, progress=progress, **({} if fused is None else fused.kw()))
 
-        norm = self._normalise(out)
-        f_total = out[..., kb.OUT_FTOTAL] * norm
-        f_hit = out[..., kb.OUT_FHIT] * norm
-        h, w_ = self.shape
-        images = np.empty((nd, nw, len(deltas), h, w_), np.float32)
-        sums = np.empty((nd, nw, h, w_), np.complex128) if linear else None
-        # Column offsets of each direction's block.
-        n_u = sum(1 for d in directions if d == "x")
-        per_width = (2 if linear else len(deltas)) if not continuous else 2 * (1 if linear else GAMMA_HARMONICS)
-        base = {"x": kb.OUT_FIRST, "y": kb.OUT_FIRST + n_u * nw * per_width}
+        if linear:  # the rows no tile finished (another scheduler, several passes): here
+            norm, f_total, f_hit = fused.complete(out)
+        else:
+            sums = None
+            norm = self._normalise(out)
+            f_total = out[..., kb.OUT_FTOTAL] * norm
+            f_hit = out[..., kb.OUT_FHIT] * norm
         if not linear and continuous:
             theta = 2 * np.pi * np.arange(4096) / 4096
             g = mon.luminance(0.5 + 0.5 * np.cos(theta))
             coef = np.fft.rfft(g).real / theta.size
             coef[1:] *= 2  # g(theta) = sum_m coef_m cos(m theta)
-        if linear:  # every direction and width in one pass over the kernel's output rows
-            cols = np.array([base[d] + wi * per_width for d in directions for wi in range(nw)],
-                            np.int64)
-            shifted_images(
-                out.reshape(h * w_, -1), cols, norm.reshape(-1), f_hit.reshape(-1),
-                np.cos(deltas), np.sin(deltas), black, white,
-                sums.reshape(nd * nw, h * w_), images.reshape(nd * nw, len(deltas), h * w_),
-            )
         sums_err = convergence = None
         info = self.describe_sampling(self.fringes_smooth())
         if linear and err is not None:  # the error of every normalised complex sum
