@@ -8,7 +8,7 @@ import numpy as np
 
 from ..kernels import bundle as kb
 from ..kernels import primary as kprim
-from ..kernels.synth import fringe_rows
+from ..kernels.synth import fringe_error_rows, fringe_rows
 from ..scene import Scene
 
 
@@ -171,3 +171,34 @@ class FringeFinish:
                 list(pool.map(lambda r: self(r, min(r + step, h), out), range(0, h, step)))
         self.done.clear()
         return self.norm, self.f_total, self.f_hit
+
+
+def fringe_errors(diffs, cols, norm, sums, second: bool, workers=None):
+    """The numerical error of the normalised complex sums (B, H, W) complex128 from the
+    render's differences to the embedded rules ``diffs`` ((H, W, C) each), and with
+    ``second`` the per-pixel inputs of the observed convergence ``(|dS1| / |dS2|,
+    |dS1| / |S|)`` (B, H*W) each (:func:`pmdsim.render.results.convergence_of_ratios`), else
+    None: one compiled pass over the differences (:func:`~pmdsim.kernels.synth.
+    fringe_error_rows`) in row blocks on a thread pool."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    h, w = norm.shape
+    nb = len(cols)
+    cols = np.asarray(cols, np.int64)
+    err = np.empty((nb, h, w), np.complex128)
+    ratio = np.empty((nb, h * w)) if second else np.empty((nb, 0))
+    rel = np.empty_like(ratio)
+    d1 = diffs[0].reshape(h * w, -1)
+    d2 = diffs[1].reshape(h * w, -1) if second else np.zeros((0, 0))
+    e2, s2, nf = err.reshape(nb, -1), sums.reshape(nb, -1), norm.reshape(-1)
+    step = max(1, -(-h // 32)) * w
+
+    def block(p0):
+        p1 = min(p0 + step, h * w)
+        fringe_error_rows(d1[p0:p1], d2[p0:p1] if second else d2, cols, nf[p0:p1],
+                          s2[:, p0:p1], e2[:, p0:p1], ratio[:, p0:p1] if second else ratio,
+                          rel[:, p0:p1] if second else rel)
+
+    with ThreadPoolExecutor(workers) as pool:  # the kernel releases the GIL
+        list(pool.map(block, range(0, h * w, step)))
+    return err, ((ratio, rel) if second else None)

@@ -42,8 +42,8 @@ from ..scene import Scene
 from ..scene.brdf_variation import with_params
 from ..scene.quadrature import convergence_exponent
 from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, convergence_factor,  # noqa: F401
-                      phase_error, value_error, worst_phase_error)
-from .rows import (FringeFinish, local_scheduler, reduce_subrays,  # noqa: F401
+                      convergence_of_ratios, phase_error, value_error, worst_phase_error)
+from .rows import (FringeFinish, fringe_errors, local_scheduler, reduce_subrays,  # noqa: F401
                    scene_geometry_rows, vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels
 
@@ -487,23 +487,16 @@ class Simulation:
         info = self.describe_sampling(self.fringes_smooth())
         if linear and err is not None:  # the error of every normalised complex sum
             diffs = err if isinstance(err, tuple) else (err,)
-            cols = {(di, wi): base[d] + wi * per_width for di, d in enumerate(directions)
-                    for wi in range(nw)}
-
-            def fringe_sum(e, di, wi):
-                return (e[..., cols[di, wi]] + 1j * e[..., cols[di, wi] + 1]) * np.abs(norm)
-
-            sums_err = np.empty((nd, nw, h, w_), np.complex128)
-            for di, wi in cols:
-                sums_err[di, wi] = fringe_sum(diffs[0], di, wi)
             kexp = (convergence_exponent(tuple(info["order"]), info["kind"]) if len(diffs) > 1
                     else None)
+            sums_err, ratios = fringe_errors(diffs, cols, norm, sums.reshape(nd * nw, h, w_),
+                                             kexp is not None, self.num_workers)
+            sums_err = sums_err.reshape(nd, nw, h, w_)
             if kexp is not None:  # the observed convergence from the second embedded rule
-                convergence = np.ones((nd, nw))  # fringe by fringe: one (H, W) copy at a time
-                for di, wi in cols:
-                    convergence[di, wi] = convergence_factor(
-                        sums[di, wi], sums_err[di, wi], fringe_sum(diffs[1], di, wi), kexp)
+                convergence = convergence_of_ratios(ratios[0].reshape(nd, nw, -1),
+                                                    ratios[1].reshape(nd, nw, -1), kexp)
                 info["convergence"] = [[round(float(c), 6) for c in r] for r in convergence]
+            del ratios
             del diffs, err
         for di, d in enumerate(directions if not linear else ()):
             for wi in range(nw):
