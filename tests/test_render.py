@@ -401,7 +401,7 @@ def test_fringes_finished_in_the_tiles_equal_the_finish_after_the_render(monkeyp
     tiles = sim.render_fringes(widths=(20.0, 45.0), shifts=3)
     assert sorted(blocks) == [(r, min(r + 5, 32)) for r in range(0, 32, 5)]  # the tiles
     blocks.clear()
-    monkeypatch.setattr(FringeFinish, "kw", lambda self: {})  # the tiles do not finish
+    monkeypatch.setattr(FringeFinish, "kw", lambda self, mode, ncols: {})  # the tiles do not finish
     after = sim.render_fringes(widths=(20.0, 45.0), shifts=3)
     assert sorted(blocks) == [(r, r + 1) for r in range(32)]  # after the render
     assert np.isfinite(tiles.images).any() and np.isnan(tiles.images).any()

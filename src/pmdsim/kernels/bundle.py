@@ -132,7 +132,9 @@ MODE_TRANSPORT = 4  # out_u/out_v/out_f (npix, nrays): the rays themselves
 OUT_FTOTAL = 0
 OUT_FHIT = 1
 #: Ray loops of :func:`render_tile` (Ward, Beckmann) run over a multiple of this many rays
-#: (padding rays of weight 0): a ray in a scalar remainder loop costs ~10 vector lanes.
+#: (padding rays of weight 0): a ray in a scalar remainder loop costs ~10 vector lanes. 8 is
+#: the largest step of the compiled ray loops on AVX2 (phase 1: 4 lanes x 2; the harmonic
+#: loops 4 or 8): N = 100 (+ P) runs as 104 rays (it ran as 112 with 16).
 RAY_BLOCK = 8
 OUT_FIRST = 2
 

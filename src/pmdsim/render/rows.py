@@ -118,20 +118,16 @@ class FringeFinish:
     task right after the bundle kernel wrote the tile's rows, while they are in cache:
     :func:`~pmdsim.kernels.synth.fringe_rows` writes the normalisation, f_total, f_hit, the
     normalised complex sums ``sums`` (B blocks, (direction, width) order) and the shifted
-    ``images`` (B, K) of those rows. Only for a render whose first pass is its result (one
-    pass, or mode ``rule``, whose embedded passes only give the error) and without a
-    specular peak (a second, mirror pass is added after the tiles); :meth:`complete` then
-    finishes whatever rows no tile did (another scheduler, the mean of rqmc replicates).
+    ``images`` (B, K) of those rows. Only in the pass that is the render's result
+    (``Simulation.result_pass``: one pass, or mode ``rule``, whose embedded passes only
+    give the error; no specular peak, whose mirror pass is added after the tiles);
+    :meth:`complete` finishes whatever rows no tile did (another scheduler, the mean of
+    rqmc replicates).
     """
 
     def __init__(self, sim, images, sums, cols, deltas, black: float, white: float):
-        from .specular import specular_reflectance
-
         h, w = sim.shape
-        passes = sim.plan(sim.fringes_smooth())
-        single = len(passes) == 1 or passes[0].mode == "rule"
-        nospec = sim.scene.brdf.is_delta or specular_reflectance(sim.scene.brdf) == 0
-        self.sampling = passes[0] if single and nospec else None
+        self.sampling = sim.result_pass(sim.fringes_smooth())
         self.shape = (h, w)
         self.workers = sim.num_workers
         self.ratio = sim.scene.estimator == "weighted_mean"
@@ -145,9 +141,10 @@ class FringeFinish:
         self.black, self.white = float(black), float(white)
         self.done: list = []  # (sums array, rows) per finished tile (list.append: atomic)
 
-    def kw(self) -> dict:
-        """The ``finish`` keyword of the render (empty when the tiles cannot finish)."""
-        return {} if self.sampling is None else {"finish": (self.sampling, self)}
+    def kw(self, mode: int, ncols: int) -> dict:
+        """The ``finish`` keyword of the render of ``mode`` into ``ncols`` columns (empty
+        when the tiles cannot finish)."""
+        return {} if self.sampling is None else {"finish": (self.sampling, mode, ncols, self)}
 
     def __call__(self, r0: int, r1: int, full: np.ndarray) -> None:
         w = self.shape[1]

@@ -141,6 +141,22 @@ class Simulation:
             return (samp,)
         return samp.error_passes()
 
+    def result_pass(self, smooth: bool = True):
+        """The sample set whose pass :meth:`_render` returns unchanged as its result (one
+        pass; mode ``rule``, whose embedded passes only give the error), or None (the mean
+        of rqmc replicates; a specular peak's mirror pass added after the tiles): only then
+        can a caller finish the sums inside that pass's tiles (``finish``,
+        :class:`~pmdsim.render.rows.FringeFinish`). Keep in step with :meth:`_render`."""
+        from .specular import specular_reflectance
+
+        passes = self.plan(smooth)
+        if len(passes) > 1 and passes[0].mode != "rule":
+            return None
+        brdf = self.scene.brdf
+        if not brdf.is_delta and specular_reflectance(brdf) > 0:
+            return None
+        return passes[0]
+
     def fringes_smooth(self) -> bool:
         """Whether the fringe integrand is smooth (a Gauss rule converges fast): a continuous
         monitor and, for the radiometric estimator, a Gaussian slope density."""
@@ -195,10 +211,11 @@ class Simulation:
 
     def _render_brdf(self, scene, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
                      images=None, dots=None, progress=None, finish=None):
-        """Pixel sums (H, W, ncols) of one pass. ``finish``: optional ``(sampling, fn)``:
-        when this pass renders with that sample set on an in-process scheduler, each tile
-        task calls ``fn(r0, r1, sums)`` (``sums`` the whole (H, W, ncols) array, rows
-        ``r0:r1`` final) right after its kernel, while the rows are in cache."""
+        """Pixel sums (H, W, ncols) of one pass. ``finish``: optional ``(sampling, mode,
+        ncols, fn)``: when this pass renders that sample set, mode and columns on an
+        in-process scheduler, each tile task calls ``fn(r0, r1, sums)`` (``sums`` the whole
+        (H, W, ncols) array, rows ``r0:r1`` final) right after its kernel, while the rows
+        are in cache (:meth:`result_pass`)."""
         delta = scene.brdf.is_delta
         samp = scene.sampling
         lobe = scene.estimator == "radiometric" and not delta
@@ -231,8 +248,8 @@ class Simulation:
         # per-tile result arrays, no concatenation copy: half the render's peak memory).
         full = (np.empty((cam.height, width, ncols))
                 if self.scheduler in ("threads", "synchronous") else None)
-        fin = (finish[1] if finish is not None and full is not None
-               and scene.sampling == finish[0] else None)
+        fin = (finish[3] if finish is not None and full is not None
+               and (scene.sampling, mode, ncols) == finish[:3] else None)
 
         var = None if delta else scene.brdf_variation
 
@@ -460,7 +477,7 @@ class Simulation:
             ncols = kb.OUT_FIRST + tu.shape[0] + tv.shape[0]
             out, err = self._render(kb.MODE_TABLES, ncols, smooth=self.fringes_smooth(),
                                     table_u=tu, table_v=tv, progress=progress,
-                                    **({} if fused is None else fused.kw()))
+                                    **({} if fused is None else fused.kw(kb.MODE_TABLES, ncols)))
         else:
             harm = 1 if linear else GAMMA_HARMONICS
             for d in directions:
@@ -469,7 +486,8 @@ class Simulation:
             ku, kv = np.array(per_dir["x"]), np.array(per_dir["y"])
             ncols = kb.OUT_FIRST + 2 * (ku.size + kv.size)
             out, err = self._render(kb.MODE_HARMONIC, ncols, smooth=self.fringes_smooth(),
-                                    k_u=ku, k_v=kv, progress=progress, **({} if fused is None else fused.kw()))
+                                    k_u=ku, k_v=kv, progress=progress,
+                                    **({} if fused is None else fused.kw(kb.MODE_HARMONIC, ncols)))
 
         if linear:  # the rows no tile finished (another scheduler, several passes): here
             norm, f_total, f_hit = fused.complete(out)
