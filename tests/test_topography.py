@@ -56,61 +56,6 @@ def test_each_surfalize_format_reads_with_values_orientation_and_spacing(tmp_pat
     assert (t.dx, t.dy) == pytest.approx((DX, DY), rel=1e-7)
 
 
-def test_every_advertised_instrument_format_has_a_test():
-    """The suffixes read through surfalize are exactly those tested above (and the SDF of
-    the standard below); the others are refused, each with its reason."""
-    from pmdsim.topofile import NOT_READ, SURFALIZE_SUFFIXES
-
-    assert set(SURFALIZE_SUFFIXES) == {".sur", ".al3d", ".tmd", ".sflz", ".sdf"}
-    assert {".plu", ".vk4", ".datx", ".xyz"} <= set(NOT_READ)
-
-
-def _plu_as_gwyddion_describes(path, z_um, mppx, mppy):
-    """A Sensofar .plu file laid out as Gwyddion's sensofar.c reads it: date (128 bytes),
-    time (uint32), comment (256), the axes block (yres, xres, N_tall uint32; dy_multip,
-    mppx, mppy, x_0, y_0, mpp_tall, z_0 float32), the measurement block (72 bytes, type 3 =
-    topography), then yres, xres (uint32), the float32 heights in um row by row, min, max."""
-    import struct
-
-    ny, nx = z_um.shape
-    head = b"Tue Dec  1 12:00:00 2026".ljust(128, b"\0") + struct.pack("<I", 0) + bytes(256)
-    head += struct.pack("<3I7f", ny, nx, 1, 1.0, mppx, mppy, 0.0, 0.0, 1.0, 0.0)
-    head += struct.pack("<10IdfII", 3, 0, 0, 0, 3, nx, ny, nx, ny, 1, 0.1, 10.0, 1, 0)
-    head += bytes([0, 1, 0xFA, 0, 1, 0, 0, 0]) + struct.pack("<I", 0)
-    assert len(head) == 500
-    z = np.asarray(z_um, "<f4")
-    path.write_bytes(head + struct.pack("<II", ny, nx) + z.tobytes()
-                     + struct.pack("<ff", z.min(), z.max()))
-
-
-def test_unverified_formats_are_refused_naming_the_reason(tmp_path):
-    """.plu is not read: on a file laid out as Gwyddion describes, surfalize 0.19.2 returns
-    heights shifted by two values (the grid's size read as heights), so neither layout can
-    be trusted without a sample file. .datx and .vk4 are refused the same way, naming the
-    field, the file and what to export instead."""
-    surfalize = pytest.importorskip("surfalize")
-    import warnings
-
-    z = (_grid() * 1e3).astype(np.float32)  # um
-    plu = tmp_path / "part.plu"
-    _plu_as_gwyddion_describes(plu, z, DX * 1e3, DY * 1e3)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        misread = surfalize.Surface.load(plu).data
-    assert not np.allclose(misread, z, equal_nan=False)  # why .plu is not advertised
-    np.testing.assert_allclose(np.asarray(misread).ravel()[2:], z.ravel()[:-2], rtol=1e-6)
-    for name in ("part.plu", "part.datx", "part.vk4"):
-        path = tmp_path / name
-        if not path.exists():
-            path.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(64))
-        with pytest.raises(InputError) as info:
-            read_topography(path, "brdf.file")
-        msg = str(info.value)
-        assert msg.startswith("brdf.file:") and name in msg and "X3P" in msg, msg
-    with pytest.raises(InputError, match="HDF5 layout is not published"):
-        read_topography(tmp_path / "part.datx")
-
-
 def test_ascii_sdf_by_the_standard_reads_through_surfalize(tmp_path):
     """An ISO 25178-71 ASCII SDF file written here from the standard's layout (not by
     surfalize) reads with the scales of its header: x, y in m per point, z in m per unit."""

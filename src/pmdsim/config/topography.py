@@ -45,7 +45,7 @@ class RayleighRiceConfig(_SmoothFields):
 
 
 class TopographyConfig(_SmoothFields):
-    """A measured roughness patch (``file``: X3P, .sur, .sdf, .al3d, ... with units and
+    """A measured roughness patch (``file``: X3P, .sur, .sdf, .vk4, .plu, .datx, ... with units and
     spacing inside, or .npy/.csv/.tif with ``spacing_mm`` and ``height_unit``), levelled
     (``level``), outliers and non-measured points handled (``outlier_sigma``, ``fill``);
     ``radial_axis``: the map axis across the turning grooves (local y). ``regime``:

@@ -255,6 +255,8 @@ class Simulation:
 
         def kernel(geo, rot, out=None):
             out = np.empty((geo.shape[0], ncols)) if out is None else out
+            if not (lobe or delta):  # phi = 0 on the lobe's long axis where the rule needs it
+                samp.orient(geo, brdf)
             if var is not None:  # spatially varying alpha/rho_s: per-pixel parameters
                 px = var.geometry_params(geo, scene.monitor, brdf)
                 args = (geo, brdf, u1, u2, rot)
@@ -617,6 +619,8 @@ class Simulation:
         geo = bundle_geometry(scene, hits)
         samp = scene.sampling
         lobe = self._lobe
+        if not (lobe or scene.brdf.is_delta):  # as the render (:meth:`_render_brdf`)
+            samp.orient(geo, scene.brdf.kernel_params())
         if scene.brdf.is_delta:
             u1 = u2 = np.zeros(0)
             local = np.array([[0.0, 0.0, 1.0]])

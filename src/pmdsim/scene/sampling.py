@@ -60,7 +60,9 @@ class ConeSampling:
 
     ``lobe_sigma`` (rad): the lobe's widest angular standard deviation (sqrt(2) alpha):
     cone rules lay their radial nodes out in the lobe when it is narrower than a third of
-    the cone. ``lobe_gaussian``: the radiometric sampler maps Gaussian slopes (Ward,
+    the cone. ``lobe_narrow`` (rad): its narrowest (sqrt(2) min(alpha_x, alpha_y)): an
+    anisotropic lobe narrower than the cone across (:func:`~.quadrature.phi_map_ratio`)
+    gets azimuths that follow it (:attr:`phi_rho`, :meth:`orient`). ``lobe_gaussian``: the radiometric sampler maps Gaussian slopes (Ward,
     Beckmann: Gauss-Hermite rule) rather than a tabulated CDF (Gauss-Legendre in the unit
     square; not smooth at the cells' edges). ``part``: which pass of an error estimate this
     set is (0: the rendered rule; in mode ``rule`` 1 = the embedded rule, 2 = the second
@@ -80,6 +82,7 @@ class ConeSampling:
     #: target of the stated phase error (rad, P95 over pixels) and the cap on n_rays for it
     target_error: float | None = None
     max_rays: int = 65536
+    lobe_narrow: float | None = None
 
     def __post_init__(self):
         if self.n_rays < 1:
@@ -119,8 +122,53 @@ class ConeSampling:
         if lobe:
             order = self._part_order(quad.square_order(self.n_rays))
             return quad.hermite_rule(order) if self.lobe_gaussian else quad.unit_rule(order)
-        order = self._part_order(quad.cone_order(self.n_rays))
-        return quad.cone_rule(order, self.scheme, self.theta_max, self.lobe_sigma)
+        rho = self.phi_rho
+        wide = rho is not None and self.theta_max > 10.0 * self.lobe_narrow
+        order = self._part_order(quad.cone_order(self.n_rays, 2 if wide else 4))
+        if rho is not None and order[1] > 1:
+            # an even number of azimuths: the mapped nodes then come in pairs phi, phi + pi,
+            # as the lobe's two halves do (an odd count errs 10-1000 x more on Fig. 3)
+            order = (order[0], order[1] - order[1] % 2)
+        return quad.cone_rule(order, self.scheme, self.theta_max, self.lobe_sigma, rho)
+
+    @property
+    def phi_rho(self) -> float | None:
+        """The axis ratio of the cone rule's azimuth map (:func:`~.quadrature.phi_map`) in
+        mode ``rule``, None where the azimuths are the plain trapezoid's."""
+        if self.mode != "rule":
+            return None
+        return quad.phi_map_ratio(self.lobe_narrow, self.lobe_sigma, self.theta_max)
+
+    def orient(self, geo: np.ndarray, brdf: np.ndarray) -> np.ndarray:
+        """Turn each pixel's cone basis (b1, b2) about P, in place in the geometry rows
+        ``geo`` (P, G_SIZE), so that b1 lies on the lobe's long axis: where the cone rule's
+        azimuths follow the lobe (:attr:`phi_rho`), its phi = 0 must be that axis. A no-op
+        otherwise. ``brdf``: the kernel's parameter vector (its alphas set the axis).
+
+        Near P the Ward and Beckmann exponents are ``-(h_x^2 / ax^2 + h_y^2 / ay^2) /
+        h_z^2`` with ``(h_x, h_y) = M (a, b)`` to first order in the ray's coefficients
+        ``(a, b)`` on (b1, b2), ``M = [[b1.x, b2.x], [b1.y, b2.y]]``: the lobe is the
+        Gaussian of ``Q = M^T diag(1/ax^2, 1/ay^2) M``, its long axis the eigenvector of
+        Q's smaller eigenvalue, at ``phi0 = atan2(2 Q12, Q11 - Q22) / 2 + pi / 2``. For the
+        exact integrand the cone integral does not depend on where phi = 0 is; the rule's
+        nodes do."""
+        if self.phi_rho is None or geo.shape[0] == 0:
+            return geo
+        ax, ay = float(brdf[kb.B_AX]), float(brdf[kb.B_AY])
+        x1, x2 = geo[:, kb.G_X + 1], geo[:, kb.G_X + 2]
+        y1, y2 = geo[:, kb.G_Y + 1], geo[:, kb.G_Y + 2]
+        ix2, iy2 = 1.0 / (ax * ax), 1.0 / (ay * ay)
+        q11 = x1 * x1 * ix2 + y1 * y1 * iy2
+        q12 = x1 * x2 * ix2 + y1 * y2 * iy2
+        q22 = x2 * x2 * ix2 + y2 * y2 * iy2
+        phi0 = 0.5 * np.arctan2(2.0 * q12, q11 - q22) + 0.5 * np.pi
+        c, s = np.cos(phi0), np.sin(phi0)
+        for k in (kb.G_A, kb.G_B, kb.G_C, kb.G_X + 1, kb.G_Y + 1, kb.G_Z + 1):
+            p1 = geo[:, k].copy()
+            p2 = geo[:, k + 1]
+            geo[:, k] = c * p1 + s * p2
+            geo[:, k + 1] = c * p2 - s * p1
+        return geo
 
     def _part_order(self, order: tuple[int, int]) -> tuple[int, int]:
         """The order of this pass of the rule ``order`` (:attr:`part`)."""
@@ -197,23 +245,26 @@ class ConeSampling:
         return np.concatenate([[[0.0, 0.0, 1.0]], d])
 
 
-def lobe_shape(brdf) -> tuple[float | None, bool]:
-    """(lobe_sigma, lobe_gaussian) of a BRDF for :class:`ConeSampling`: the widest angular
-    standard deviation of the reflected lobe, sqrt(2) max(alpha_x, alpha_y) (None for the
-    mirror), and whether the radiometric sampler maps Gaussian slopes (Ward, Beckmann)."""
+def lobe_shape(brdf) -> tuple[float | None, bool, float | None]:
+    """(lobe_sigma, lobe_gaussian, lobe_narrow) of a BRDF for :class:`ConeSampling`: the
+    widest angular standard deviation of the reflected lobe, sqrt(2) max(alpha_x, alpha_y)
+    (None for the mirror), whether the radiometric sampler maps Gaussian slopes (Ward,
+    Beckmann), and the narrowest, sqrt(2) min(alpha_x, alpha_y) (None unless both alphas
+    are positive)."""
     if getattr(brdf, "is_delta", False):
-        return None, True
+        return None, True, None
     p = brdf.kernel_params()
     model = int(p[kb.B_MODEL])
     ax, ay = float(p[kb.B_AX]), float(p[kb.B_AY])
     sigma = math.sqrt(2.0) * max(ax, ay) if max(ax, ay) > 0 else None
-    return sigma, model in (kb.MODEL_WARD, kb.MODEL_BECKMANN)
+    narrow = math.sqrt(2.0) * min(ax, ay) if min(ax, ay) > 0 else None
+    return sigma, model in (kb.MODEL_WARD, kb.MODEL_BECKMANN), narrow
 
 
 def sampling_from_config(s, brdf=None) -> ConeSampling:
     """The :class:`ConeSampling` of a ``[sampling]`` section for a BRDF."""
-    sigma, gaussian = lobe_shape(brdf) if brdf is not None else (None, True)
+    sigma, gaussian, narrow = lobe_shape(brdf) if brdf is not None else (None, True, None)
     return ConeSampling(s.n_rays, float(np.deg2rad(s.theta_max_deg)), s.scheme, s.mode, s.seed,
                         s.replicates, sigma, gaussian, 0, s.error_estimate,
                         None if s.target_error_mrad is None else s.target_error_mrad * 1e-3,
-                        s.max_rays)
+                        s.max_rays, narrow)
