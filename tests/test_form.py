@@ -117,6 +117,23 @@ def test_zernike_columns_share_work_but_not_numbers(order):
         assert np.array_equal(cols[..., k], alone), f"{order} Z{j}"
 
 
+def test_one_basis_for_both_tables_changes_no_number():
+    """remove_form evaluates the Noll and Fringe tables on one shared basis of the disc's
+    points (radial and angular factors once): every column is still bit for bit the term
+    evaluated alone, in either order of use."""
+    from pmdsim.measure.form import _Basis
+
+    rng = np.random.default_rng(11)
+    u, v = rng.uniform(-1, 1, 301), rng.uniform(-0.7, 0.9, 301)
+    shared = _Basis(u, v)
+    _, fringe = zernike_columns("fringe", 37, None, None, basis=shared)
+    _, noll = zernike_columns("noll", 37, None, None, basis=shared)
+    _, noll_alone = zernike_columns("noll", 37, u, v)
+    _, fringe_alone = zernike_columns("fringe", 37, u, v)
+    assert noll.tobytes() == noll_alone.tobytes()
+    assert fringe.tobytes() == fringe_alone.tobytes()
+
+
 def test_best_fit_sphere_recovers_a_radius_change():
     x, y, m = _grid()
     radius, change = 800.0, 0.8

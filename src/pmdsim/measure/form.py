@@ -93,16 +93,18 @@ def zernike_value(n: int, m: int, u, v, normalized: bool = True) -> np.ndarray:
     return norm * r * ang
 
 
-def zernike_columns(order: str, n_terms: int, u, v) -> tuple[list, np.ndarray]:
+def zernike_columns(order: str, n_terms: int, u, v, basis=None) -> tuple[list, np.ndarray]:
     """([(j, n, m), ...], (points, n_terms) matrix) of the first ``n_terms`` Zernikes in
-    ``order`` "noll" (normalised) or "fringe" (unnormalised) at unit-disc points (u, v)."""
+    ``order`` "noll" (normalised) or "fringe" (unnormalised) at unit-disc points (u, v).
+    ``basis``: the :class:`_Basis` of (u, v) when the caller has one (its radial and
+    angular factors are shared with other tables of the same points)."""
     if order == "noll":
         idx = [(j, *zernike_noll_index(j)) for j in range(1, n_terms + 1)]
     elif order == "fringe":
         idx = [(j, *fringe_index(j)) for j in range(1, n_terms + 1)]
     else:
         raise ValueError(f"order must be 'noll' or 'fringe', got {order!r}")
-    basis = _Basis(u, v)
+    basis = _Basis(u, v) if basis is None else basis
     cols = np.empty((basis.rho.size, len(idx)))
     for k, (_, n, m) in enumerate(idx):
         cols[:, k] = basis.value(n, m, normalized=order == "noll").ravel()
@@ -121,6 +123,7 @@ class _Basis:
         self._theta = None
         self._powers: dict = {}
         self._angular: dict = {}
+        self._radial: dict = {}
 
     def _power(self, p: int) -> np.ndarray:
         if p not in self._powers:
@@ -130,12 +133,15 @@ class _Basis:
     def radial(self, n: int, m: int) -> np.ndarray:
         """R_n^|m|(rho), summed as :func:`pmdsim.measure.integrate._radial` sums it."""
         m = abs(m)
+        if (n, m) in self._radial:
+            return self._radial[n, m]
         r = np.zeros_like(self.rho)
         for k in range((n - m) // 2 + 1):
             c = (-1) ** k * math.factorial(n - k) / (
                 math.factorial(k) * math.factorial((n + m) // 2 - k)
                 * math.factorial((n - m) // 2 - k))
             r += c * self._power(n - 2 * k)
+        self._radial[n, m] = r
         return r
 
     def angular(self, m: int) -> np.ndarray | None:
@@ -169,7 +175,7 @@ def disc_of(mask, x, y, centre=None, radius=None) -> tuple[tuple[float, float], 
 
 
 def zernike_table(residual, mask, x, y, *, order="noll", n_terms=37, centre=None, radius=None,
-                  removed=()) -> list[dict]:
+                  removed=(), basis=None) -> list[dict]:
     """Least-squares Zernike coefficients (in the unit of ``residual``) of ``residual`` over
     ``mask`` on the disc (:func:`disc_of`): one dict per term with ``index``, ``n``, ``m``,
     ``coefficient`` and ``removed`` (its (n, m) is among the Noll indices ``removed``)."""
@@ -177,7 +183,11 @@ def zernike_table(residual, mask, x, y, *, order="noll", n_terms=37, centre=None
     if m.sum() < n_terms:
         return []
     c, r = disc_of(m, x, y, centre, radius)
-    idx, a = zernike_columns(order, n_terms, (x[m] - c[0]) / r, (y[m] - c[1]) / r)
+    if basis is not None and basis[0].shape == m.shape and np.array_equal(basis[0], m) \
+            and basis[1] == (c, r):  # the caller's basis of these very points
+        idx, a = zernike_columns(order, n_terms, None, None, basis=basis[2])
+    else:
+        idx, a = zernike_columns(order, n_terms, (x[m] - c[0]) / r, (y[m] - c[1]) / r)
     coef = _lstsq(a, np.asarray(residual, np.float64)[m])
     gone = {zernike_noll_index(j) for j in removed}
     return [{"index": j, "n": n, "m": mm, "coefficient": float(k), "removed": (n, mm) in gone}
@@ -365,17 +375,19 @@ def remove_form(error, mask, x, y, spec: FormSpec, *, true_height=None, disc=(No
         xc, yc = xm.mean(), ym.mean()
         scale = max(np.abs(xm - xc).max(), np.abs(ym - yc).max(), 1e-300)
         cols += _term_columns(lin, (xm - xc) / scale, (ym - yc) / scale)
+    # one basis of the disc's points for the removal and both tables (their radial and
+    # angular factors computed once: the same numbers, bit for bit)
+    basis = _Basis((xm - c[0]) / rad, (ym - c[1]) / rad)
     if spec.zernike:
-        u, v = (xm - c[0]) / rad, (ym - c[1]) / rad
-        basis = _Basis(u, v)
         cols += [basis.value(*zernike_noll_index(j)) for j in spec.zernike]
     if cols:
         a = np.stack(cols, axis=1)
         r = r - a @ _lstsq(a, r)
     out[m] = r
     removed = spec.removed_noll
+    shared = (m, (c, rad), basis)
     noll = zernike_table(out, m, x, y, order="noll", n_terms=spec.n_zernike, centre=c, radius=rad,
-                         removed=removed)
+                         removed=removed, basis=shared)
     fringe = zernike_table(out, m, x, y, order="fringe", n_terms=min(spec.n_zernike, 37), centre=c,
-                           radius=rad, removed=removed)
+                           radius=rad, removed=removed, basis=shared)
     return FormResult(out, m, spec.describe(), sphere, noll, fringe, int(m0.sum() - m.sum()))

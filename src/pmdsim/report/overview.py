@@ -142,21 +142,24 @@ def references_coincide(mirror_maps, exact_maps, lim: float) -> bool:
 
 
 def _stats_box(st: dict, estimator: str | None = None) -> str:
-    lines = [f"{st['method']} unwrapping, widths {', '.join(f'{w:g}' for w in st['widths_px'])}"
-             f" px, K = {st['shifts']}" + (f", {estimator} estimator" if estimator else ""),
-             f"{'':3}{'':>13}{'mean':>9}{'RMS':>9}{'P95':>9}"]
+    # Two header lines and 10-character columns: the box fits its panel (a long first line
+    # was cut at the figure's edge, a negative mean ran into its label).
+    lines = [f"{st['method']} unwrapping, K = {st['shifts']}"
+             + (f", {estimator} estimator" if estimator else ""),
+             f"widths {', '.join(f'{w:g}' for w in st['widths_px'])} px",
+             f"{'':3}{'':>13}{'mean':>10}{'RMS':>10}{'P95':>10}"]
     for d, s in st["directions"].items():
         for q, lab in (("phase_mrad", "phase mrad"), ("coord_px", "coord px"),
                        ("coord_mm", "coord mm"), ("slope_urad", "slope urad")):
             r = s[q]
-            lines.append(f"{d.upper():3}{lab:>13}" + "".join(f"{_g(r[k]):>9}"
+            lines.append(f"{d.upper():3}{lab:>13}" + "".join(f"{_g(r[k]):>10}"
                                                             for k in ("mean", "rms", "p95")))
             e = (s.get("numerical_error") or {}).get(q)
             if e:  # the rendering's numerical error of the RMS and P95 above
-                lines.append(f"{'':3}{'± numerical':>13}{'':>9}"
-                             + "".join(f"{_g(e.get(k), 2):>9}" for k in ("rms", "p95")))
+                lines.append(f"{'':3}{'± numerical':>13}{'':>10}"
+                             + "".join(f"{_g(e.get(k), 2):>10}" for k in ("rms", "p95")))
         ex = s.get("coord_vs_exact_px") or {}
-        lines.append(f"{d.upper():3}{'px vs exact':>13}" + "".join(f"{_g(ex.get(k)):>9}"
+        lines.append(f"{d.upper():3}{'px vs exact':>13}" + "".join(f"{_g(ex.get(k)):>10}"
                                                                for k in ("mean", "rms", "p95")))
         p = s["pixels"]
         lines.append(f"   valid {p['valid']:,} / {p['considered']:,} "

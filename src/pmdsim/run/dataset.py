@@ -40,6 +40,10 @@ def build_dataset(cfg: RunConfig, geometry: Geometry, fringes: FringeResult | No
     """The run's xarray Dataset (in memory): see the module docstring for its contents."""
     import xarray as xr
 
+    from .lazy import xarray_without_dask_import
+
+    xarray_without_dask_import()  # xarray would import dask.array for each variable
+
     h, w = geometry.surface_mask.shape
     estimator = cfg.sampling.estimator
     value_units = (
@@ -193,23 +197,17 @@ def storage_form(ds, lazy: bool = False):
     columns) in float32 with :data:`KEEP_BITS` significant bits, except
     :data:`FULL_PRECISION` (float32, all bits); everything else unchanged (a shallow copy).
 
-    With ``lazy`` the image-like variables are Dask arrays of one chunk per camera image,
-    rounded chunk by chunk when computed: writing them holds a few images at a time instead
-    of a rounded copy of the whole dataset."""
+    With ``lazy`` the image-like variables are converted when read
+    (:func:`pmdsim.run.lazy.converted`): writing them holds a rounded copy of one variable
+    at a time instead of one of the whole dataset."""
+    from . import lazy
+
     new = {}
     for name, var in ds.data_vars.items():
         if not _image_like(var):
             continue
         if lazy:
-            import dask.array as da
-
-            if isinstance(var.data, da.Array):  # already lazy (the chain's variables)
-                chunks = (1,) * (var.ndim - 2) + tuple(var.shape[-2:])
-                dtype = np.dtype(np.float32) if var.dtype.kind == "f" else var.dtype
-                arr = var.data.rechunk(chunks).map_blocks(functools.partial(_stored, name),
-                                                          dtype=dtype)
-            else:  # a view of the in-memory array, each chunk converted when read
-                arr = lazy_array(var.data, convert=functools.partial(_stored, name))
+            arr = lazy.converted(var.variable._data, functools.partial(_stored, name))
             new[name] = var.copy(data=arr)
         elif var.dtype.kind == "f":
             new[name] = var.copy(data=_stored(name, np.asarray(var.values)))
@@ -291,50 +289,6 @@ def run_config(ds) -> RunConfig:
     return RunConfig.model_validate_json(ds.attrs["config_json"])
 
 
-class _View:
-    """A read-only, array-like view of an array, converted to ``dtype`` and multiplied by
-    ``scale`` chunk by chunk when indexed (what :func:`dask.array.from_array` wraps without
-    copying: it copies arrays that have a ``copy`` method)."""
-
-    def __init__(self, data: np.ndarray, dtype=None, scale: float | None = None,
-                 convert=None):
-        self.data, self.scale, self.convert = data, scale, convert
-        self.shape, self.ndim = data.shape, data.ndim
-        self.dtype = np.dtype(dtype) if dtype is not None else (
-            data.dtype if scale is None else np.result_type(data.dtype, scale))
-        if convert is not None:  # its output dtype
-            self.dtype = convert(np.zeros((1,) * data.ndim, self.dtype)).dtype
-
-    def __getitem__(self, key) -> np.ndarray:
-        out = np.asarray(self.data[key]).astype(self.dtype if self.convert is None
-                                                else self.data.dtype, copy=False)
-        if self.scale is not None:
-            out = out * out.dtype.type(self.scale)
-        return out if self.convert is None else self.convert(out)
-
-
-def lazy_array(data: np.ndarray, dtype=None, scale: float | None = None, convert=None):
-    """``data`` (converted to ``dtype``, times ``scale``, passed through ``convert``) as a
-    Dask array of one chunk per camera image (the last two axes), referencing ``data``
-    without a copy."""
-    import dask.array as da
-
-    data = np.asarray(data)
-    view = _View(data, dtype, scale, convert)
-    chunks = (1,) * (data.ndim - 2) + tuple(data.shape[-2:]) if data.ndim >= 2 else data.shape
-    # name=False: a random key instead of hashing the data
-    return da.from_array(view, chunks=chunks, name=False, asarray=False,
-                         meta=np.empty((0,) * data.ndim, view.dtype))
-
-
-def lazy_stack(arrays, dtype=None, scale: float | None = None):
-    """``np.stack(arrays)`` (as ``dtype``, times ``scale``) as a Dask array over views of
-    ``arrays``: nothing is copied until it is computed (written or drawn)."""
-    import dask.array as da
-
-    return da.stack([lazy_array(a, dtype, scale) for a in arrays])
-
-
 def dataset_variables(chain: ChainResult) -> dict:
     """xarray variables ``{name: (dims, data, attrs)}`` of a chain (to assign to a run
     dataset with ``direction``, ``width``, ``row``, ``col`` coordinates)."""
@@ -342,9 +296,11 @@ def dataset_variables(chain: ChainResult) -> dict:
     dcs = [chain.directions[d] for d in dirs]
     pitch = chain.pitch_mm
 
+    from .lazy import lazy_stack
+
     def per(fn, dtype=None, scale=None):
-        # stacked lazily (Dask) over views of the chain's own arrays: no second copy of the
-        # chain in memory (1.2 GB at 5 MP); computed when written or drawn
+        # stacked lazily over the chain's own arrays (no Dask): no second copy of the
+        # chain in memory (1.2 GB at 5 MP); read when written or drawn
         return lazy_stack([fn(dc) for dc in dcs], dtype, scale)
 
     D, DW = ("direction", "row", "col"), ("direction", "width", "row", "col")

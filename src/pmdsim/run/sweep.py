@@ -430,7 +430,7 @@ def _run_claimed(plan: SweepPlan, outdir: Path, overwrite: bool, client, schedul
             computed = _distributed(tasks, c, progress)
     else:
         computed = _local(tasks, keys, scheduler, num_workers, progress)
-    ds = load_sweep(store)
+    ds = _read_store(store)
     files = [write_points_csv(ds, outdir / "points.csv")]
     if figures:
         from ..report.sweep import sweep_figures
@@ -473,24 +473,41 @@ def load_sweep(path: str | Path):
     return xr.open_zarr(path, consolidated=False)
 
 
+def _read_store(path: Path):
+    """The finished store as :func:`load_sweep` opens it, but lazily indexed without Dask
+    arrays (the sweep reads only its small variables; importing ``dask.array`` would cost
+    about a CPU-second of a sweep's process)."""
+    import xarray as xr
+
+    from .lazy import xarray_without_dask_import
+
+    xarray_without_dask_import()
+    return xr.open_zarr(path, consolidated=False, chunks=None)
+
+
 def points_table(ds) -> list[dict]:
     """One row per point: its parameters, done, and the RMS phase and slope deviations and
     valid fractions per direction (for ``points.csv``)."""
     params = json.loads(ds.attrs["config_json"])["sweep"]["parameters"]
     dims = list(ds.attrs["dims"])
-    stats = ds["deviation_stats"].load()
+    da = ds["deviation_stats"].transpose(*dims, "direction", "quantity", "statistic")
+    stats = np.asarray(da.values, np.float64)
+    quantity = {str(q): k for k, q in enumerate(ds["quantity"].values)}
+    statistic = {str(q): k for k, q in enumerate(ds["statistic"].values)}
+    index = np.asarray(ds["point_index"].transpose(*dims).values)
+    values = {p: ds[p].load() for p in params}
     rows = []
-    done = ds["done"].values
+    done = ds["done"].transpose(*dims).values
     for pos in np.ndindex(*done.shape):
         sel = dict(zip(dims, pos))
-        row = {"point": int(ds["point_index"].values[pos])}
+        row = {"point": int(index[pos])}
         for p in params:
-            row[p] = ds[p].isel({k: v for k, v in sel.items() if k in ds[p].dims}).item()
+            row[p] = values[p].isel({k: v for k, v in sel.items() if k in values[p].dims}).item()
         row["done"] = bool(done[pos])
-        s = stats.isel(sel)
-        for d in ds["direction"].values:
+        s = stats[pos]
+        for di, d in enumerate(ds["direction"].values):
             def val(q, st):
-                return float(s.sel(direction=d, quantity=q, statistic=st))
+                return float(s[di, quantity[q], statistic[st]])
             row[f"{d}_phase_rms_mrad"] = val("phase_mrad", "rms")
             row[f"{d}_slope_rms_urad"] = val("slope_urad", "rms")
             row[f"{d}_valid_fraction"] = val("phase_mrad", "valid_fraction")

@@ -23,18 +23,76 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 
+#: Variables of a part written per call of ``to_zarr`` up to this many bytes: xarray encodes
+#: (reads) every variable of a call before it writes any, so a call's variables are in
+#: memory at once (a variable larger than this is written alone).
+GROUP_BYTES = 64 * 2**20
+#: A camera-image variable larger than this (as stored) is written chunk by chunk through
+#: Dask (one image at a time, as all were before: 5 MP runs keep their memory) instead of
+#: from one converted copy; none of the Fig. 3 run's is (the largest, its fringe images,
+#: is 126 MB), so it never imports ``dask.array``.
+LARGE_BYTES = 256 * 2**20
+
+
+def _stored_bytes(var) -> int:
+    return var.size * (4 if var.dtype.kind == "f" else var.dtype.itemsize)
+
+
+def _groups(ds) -> list[list[str]]:
+    """The data variables of ``ds`` in groups of at most :data:`GROUP_BYTES` (as stored:
+    float32 for floats), in order; the small ones with the first group."""
+    small, big = [], []
+    for name, var in ds.data_vars.items():
+        (big if var.ndim >= 2 and var.dims[-2:] == ("row", "col") else small).append(name)
+    groups, size = [list(small)], 0
+    for name in big:
+        var = ds[name]
+        nbytes = _stored_bytes(var)
+        if size and size + nbytes > GROUP_BYTES:
+            groups.append([])
+            size = 0
+        groups[-1].append(name)
+        size += nbytes
+    return [g for g in groups if g]
+
+
 def _write_part(ds, path: Path, create: bool) -> None:
     """Write ``ds`` (a part of a run dataset) into the store ``path``: create it, or add
     the part's variables to it. No consolidated metadata (see :func:`finish_store`). The
-    chunks are rounded and compressed on Dask's threaded scheduler, passed explicitly
-    (not through ``dask.config``, which is global: the run's other threads use their own)."""
-    from ..render import local_scheduler
+    camera-image variables are rounded as they are read (:func:`pmdsim.run.lazy.converted`),
+    a group of at most :data:`GROUP_BYTES` at a time, and Zarr compresses their chunks in
+    its own threads; a part holding Dask arrays (a loaded run's) is computed on Dask's
+    threaded scheduler, passed explicitly (not through ``dask.config``, which is global:
+    the run's other threads use their own)."""
+    import sys
+
     from .dataset import _encoding, storage_form
 
-    delayed = storage_form(ds, lazy=True).to_zarr(
-        path, mode="w-" if create else "a", consolidated=False, compute=False,
-        encoding=_encoding(ds), zarr_format=3)
-    delayed.compute(scheduler=local_scheduler("threads"))
+    from . import lazy
+
+    stored = storage_form(ds, lazy=True)
+    large = {n: lazy.as_dask(v.variable._data) for n, v in stored.data_vars.items()
+             if _stored_bytes(v) > LARGE_BYTES and lazy.is_lazy(v.variable._data)}
+    if large:  # chunk by chunk, as a loaded run's Dask arrays below
+        stored = stored.assign({n: stored[n].copy(data=a) for n, a in large.items()})
+    da = sys.modules.get("dask.array")
+    if da is not None and any(isinstance(v.data, da.Array) for v in stored.variables.values()):
+        from ..render import local_scheduler
+
+        stored.to_zarr(path, mode="w-" if create else "a", consolidated=False,
+                       encoding=_encoding(ds), zarr_format=3, compute=False).compute(
+            scheduler=local_scheduler("threads"))
+        return
+    written: set = set()
+    for k, names in enumerate(_groups(stored)):
+        part = stored[names]
+        # coordinates of the part that came without a variable of this group
+        part = part.assign_coords({c: stored.coords[c] for c in stored.coords
+                                   if c not in part.coords and k == 0})
+        part = part.drop_vars([c for c in part.coords if c in written])
+        part.to_zarr(path, mode="w-" if create and k == 0 else "a", consolidated=False,
+                     encoding=_encoding(part), zarr_format=3)
+        written.update(part.coords)
 
 
 def finish_store(path: Path, attrs: dict) -> None:
