@@ -379,3 +379,31 @@ def test_rays_that_miss_the_monitor_are_black_and_never_nan(monitor):
     wm = sim_of(make_config(monitor=monitor, sampling={"estimator": "weighted_mean"}))
     out = wm.render_images(np.ones((1,) + shape))[0]
     assert np.all(np.isfinite(out[valid]))
+
+
+@pytest.mark.parametrize("estimator", ["paper", "weighted_mean"])
+def test_fringes_finished_in_the_tiles_equal_the_finish_after_the_render(monkeypatch, estimator):
+    """The linear fringes' normalisation, complex sums and shifted images are finished in
+    each tile's task (``FringeFinish``), every camera row exactly once; the bytes equal those
+    of finishing the whole sums after the render (the path of other schedulers and of the
+    rqmc mean)."""
+    from pmdsim.render.rows import FringeFinish
+
+    sim = sim_of(make_config(compute={"tile_rows": 5}, sampling={"estimator": estimator}))
+    blocks = []
+    call = FringeFinish.__call__
+
+    def spy(self, r0, r1, full):
+        blocks.append((r0, r1))
+        return call(self, r0, r1, full)
+
+    monkeypatch.setattr(FringeFinish, "__call__", spy)
+    tiles = sim.render_fringes(widths=(20.0, 45.0), shifts=3)
+    assert sorted(blocks) == [(r, min(r + 5, 32)) for r in range(0, 32, 5)]  # the tiles
+    blocks.clear()
+    monkeypatch.setattr(FringeFinish, "kw", lambda self, mode, ncols: {})  # the tiles do not finish
+    after = sim.render_fringes(widths=(20.0, 45.0), shifts=3)
+    assert sorted(blocks) == [(r, r + 1) for r in range(32)]  # after the render
+    assert np.isfinite(tiles.images).any() and np.isnan(tiles.images).any()
+    for name in ("images", "sums", "f_total", "f_hit"):
+        assert getattr(tiles, name).tobytes() == getattr(after, name).tobytes(), name

@@ -132,8 +132,10 @@ MODE_TRANSPORT = 4  # out_u/out_v/out_f (npix, nrays): the rays themselves
 OUT_FTOTAL = 0
 OUT_FHIT = 1
 #: Ray loops of :func:`render_tile` (Ward, Beckmann) run over a multiple of this many rays
-#: (padding rays of weight 0): a ray in a scalar remainder loop costs ~10 vector lanes.
-RAY_BLOCK = 16
+#: (padding rays of weight 0): a ray in a scalar remainder loop costs ~10 vector lanes. 8 is
+#: the largest step of the compiled ray loops on AVX2 (phase 1: 4 lanes x 2; the harmonic
+#: loops 4 or 8): N = 100 (+ P) runs as 104 rays (it ran as 112 with 16).
+RAY_BLOCK = 8
 OUT_FIRST = 2
 
 _TWO_PI = 2.0 * math.pi
@@ -171,20 +173,27 @@ def _smith_g1_beckmann(vx, vy, vz, ax, ay):
 
 
 @fastjit(inline="always")
-def _store_ray(j, w, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf):
-    """Store ray j of phase 1: its monitor coordinates, nearest monitor pixel and weight if it
-    hits the monitor's emitting side inside the pixel grid (dn < 0, t > 0), else weight 0 at
-    pixel (0, 0) so that phase-2 gathers stay in range. Returns the stored weight."""
+def _store_ray(j, w, dn, t, u, v, umax, vmax, ubuf, vbuf, fbuf):
+    """Store ray j of phase 1: its monitor coordinates and weight if it hits the monitor's
+    emitting side inside the pixel grid (dn < 0, t > 0), else weight 0 at (0, 0) so that
+    phase-2 gathers stay in range (the nearest pixels: :func:`_pixel_indices`, for the
+    pattern kinds that gather). Returns the stored weight."""
     inside = (dn < 0.0) & (t > 0.0) & (u >= -0.5) & (u < umax) & (v >= -0.5) & (v < vmax)
     wh = w if inside else 0.0
-    uc = u if inside else 0.0
-    vc = v if inside else 0.0
-    ubuf[j] = uc
-    vbuf[j] = vc
-    iubuf[j] = np.int64(np.floor(uc + 0.5))
-    ivbuf[j] = np.int64(np.floor(vc + 0.5))
+    ubuf[j] = u if inside else 0.0
+    vbuf[j] = v if inside else 0.0
     fbuf[j] = wh
     return wh
+
+
+@fastjit(inline="always")
+def _pixel_indices(n, ubuf, vbuf, iubuf, ivbuf):
+    """The nearest monitor pixel (column, row) of each of the ``n`` stored rays (pixel
+    (0, 0) for a miss): only the pattern kinds that gather need them (not the harmonic
+    fringes, whose phase 1 saves the two roundings and stores per ray)."""
+    for j in range(n):
+        iubuf[j] = np.int64(np.floor(ubuf[j] + 0.5))
+        ivbuf[j] = np.int64(np.floor(vbuf[j] + 0.5))
 
 
 # --- ray directions: the cone's sample set, or micro-normals drawn from the lobe ---------
@@ -262,7 +271,7 @@ def _draw_slopes(u1, u2, r1, r2, dp, pix, aux, wsum, mx, my, mz, mz3):
 # --- phase 1: one ray loop; the source of directions and the model fill in the ray ----------
 @fastjit(inline="always")
 def _phase1(setup, ray_of, prep, ray, g, d0, d1, d2, d3, n, pix, aux, wsum, wr, umax, vmax,
-            ubuf, vbuf, iubuf, ivbuf, fbuf):
+            ubuf, vbuf, fbuf):
     """Monitor hits and weights of one pixel's ``n`` rays; returns (sum f, sum f over hits).
 
     ``setup(g)``: the source's per-pixel constants from the geometry row;
@@ -270,8 +279,8 @@ def _phase1(setup, ray_of, prep, ray, g, d0, d1, d2, d3, n, pix, aux, wsum, wr, 
     the surface), ``o . n_m`` (dn), distance t and monitor coordinates (u, v), the weight
     from the model's ``ray`` with its per-pixel constants ``k = prep(pix, i_x, i_y, i_z,
     wsum)``. Rays that miss the monitor (behind the surface, parallel, outside the pixel
-    grid) get weight 0 in ``fbuf`` and index 0 in ``iubuf``/``ivbuf`` so that gathers stay
-    in range.
+    grid) get weight 0 in ``fbuf`` and coordinates 0 in ``ubuf``/``vbuf`` so that gathers
+    stay in range.
     """
     s = setup(g)
     k = prep(pix, g[G_X], g[G_Y], g[G_Z], wsum)
@@ -281,7 +290,7 @@ def _phase1(setup, ray_of, prep, ray, g, d0, d1, d2, d3, n, pix, aux, wsum, wr, 
         f, dn, t, u, v = ray_of(ray, k, pix, aux, s, d0[j], d1[j], d2[j], d3[j])
         f = f * wr[j]
         ftot += f
-        fhit += _store_ray(j, f, dn, t, u, v, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
+        fhit += _store_ray(j, f, dn, t, u, v, umax, vmax, ubuf, vbuf, fbuf)
     return ftot, fhit
 
 
@@ -1150,6 +1159,7 @@ def _tile(geo, brdf, u1, u2, rotation, scheme, theta_max, include_principal, mon
     varying = brdf_px.shape[0] > 0  # per-pixel parameters (else (0, 3))
     corrected = mon_corr.shape[0] > 0  # display geometry and falloff (else empty)
     per_pixel = _DRAW_PER_PIXEL or not shared or (_LOBE and varying)
+    gather = mode != MODE_HARMONIC and mode != MODE_TRANSPORT  # needs pixel indices
     dp = (scheme, theta_max, math.cos(theta_max), include_principal)
     nord = _n_orders(brdf)
     wr_own = _ray_weights(w_ray, n, npad)
@@ -1196,9 +1206,11 @@ def _tile(geo, brdf, u1, u2, rotation, scheme, theta_max, include_principal, mon
             r2 = 0.0 if shared else rotation[p, 1]
             _DRAW(u1, u2, r1, r2, dp, pix, aux, wsum, d0, d1, d2, d3)
         ftot, fhit = _phase1(_SETUP, _RAY_OF, _PREP, _RAY, g, d0, d1, d2, d3, npad, pix, aux,
-                             wsum, wr, umax, vmax, ubuf, vbuf, iubuf, ivbuf, fbuf)
+                             wsum, wr, umax, vmax, ubuf, vbuf, fbuf)
         if corrected:
             fhit = monitor_correction(g, mon_corr, n, wm, hm, ubuf, vbuf, iubuf, ivbuf, fbuf)
+        if gather:
+            _pixel_indices(n, ubuf, vbuf, iubuf, ivbuf)
         out[p, OUT_FTOTAL] = ftot
         out[p, OUT_FHIT] = fhit
         _phase2(mode, p, n, npad, ubuf, vbuf, iubuf, ivbuf, fbuf, pat, out, out_u, out_v,

@@ -1,19 +1,30 @@
 """Phase-shifted fringe images from the per-pixel complex sums (the exact identity
-sum_p f_p cos(k u_p + delta) = C cos(delta) - S sin(delta), C + iS = sum_p f_p exp(i k u_p))."""
+sum_p f_p cos(k u_p + delta) = C cos(delta) - S sin(delta), C + iS = sum_p f_p exp(i k u_p)).
+
+:func:`fringe_rows` finishes one block of pixels (a render tile's camera rows, called in the
+tile's own task right after the bundle kernel wrote them, while they are in cache): the
+estimator's normalisation, f_total and f_hit, the normalised complex sums and the K shifted
+images of every fringe block. No pass over the whole (H, W, C) output follows the render.
+"""
 
 from __future__ import annotations
 
-from numba import prange
+import math
 
-from ._jit import parallel_jit
+from ._jit import jit
 
-_CHUNK = 4096  # pixels per parallel chunk
+#: Floating point of :func:`fringe_rows`: contraction to FMA as before (bit-identical images),
+#: but no ``nnan``/``ninf``: its pixels off the plate are NaN and must stay NaN.
+_FINISH_FLAGS = {"contract", "nsz", "reassoc"}
+
+_FTOTAL = 0  # the bundle kernels' output columns (kernels.bundle.OUT_FTOTAL, OUT_FHIT)
+_FHIT = 1
 
 
-@parallel_jit
-def shifted_images(sums_raw, cols, norm, f_hit, cos_d, sin_d, black, white, sums, out):
-    """Normalised complex sums and the K shifted camera images of every fringe block
-    (direction and width), reading each pixel's kernel output row once.
+@jit(fastmath=_FINISH_FLAGS)
+def fringe_rows(sums_raw, cols, ratio, inv_n, cos_d, sin_d, black, white, norm, f_total,
+                f_hit, sums, out):
+    """Estimator values of one block of pixels from the bundle kernel's sums.
 
     Parameters
     ----------
@@ -21,12 +32,14 @@ def shifted_images(sums_raw, cols, norm, f_hit, cos_d, sin_d, black, white, sums
         The kernel's output rows; block ``b`` has C in column ``cols[b]``, S in the next.
     cols : (B,) int64
         The blocks' first columns.
-    norm : (P,) float64
-        Estimator normalisation per pixel (1/N or 1/sum f).
-    f_hit : (P,) float64
-        Normalised sum of the weights of rays that hit the monitor.
+    ratio : bool
+        The ``weighted_mean`` estimator: normalise by 1 / sum f (NaN where sum f <= 0 or
+        NaN); else by ``inv_n`` (1 / N).
     cos_d, sin_d : (K,) float64
         cos and sin of the phase shifts.
+    norm, f_total, f_hit : (P,) float64
+        Written: the normalisation, and the normalised sums of all weights and of the
+        weights of rays that hit the monitor.
     sums : (B, P) complex128
         Written: norm * (C + iS).
     out : (B, K, P) float32
@@ -34,18 +47,50 @@ def shifted_images(sums_raw, cols, norm, f_hit, cos_d, sin_d, black, white, sums
     """
     n = sums_raw.shape[0]
     span = white - black
-    nchunk = (n + _CHUNK - 1) // _CHUNK
-    for ch in prange(nchunk):  # a chunk's output rows stay in cache across the blocks
-        p0 = ch * _CHUNK
-        p1 = min(n, p0 + _CHUNK)
-        for b in range(cols.shape[0]):
-            col = cols[b]
-            for p in range(p0, p1):
-                sums[b, p] = complex(sums_raw[p, col] * norm[p], sums_raw[p, col + 1] * norm[p])
-            for k in range(cos_d.shape[0]):
-                ck = 0.5 * span * cos_d[k]
-                sk = 0.5 * span * sin_d[k]
-                for p in range(p0, p1):
-                    z = sums[b, p]
-                    base = (black + 0.5 * span) * f_hit[p]
-                    out[b, k, p] = base + (ck * z.real - sk * z.imag)
+    for p in range(n):
+        ft = sums_raw[p, _FTOTAL]
+        if ratio:
+            nm = 1.0 / ft if ft > 0.0 else math.nan
+        else:
+            nm = inv_n
+        norm[p] = nm
+        f_total[p] = ft * nm
+        f_hit[p] = sums_raw[p, _FHIT] * nm
+    for b in range(cols.shape[0]):
+        col = cols[b]
+        for p in range(n):
+            sums[b, p] = complex(sums_raw[p, col] * norm[p], sums_raw[p, col + 1] * norm[p])
+        for k in range(cos_d.shape[0]):
+            ck = 0.5 * span * cos_d[k]
+            sk = 0.5 * span * sin_d[k]
+            for p in range(n):
+                z = sums[b, p]
+                base = (black + 0.5 * span) * f_hit[p]
+                out[b, k, p] = base + (ck * z.real - sk * z.imag)
+
+
+@jit
+def fringe_error_rows(d1, d2, cols, norm, sums, err, ratio, rel):
+    """The numerical error of the normalised complex sums of one block of pixels, from the
+    render's signed differences to the embedded rules (``d1``, and ``d2`` or an empty
+    (0, 0) array), reading each pixel's difference rows once.
+
+    Writes ``err[b, p] = |norm[p]| (D1_C + i D1_S)`` for every fringe block ``b`` (C in
+    column ``cols[b]`` of ``d1``, S in the next) and, with ``d2``, the inputs of the
+    observed convergence (:func:`pmdsim.render.results.convergence_of_ratios`):
+    ``ratio = |dS1| / |dS2|`` and ``rel = |dS1| / |S|`` (``sums`` the normalised sums).
+    Strict IEEE arithmetic: the same bytes as the NumPy expressions it replaced.
+    """
+    n = d1.shape[0]
+    second = d2.shape[0] > 0
+    for b in range(cols.shape[0]):
+        col = cols[b]
+        for p in range(n):
+            a = abs(norm[p])
+            e1 = complex(d1[p, col] * a, d1[p, col + 1] * a)
+            err[b, p] = e1
+            if second:
+                e2 = complex(d2[p, col] * a, d2[p, col + 1] * a)
+                m1 = abs(e1)
+                ratio[b, p] = m1 / abs(e2)
+                rel[b, p] = m1 / abs(sums[b, p])

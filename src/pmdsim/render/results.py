@@ -84,6 +84,14 @@ def convergence_factor(sums: np.ndarray, d1: np.ndarray, d2: np.ndarray,
     with np.errstate(divide="ignore", invalid="ignore"):
         a1 = (np.abs(d1) / np.abs(sums)).reshape(lead + (-1,))
         ratio = (np.abs(d1) / np.abs(d2)).reshape(lead + (-1,))
+    return convergence_of_ratios(ratio, a1, exponent)
+
+
+def convergence_of_ratios(ratio: np.ndarray, a1: np.ndarray, exponent: float) -> np.ndarray:
+    """:func:`convergence_factor` from its per-pixel inputs ``ratio = |dS1| / |dS2|`` and
+    ``a1 = |dS1| / |S|`` (leading axes: fringes; last axis: pixels; non-finite values are
+    left out)."""
+    lead = ratio.shape[:-1]
     out = np.ones(lead)
     for idx in np.ndindex(*lead):
         r, a = ratio[idx], a1[idx]

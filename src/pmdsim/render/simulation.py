@@ -41,12 +41,11 @@ from . import control
 from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
-from ..kernels.synth import shifted_images
 from ..scene.quadrature import convergence_exponent
 from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, convergence_factor,  # noqa: F401
-                      phase_error, value_error, worst_phase_error)
-from .rows import (local_scheduler, reduce_subrays, scene_geometry_rows,  # noqa: F401
-                   vision_geometry_rows)
+                      convergence_of_ratios, phase_error, value_error, worst_phase_error)
+from .rows import (FringeFinish, fringe_errors, local_scheduler, reduce_subrays,  # noqa: F401
+                   scene_geometry_rows, vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
@@ -143,6 +142,22 @@ class Simulation:
             return (samp,)
         return samp.error_passes()
 
+    def result_pass(self, smooth: bool = True):
+        """The sample set whose pass :meth:`_render` returns unchanged as its result (one
+        pass; mode ``rule``, whose embedded passes only give the error), or None (the mean
+        of rqmc replicates; a specular peak's mirror pass added after the tiles): only then
+        can a caller finish the sums inside that pass's tiles (``finish``,
+        :class:`~pmdsim.render.rows.FringeFinish`). Keep in step with :meth:`_render`."""
+        from .specular import specular_reflectance
+
+        passes = self.plan(smooth)
+        if len(passes) > 1 and passes[0].mode != "rule":
+            return None
+        brdf = self.scene.brdf
+        if not brdf.is_delta and specular_reflectance(brdf) > 0:
+            return None
+        return passes[0]
+
     def fringes_smooth(self) -> bool:
         """Whether the fringe integrand is smooth (a Gauss rule converges fast): a continuous
         monitor and, for the radiometric estimator, a Gaussian slope density."""
@@ -196,7 +211,12 @@ class Simulation:
         return out
 
     def _render_brdf(self, scene, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
-                     images=None, dots=None, progress=None):
+                     images=None, dots=None, progress=None, finish=None):
+        """Pixel sums (H, W, ncols) of one pass. ``finish``: optional ``(sampling, mode,
+        ncols, fn)``: when this pass renders that sample set, mode and columns on an
+        in-process scheduler, each tile task calls ``fn(r0, r1, sums)`` (``sums`` the whole
+        (H, W, ncols) array, rows ``r0:r1`` final) right after its kernel, while the rows
+        are in cache (:meth:`result_pass`)."""
         delta = scene.brdf.is_delta
         samp = scene.sampling
         lobe = scene.estimator == "radiometric" and not delta
@@ -229,6 +249,8 @@ class Simulation:
         # per-tile result arrays, no concatenation copy: half the render's peak memory).
         full = (np.empty((cam.height, width, ncols))
                 if self.scheduler in ("threads", "synchronous") else None)
+        fin = (finish[3] if finish is not None and full is not None
+               and (scene.sampling, mode, ncols) == finish[:3] else None)
 
         var = None if delta else scene.brdf_variation
 
@@ -277,6 +299,8 @@ class Simulation:
                 rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
                 if full is not None:
                     kernel(geo, rot, full[r0:r1].reshape(-1, ncols))
+                    if fin is not None:
+                        fin(r0, r1, full)
                     return None
                 return kernel(geo, rot).reshape(r1 - r0, width, ncols)
             # camera optics: S vision rays per pixel, each with its own scattered bundle,
@@ -290,6 +314,8 @@ class Simulation:
                     rot = np.random.default_rng([samp.seed, r]).random((geo.shape[0], 2))
                 out = kernel(geo, rot).reshape(width, n_sub, ncols)
                 res[r - r0] = reduce_subrays(out, scene.estimator)
+            if fin is not None:
+                fin(r0, r1, full)
             return None if full is not None else res
 
         parts = self._compute(tile, self._tiles(), progress)
@@ -429,6 +455,17 @@ class Simulation:
         # frequency (continuous).
         per_dir: dict[str, list] = {"x": [], "y": []}
         cv_info = None
+        h, w_ = self.shape
+        images = np.empty((nd, nw, len(deltas), h, w_), np.float32)
+        # Column offsets of each direction's block.
+        n_u = sum(1 for d in directions if d == "x")
+        per_width = (2 if linear else len(deltas)) if not continuous else 2 * (1 if linear else GAMMA_HARMONICS)
+        base = {"x": kb.OUT_FIRST, "y": kb.OUT_FIRST + n_u * nw * per_width}
+        fused = None
+        if linear:  # normalisation, sums and shifted images finished tile by tile
+            sums = np.empty((nd, nw, h, w_), np.complex128)
+            cols = [base[d] + wi * per_width for d in directions for wi in range(nw)]
+            fused = FringeFinish(self, images, sums, cols, deltas, black, white)
         if not continuous:
             for d in directions:
                 c = coords[d]
@@ -448,7 +485,8 @@ class Simulation:
                 err = None
             else:
                 out, err = self._render(kb.MODE_TABLES, ncols, smooth=self.fringes_smooth(),
-                                        table_u=tu, table_v=tv, progress=progress)
+                                        table_u=tu, table_v=tv, progress=progress,
+                                        **({} if fused is None else fused.kw(kb.MODE_TABLES, ncols)))
         else:
             harm = 1 if linear else GAMMA_HARMONICS
             for d in directions:
@@ -457,29 +495,21 @@ class Simulation:
             ku, kv = np.array(per_dir["x"]), np.array(per_dir["y"])
             ncols = kb.OUT_FIRST + 2 * (ku.size + kv.size)
             out, err = self._render(kb.MODE_HARMONIC, ncols, smooth=self.fringes_smooth(),
-                                    k_u=ku, k_v=kv, progress=progress)
+                                    k_u=ku, k_v=kv, progress=progress,
+                                    **({} if fused is None else fused.kw(kb.MODE_HARMONIC, ncols)))
 
-        norm = self._normalise(out)
-        f_total = out[..., kb.OUT_FTOTAL] * norm
-        f_hit = out[..., kb.OUT_FHIT] * norm
-        h, w_ = self.shape
-        images = np.empty((nd, nw, len(deltas), h, w_), np.float32)
-        sums = np.empty((nd, nw, h, w_), np.complex128) if linear else None
-        # Column offsets of each direction's block.
-        n_u = sum(1 for d in directions if d == "x")
-        per_width = (2 if linear else len(deltas)) if not continuous else 2 * (1 if linear else GAMMA_HARMONICS)
-        base = {"x": kb.OUT_FIRST, "y": kb.OUT_FIRST + n_u * nw * per_width}
-        if not linear and continuous:  # g(theta) = sum_m coef_m cos(m theta)
-            coef = control.response_coefficients(mon)
-            g = mon.luminance(0.5 + 0.5 * np.cos(2 * np.pi * np.arange(4096) / 4096))
-        if linear:  # every direction and width in one pass over the kernel's output rows
-            cols = np.array([base[d] + wi * per_width for d in directions for wi in range(nw)],
-                            np.int64)
-            shifted_images(
-                out.reshape(h * w_, -1), cols, norm.reshape(-1), f_hit.reshape(-1),
-                np.cos(deltas), np.sin(deltas), black, white,
-                sums.reshape(nd * nw, h * w_), images.reshape(nd * nw, len(deltas), h * w_),
-            )
+        if linear:  # the rows no tile finished (another scheduler, several passes): here
+            norm, f_total, f_hit = fused.complete(out)
+        else:
+            sums = None
+            norm = self._normalise(out)
+            f_total = out[..., kb.OUT_FTOTAL] * norm
+            f_hit = out[..., kb.OUT_FHIT] * norm
+        if not linear and continuous:
+            theta = 2 * np.pi * np.arange(4096) / 4096
+            g = mon.luminance(0.5 + 0.5 * np.cos(theta))
+            coef = np.fft.rfft(g).real / theta.size
+            coef[1:] *= 2  # g(theta) = sum_m coef_m cos(m theta)
         sums_err = convergence = stated = None
         info = self.describe_sampling(self.fringes_smooth())
         if cv_info is not None:  # the control variate's error of every fringe sum
@@ -488,23 +518,16 @@ class Simulation:
                 sums_err = cv_err * np.abs(norm)
         if linear and err is not None:  # the error of every normalised complex sum
             diffs = err if isinstance(err, tuple) else (err,)
-            cols = {(di, wi): base[d] + wi * per_width for di, d in enumerate(directions)
-                    for wi in range(nw)}
-
-            def fringe_sum(e, di, wi):
-                return (e[..., cols[di, wi]] + 1j * e[..., cols[di, wi] + 1]) * np.abs(norm)
-
-            sums_err = np.empty((nd, nw, h, w_), np.complex128)
-            for di, wi in cols:
-                sums_err[di, wi] = fringe_sum(diffs[0], di, wi)
             kexp = (convergence_exponent(tuple(info["order"]), info["kind"]) if len(diffs) > 1
                     else None)
+            sums_err, ratios = fringe_errors(diffs, cols, norm, sums.reshape(nd * nw, h, w_),
+                                             kexp is not None, self.num_workers)
+            sums_err = sums_err.reshape(nd, nw, h, w_)
             if kexp is not None:  # the observed convergence from the second embedded rule
-                convergence = np.ones((nd, nw))  # fringe by fringe: one (H, W) copy at a time
-                for di, wi in cols:
-                    convergence[di, wi] = convergence_factor(
-                        sums[di, wi], sums_err[di, wi], fringe_sum(diffs[1], di, wi), kexp)
+                convergence = convergence_of_ratios(ratios[0].reshape(nd, nw, -1),
+                                                    ratios[1].reshape(nd, nw, -1), kexp)
                 info["convergence"] = [[round(float(c), 6) for c in r] for r in convergence]
+            del ratios
             del diffs, err
         for di, d in enumerate(directions if not linear else ()):
             for wi in range(nw):
