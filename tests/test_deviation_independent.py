@@ -235,7 +235,8 @@ def test_chain_dataset_variables_carry_the_same_numbers():
     c, coord, ref_coord, exact, distance, pitch, res = _chain_case()
     from pmdsim.run.dataset import dataset_variables
 
-    v = dataset_variables(res)
+    # the chain's variables are lazily indexed stacks (run/lazy.py): read them as arrays
+    v = {k: (val[0], np.asarray(val[1])) for k, val in dataset_variables(res).items()}
     ok = res.directions["x"].deviation.valid
     mm = v["coord_deviation_mm"][1][0]
     np.testing.assert_allclose(mm[ok], ((coord - ref_coord) * pitch)[ok], rtol=1e-14)
