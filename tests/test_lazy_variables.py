@@ -99,17 +99,7 @@ def test_written_in_groups_byte_for_byte_as_at_once(tmp_path, monkeypatch):
                "row": np.arange(5), "col": np.arange(7) * 2})
     monkeypatch.setattr(writing, "GROUP_BYTES", 1)
     assert len(writing._groups(ds)) == 3  # the small variables with the first, then one each
-    stores = {}
-    for label, limit in (("once", 2**40), ("groups", 1)):
-        monkeypatch.setattr(writing, "GROUP_BYTES", limit)
-        path = tmp_path / f"{label}.zarr"
-        writing._write_part(ds, path, create=True)
-        writing.finish_store(path, {"name": "t"})
-        stores[label] = {p.relative_to(path): p.read_bytes() for p in sorted(path.rglob("*"))
-                         if p.is_file()}
-    assert stores["once"].keys() == stores["groups"].keys()
-    for k in stores["once"]:
-        assert stores["once"][k] == stores["groups"][k], k
+    _assert_same_files(ds, tmp_path, monkeypatch, "GROUP_BYTES", 2**40, 1)
 
 
 def test_a_large_variable_is_written_chunk_by_chunk_with_the_same_bytes(tmp_path, monkeypatch):
@@ -122,14 +112,21 @@ def test_a_large_variable_is_written_chunk_by_chunk_with_the_same_bytes(tmp_path
         "phase_deviation": (("direction", "row", "col"), lazy_stack([a, b])),
         "fringes": (("width", "row", "col"), np.stack([a, b, a * 2]).astype(np.float32)),
     }, coords={"direction": ["x", "y"], "row": np.arange(5), "col": np.arange(7) * 2})
-    stores = {}
-    for label, limit in (("copy", 2**40), ("chunks", 1)):
-        monkeypatch.setattr(writing, "LARGE_BYTES", limit)
-        path = tmp_path / f"{label}.zarr"
+    _assert_same_files(ds, tmp_path, monkeypatch, "LARGE_BYTES", 2**40, 1)
+
+
+def _assert_same_files(ds, tmp_path, monkeypatch, setting: str, *limits) -> None:
+    """Write ``ds`` once per value of ``writing.<setting>``: every file byte for byte alike."""
+    from pmdsim.run import writing
+
+    stores = []
+    for i, limit in enumerate(limits):
+        monkeypatch.setattr(writing, setting, limit)
+        path = tmp_path / f"{setting}-{i}.zarr"
         writing._write_part(ds, path, create=True)
         writing.finish_store(path, {"name": "t"})
-        stores[label] = {p.relative_to(path): p.read_bytes() for p in sorted(path.rglob("*"))
-                         if p.is_file()}
-    assert stores["copy"].keys() == stores["chunks"].keys()
-    for k in stores["copy"]:
-        assert stores["copy"][k] == stores["chunks"][k], k
+        stores.append({p.relative_to(path): p.read_bytes() for p in sorted(path.rglob("*"))
+                       if p.is_file()})
+    assert all(s.keys() == stores[0].keys() for s in stores)
+    for k in stores[0]:
+        assert all(s[k] == stores[0][k] for s in stores), k
