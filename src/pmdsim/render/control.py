@@ -44,14 +44,15 @@ from ..kernels import bundle as kb
 CV_HARMONICS = 1
 
 
-def response_coefficients(monitor, n: int = 4096) -> np.ndarray:
-    """``c_m`` with ``g(theta) = sum_m c_m cos(m theta)``, ``g`` the monitor's luminance of
-    the fringe level ``0.5 + 0.5 cos(theta)`` (``n`` samples, FFT)."""
+def response_series(monitor, n: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+    """``(c_m, g)``: ``g`` the monitor's luminance of the fringe level
+    ``0.5 + 0.5 cos(theta)`` at ``n`` samples of ``theta``, ``c_m`` its cosine series
+    ``g(theta) = sum_m c_m cos(m theta)`` (FFT)."""
     theta = 2 * np.pi * np.arange(n) / n
     g = monitor.luminance(0.5 + 0.5 * np.cos(theta))
     coef = np.fft.rfft(g).real / theta.size
     coef[1:] *= 2
-    return coef
+    return coef, g
 
 
 def applies(sim) -> bool:
@@ -130,7 +131,7 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
     from .results import phase_error
 
     samp = sim.scene.sampling
-    coef = None if linear else response_coefficients(sim.scene.monitor)
+    coef = None if linear else response_series(sim.scene.monitor)[0]
     ncols_t = kb.OUT_FIRST + table_u.shape[0] + table_v.shape[0]
     lay = _Layout(tuple(directions), tuple(widths), np.asarray(deltas), linear, coef, ncols_t)
     reps = samp.as_mode("rqmc").error_passes()

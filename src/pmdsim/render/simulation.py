@@ -505,11 +505,8 @@ class Simulation:
             norm = self._normalise(out)
             f_total = out[..., kb.OUT_FTOTAL] * norm
             f_hit = out[..., kb.OUT_FHIT] * norm
-        if not linear and continuous:
-            theta = 2 * np.pi * np.arange(4096) / 4096
-            g = mon.luminance(0.5 + 0.5 * np.cos(theta))
-            coef = np.fft.rfft(g).real / theta.size
-            coef[1:] *= 2  # g(theta) = sum_m coef_m cos(m theta)
+        if not linear and continuous:  # g(theta) = sum_m coef_m cos(m theta)
+            coef, g = control.response_series(mon)
         sums_err = convergence = stated = None
         info = self.describe_sampling(self.fringes_smooth())
         if cv_info is not None:  # the control variate's error of every fringe sum
