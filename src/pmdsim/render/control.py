@@ -1,5 +1,6 @@
 """Fringes on a nearest-pixel monitor with a control variate: the Gauss rule for the smooth
-fringe, randomised QMC for the small staircase residual only.
+fringe, randomised QMC for the small staircase residual only; on wide lobes the staircase
+by the box-filtered rule, with bounds and no samples.
 
 On a ``nearest`` monitor every ray takes the value of the monitor pixel it lands in: the
 integrand over the lobe is ``t(c)``, ``c = floor(u + 1/2)``, a staircase, where a Gauss rule
@@ -26,6 +27,40 @@ The stated error of every fringe sum ``S = sum_k I_k exp(-i delta_k)`` (per pixe
 replicates' ``t(0.975, R - 1) s / sqrt(R)`` of the residual's ``S`` (real and imaginary
 parts) plus ``|S_rule - S_embedded|`` of the smooth part (the embedded rule's difference, a
 bound on the rule's error) on both parts.
+
+Wide lobes: the staircase by the box rule
+-----------------------------------------
+Where every sub-ray's lobe is at least :data:`BOX_SIGMA_MIN` monitor px wide (standard
+deviation along u and v, :func:`lobe_widths`; the radiometric estimator on a Gaussian slope
+density), the staircase needs no samples. For a term ``exp(2 pi i f c)`` of the displayed
+profile at the pixel centres ``c`` and the lobe's density ``l(u)`` on the monitor, Poisson's
+summation formula gives exactly
+
+    Lambda(f) = sum_c exp(2 pi i f c) int_pixel c l = sinc(f) L(f) + sum_{j != 0} sinc(j - f) L(f - j)
+
+with ``L(f) = int l(u) exp(2 pi i f u) du`` the smooth integral the rule computes (the
+harmonic sums) and ``|f| <= 1/2``: the staircase is the rule's fringe times ``sinc(f)``
+(the box filter of one monitor pixel) plus aliases at ``|nu| >= 1/2`` cycles per px, where
+a lobe several px wide has no weight (:func:`alias_bound`: a Gaussian of half the measured
+width, ``< 1e-20`` of the weight at 3 px). The displayed profile itself:
+
+- a linear display: ``cos``/``sin`` of ``2 pi c / P``, one term;
+- a non-linear display with integer periods ``P``: the profile at the pixel centres is
+  ``P``-periodic (the render's tables take the phase of ``c mod P``), so the DFT of one
+  period (:func:`profile_terms`) gives it exactly, drive quantisation included; the rule
+  integrates terms 1..:data:`BOX_TERMS`, pixel by pixel only where the embedded rule's
+  difference is below the term's Gaussian bound (:func:`gauss_bound`; else the term counts
+  as zero with its bound as its error), and the terms above are bounded;
+- other periods: the response's cosine terms 1..:data:`BOX_SERIES_TERMS` on the rule, and
+  the replicates of the rest of the profile at the pixel centres (quantisation, higher
+  terms; one table pass per replicate, not two).
+
+Where the monitor's edge cuts a lobe, :func:`edge_bound` adds the pixels beyond the edge;
+above :data:`EDGE_MAX_OFF` of the weight off the monitor the phase is stated as known to
+within pi. Each term's share of the bound is its weight in ``S``, so terms that do not
+alias into the K-step phase weigh nothing. Tests check the box rule against the
+replicates of the whole staircase at 16 x the rays and against a NumPy mean over the
+rays of the nearest pixels' luminance (``tests/test_control_variate.py``).
 """
 
 from __future__ import annotations
@@ -35,7 +70,7 @@ import numpy as np
 from ..kernels import bundle as kb
 
 #: Fourier terms of the display response in the smooth part of a non-linear display (gamma,
-#: LUT, drive bits): the fundamental only. A higher term m varies over the lobe m times
+#: LUT, drive bits) on a narrow lobe (wide lobes: :data:`BOX_TERMS`): the fundamental only. A higher term m varies over the lobe m times
 #: faster, and the Gauss rule does not resolve it: on the realistic example (Ward 0.004, 60 px
 #: fringes, gamma 2.2) with 4 terms the embedded rule's difference of the third term (20 px
 #: period, 0.5 % of white) stated 9 mrad. The terms above the first stay in the residual:
@@ -55,6 +90,114 @@ def response_series(monitor, n: int = 4096) -> tuple[np.ndarray, np.ndarray]:
     return coef, g
 
 
+#: The smallest lower bound of the lobe's standard deviation on the monitor (px, both
+#: directions, :func:`lobe_widths`) from which the staircase is integrated deterministically
+#: (module docstring, "Wide lobes"); below it the replicates sample it.
+BOX_SIGMA_MIN = 3.0
+
+#: The bounds take the lobe half as wide as its measured lower bound: they assume that the
+#: lobe's Fourier transform falls as a Gaussian's of that width (a Gaussian slope density
+#: pushed onto the monitor by a smooth map); halving the width squares their margin.
+ALIAS_SIGMA_SAFETY = 0.8
+
+#: Terms of the smooth fringe the rule integrates on a wide lobe: the display profile's
+#: Fourier terms 1..8 at the pixel centres (integer periods: exact, quantisation included),
+#: else the response's cosine terms 1..3 (the replicates take the rest). Each pixel keeps a
+#: term only where the embedded rule's difference is below the term's Gaussian bound; else
+#: the term counts as zero and its bound as its error.
+BOX_TERMS = 8
+
+#: Where more than this share of a lobe's weight is off the monitor (the chain masks such
+#: pixels above 5 %), the box rule states no bound: the phase error is stated as pi.
+EDGE_MAX_OFF = 0.5
+BOX_SERIES_TERMS = 3
+
+
+def lobe_widths(sim, n: int = 12) -> dict | None:
+    """Lower bounds (monitor px) of the standard deviation of one sub-ray's lobe on the
+    monitor along u (``"x"``) and v (``"y"``), or None where the staircase is not integrated
+    deterministically (the cone estimators: the cone's edge; a tabulated slope density; a
+    specular peak; a BRDF that varies over the part).
+
+    The rule's own rays of the chief ray of ``n x n`` pixels over the camera
+    (:meth:`~pmdsim.render.Simulation.transport`): the weighted standard deviation of their
+    monitor coordinates, the smallest over the pixels, less 10 %."""
+    from .specular import specular_reflectance
+
+    scene = sim.scene
+    samp = scene.sampling
+    if (not sim._lobe or not samp.lobe_gaussian or scene.brdf_variation is not None
+            or specular_reflectance(scene.brdf) > 0):
+        return None
+    h, w = sim.shape
+    rr, cc = np.meshgrid(np.unique(np.linspace(0, h - 1, n).round().astype(int)),
+                         np.unique(np.linspace(0, w - 1, n).round().astype(int)), indexing="ij")
+    u, v, wt, _, _ = sim.transport(rr.ravel(), cc.ravel(), directions=False)
+    ok = (wt > 0) & np.isfinite(u) & np.isfinite(v)
+    wt = np.where(ok, wt, 0.0)
+    tot = wt.sum(axis=1)
+    use = tot > 0
+    if not use.any():
+        return None
+    out = {}
+    for name, c in (("x", u), ("y", v)):
+        c = np.where(ok, c, 0.0)[use]
+        ww = wt[use] / tot[use, None]
+        mean = (ww * c).sum(axis=1)
+        var = (ww * (c - mean[:, None]) ** 2).sum(axis=1)
+        out[name] = 0.9 * float(np.sqrt(max(float(var.min()), 0.0)))
+    return out
+
+
+def gauss_bound(sigma: float, f) -> np.ndarray:
+    """``sinc(f) exp(-2 pi^2 (ALIAS_SIGMA_SAFETY sigma)^2 f^2)``: the bound taken for the
+    box-filtered lobe's Fourier transform at ``f`` cycles per monitor px, per unit weight."""
+    f = np.asarray(f, np.float64)
+    s = ALIAS_SIGMA_SAFETY * sigma
+    return np.abs(np.sinc(f)) * np.exp(-2 * np.pi**2 * s * s * f * f)
+
+
+def alias_bound(sigma: float, f) -> np.ndarray:
+    """Bound of ``|Lambda(f) - sinc(f) L(f)|`` per unit weight (module docstring): the
+    aliases ``sum_{j != 0} |sinc(j - f)| |L(j - f)|`` with ``|L(nu)| <=
+    exp(-2 pi^2 (ALIAS_SIGMA_SAFETY sigma)^2 nu^2)``, ``|f| <= 1/2`` (j = +-1..+-4; the
+    rest are smaller than the last by far)."""
+    s = ALIAS_SIGMA_SAFETY * sigma
+    f = np.asarray(f, np.float64)
+    out = np.zeros_like(f)
+    for j in (-4, -3, -2, -1, 1, 2, 3, 4):
+        nu = np.abs(j - f)
+        out += np.exp(-2 * np.pi**2 * s * s * nu * nu) / (np.pi * nu)
+    return out
+
+
+def edge_bound(sigma: float, f, off) -> np.ndarray:
+    """Bound per unit weight of the staircase's error beyond the box rule where the
+    monitor's edge cuts the lobe (a share ``off`` of its weight off the monitor), per term
+    of ``f`` cycles per px: ``(1 - sinc^2 f) off + (pi f / 3) l_E``, the pixels beyond the
+    edge each contributing their mean residual and twice their first moment; ``l_E`` the
+    lobe's density at the edge, at most ``off (sqrt(2 ln(1 / off)) + 2.5)`` and
+    ``1 / sqrt(2 pi)`` over ``ALIAS_SIGMA_SAFETY sigma`` (a Gaussian tail)."""
+    off = np.clip(np.asarray(off, np.float64), 0.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.sqrt(2.0 * np.log(1.0 / np.where(off > 0, off, 1.0)))
+    dens = np.minimum(off * (z + 2.5), 1.0 / np.sqrt(2 * np.pi)) / (ALIAS_SIGMA_SAFETY * sigma)
+    f = float(f)
+    return (1.0 - np.sinc(f) ** 2) * off + (np.pi * f / 3.0) * dens
+
+
+def box_plan(sim, widths, linear) -> tuple[dict | None, bool]:
+    """(lobe widths, exact): the lobe's lower widths where the staircase is integrated
+    deterministically (:data:`BOX_SIGMA_MIN`), else None; ``exact``: no replicates at all
+    (a linear display, or integer fringe periods, whose displayed profile is periodic in
+    the pixel index)."""
+    sig = lobe_widths(sim)
+    if sig is None or min(sig.values()) < BOX_SIGMA_MIN:
+        return None, False
+    integer = all(abs(w - round(w)) < 1e-9 and round(w) >= 3 for w in widths)
+    return sig, bool(linear or integer)
+
+
 def applies(sim) -> bool:
     """Whether :func:`render_fringes_cv` renders ``sim``'s fringes: mode ``rule`` on a
     ``nearest`` monitor, a scattering BRDF whose smooth part the rule integrates fast (a
@@ -68,14 +211,42 @@ def applies(sim) -> bool:
             and samp.n_rays >= 2 * samp.replicates)
 
 
-class _Layout:
-    """Columns of the tables (``MODE_TABLES``) and of the smooth part (``MODE_HARMONIC``)."""
+def series_terms(coef, deltas, n_terms) -> np.ndarray:
+    """(K, n_terms + 1) complex ``A``: the response's cosine series as the shifted
+    profiles' terms, ``profile_k(c) = Re sum_j A[k, j] exp(2 pi i j c / P)``,
+    ``A[k, j] = coef_j exp(i j delta_k)``."""
+    j = np.arange(n_terms + 1)
+    return coef[j][None, :] * np.exp(1j * j[None, :] * np.asarray(deltas)[:, None])
 
-    def __init__(self, directions, widths, deltas, linear, coef, n_table_cols):
+
+def profile_terms(monitor, width: float, deltas) -> np.ndarray:
+    """(K, P // 2 + 1) complex ``A`` of the displayed profiles at the pixel centres of an
+    integer period ``P``: ``profile_k(c) = Re sum_j A[k, j] exp(2 pi i j c / P)`` exactly
+    for every integer ``c`` (the DFT of one period; drive quantisation included; the
+    render's tables take the phase of ``c mod P``, so that every period shows the same
+    bytes)."""
+    p = int(round(width))
+    c = np.arange(p, dtype=np.float64)
+    prof = np.array([monitor.luminance(0.5 + 0.5 * np.cos(2 * np.pi * np.mod(c, width) / width + d))
+                     for d in deltas])
+    a = np.fft.rfft(prof, axis=1) / p
+    a[:, 1:] *= 2
+    if p % 2 == 0:
+        a[:, -1] /= 2
+    return a
+
+
+class _Layout:
+    """Columns of the tables (``MODE_TABLES``) and of the smooth part (``MODE_HARMONIC``):
+    per fringe ``terms`` harmonic pairs ``sum w cos/sin(2 pi j u / P)``, j = 1..terms, and
+    the coefficients ``A`` (K, >= terms + 1) that make the shifted profiles of them
+    (:func:`series_terms`, :func:`profile_terms`; None on a linear display: cos and sin)."""
+
+    def __init__(self, directions, widths, deltas, linear, terms, n_table_cols, n_terms=1):
         self.directions, self.widths, self.deltas = directions, widths, deltas
         self.linear = linear
-        self.harm = 1 if linear else CV_HARMONICS
-        self.coef = coef
+        self.harm = 1 if linear else n_terms
+        self.terms = terms  # {(di, wi): (K, J) complex}
         nw = len(widths)
         n_u = sum(1 for d in directions if d == "x")
         self.per_t = 2 if linear else len(deltas)
@@ -94,17 +265,85 @@ class _Layout:
         profile (linear in ``h``: also for differences of sums)."""
         out = np.zeros(h.shape[:-1] + (self.ncols_t,))
         out[..., :kb.OUT_FIRST] = h[..., :kb.OUT_FIRST]
-        for _, _, tc, hc in self.fringes:
+        for di, wi, tc, hc in self.fringes:
             if self.linear:
                 out[..., tc:tc + 2] = h[..., hc:hc + 2]
                 continue
-            for k, delta in enumerate(self.deltas):
-                acc = self.coef[0] * h[..., kb.OUT_FHIT]
+            a = self.terms[di, wi]
+            for k in range(len(self.deltas)):
+                acc = a[k, 0].real * h[..., kb.OUT_FHIT]
                 for m in range(1, self.harm + 1):
                     c = hc + 2 * (m - 1)
-                    acc = acc + self.coef[m] * (h[..., c] * np.cos(m * delta)
-                                                - h[..., c + 1] * np.sin(m * delta))
+                    acc = acc + (a[k, m].real * h[..., c] - a[k, m].imag * h[..., c + 1])
                 out[..., tc + k] = acc
+        return out
+
+    def residual_tables(self, table_u: np.ndarray, table_v: np.ndarray):
+        """The profile tables less the smooth fringe ``Re sum_{j <= terms} A[k, j]
+        exp(2 pi i j c / P)`` at every monitor pixel centre ``c`` (non-linear displays)."""
+        out = {"x": np.array(table_u, np.float64, copy=True),
+               "y": np.array(table_v, np.float64, copy=True)}
+        row = {"x": 0, "y": 0}
+        for di, d in enumerate(self.directions):
+            c = np.arange(out[d].shape[1], dtype=np.float64)
+            for wi, w in enumerate(self.widths):
+                a = self.terms[di, wi]
+                e = np.exp(2j * np.pi * np.outer(np.arange(self.harm + 1), c) / w)
+                for k in range(len(self.deltas)):
+                    out[d][row[d]] -= (a[k, :self.harm + 1] @ e).real
+                    row[d] += 1
+        return out["x"], out["y"]
+
+    def select_terms(self, sig: dict, smooth: np.ndarray, coarse: np.ndarray | None,
+                     exact: bool) -> np.ndarray:
+        """Wide lobes: the bound (nd, nw, H, W) on every fringe sum ``S`` of what the rule
+        does not integrate, unnormalised; drops, pixel by
+        pixel, the terms ``j >= 2`` whose embedded difference exceeds their bound
+        :func:`gauss_bound` (zeroed in ``smooth`` and ``coarse``: the term counts as zero,
+        its bound as its error). Adds the aliases of the kept terms (:func:`alias_bound`),
+        the monitor edge's share where it cuts the lobe (:func:`edge_bound`) and, with
+        ``exact`` profile terms, the bound of the terms above ``terms``."""
+        f_hit = np.abs(smooth[..., kb.OUT_FHIT])
+        f_tot = np.maximum(np.abs(smooth[..., kb.OUT_FTOTAL]), f_hit)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            off = np.where(f_tot > 0, 1.0 - f_hit / f_tot, 0.0)
+        nd, nw = len(self.directions), len(self.widths)
+        out = np.zeros((nd, nw) + f_hit.shape)
+        for di, wi, _, hc in self.fringes:
+            d, w = self.directions[di], self.widths[wi]
+            s = sig[d]
+            if self.linear:
+                out[di, wi] = 2.0 * (float(alias_bound(s, 1.0 / w)) * f_hit
+                                     + edge_bound(s, 1.0 / w, off) * f_tot)
+                continue
+            # each term's weight in S = sum_k I_k exp(-i delta_k), I_k = Re sum_j A_kj L_j:
+            # (|sum_k e^-i delta_k A_kj| + |sum_k e^-i delta_k conj A_kj|) / 2 (terms that
+            # do not alias into the K-step phase weigh nothing)
+            rot = np.exp(-1j * np.asarray(self.deltas))[:, None]
+            a = 0.5 * (np.abs((rot * self.terms[di, wi]).sum(axis=0))
+                       + np.abs((rot * np.conj(self.terms[di, wi])).sum(axis=0)))
+            j = np.arange(a.size)
+            g = gauss_bound(s, j / w)
+            al = alias_bound(s, np.minimum(j / w, 0.5))
+            bound = float(np.sum(a[1:self.harm + 1] * al[1:self.harm + 1]))
+            if exact:
+                bound += float(np.sum(a[self.harm + 1:] * np.minimum(1.0, g + al)[self.harm + 1:]))
+            acc = bound * f_hit
+            for m in range(1, self.harm + 1):  # the monitor's edge
+                acc = acc + a[m] * edge_bound(s, m / w, off) * f_tot
+            for m in range(2, self.harm + 1):
+                c = hc + 2 * (m - 1)
+                gm = g[m] * f_hit
+                if coarse is None:
+                    dead = np.abs(smooth[..., c] + 1j * smooth[..., c + 1]) > gm
+                else:
+                    dead = np.hypot(smooth[..., c] - coarse[..., c],
+                                    smooth[..., c + 1] - coarse[..., c + 1]) > gm
+                for arr in (smooth,) if coarse is None else (smooth, coarse):
+                    arr[..., c][dead] = 0.0
+                    arr[..., c + 1][dead] = 0.0
+                acc = acc + np.where(dead, a[m] * gm, 0.0)
+            out[di, wi] = acc
         return out
 
     def fringe_sums(self, t: np.ndarray) -> np.ndarray:
@@ -125,18 +364,38 @@ class _Layout:
 def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v, progress=None):
     """Table-layout sums (H, W, ncols) of the fringes on ``sim``'s nearest-pixel monitor by
     the control variate (module docstring), the error (nd, nw, H, W) complex of every fringe
-    sum :meth:`_Layout.fringe_sums` (real and imaginary parts, >= 0, unnormalised) and what
-    was rendered (for :attr:`~pmdsim.render.FringeResult.sampling`)."""
+    sum :meth:`_Layout.fringe_sums` (real and imaginary parts, >= 0, unnormalised), the
+    stated phase error and what was rendered (for
+    :attr:`~pmdsim.render.FringeResult.sampling`).
+
+    On a wide lobe (:func:`box_plan`) the rule integrates the box-filtered terms of the
+    displayed profile, with bounds for its aliases and for the terms it leaves out; the
+    replicates sample only what the terms leave out of the profile at the pixel centres
+    (none for a linear display or integer periods)."""
     from ..scene.quadrature import student_t975
     from .results import phase_error
 
     samp = sim.scene.sampling
-    coef = None if linear else response_series(sim.scene.monitor)[0]
+    mon = sim.scene.monitor
     ncols_t = kb.OUT_FIRST + table_u.shape[0] + table_v.shape[0]
-    lay = _Layout(tuple(directions), tuple(widths), np.asarray(deltas), linear, coef, ncols_t)
-    reps = samp.as_mode("rqmc").error_passes()
+    sig, exact = box_plan(sim, widths, linear)
+    box = sig is not None
+    terms, n_terms = None, 1
+    if not linear:
+        if box and exact:
+            n_terms = min(BOX_TERMS, min(int(round(w)) // 2 for w in widths) - 1)
+            terms = {(di, wi): profile_terms(mon, w, deltas)
+                     for di in range(len(directions)) for wi, w in enumerate(widths)}
+        else:
+            n_terms = BOX_SERIES_TERMS if box else CV_HARMONICS
+            t = series_terms(response_series(mon)[0], deltas, n_terms)
+            terms = {(di, wi): t for di in range(len(directions)) for wi in range(len(widths))}
+    lay = _Layout(tuple(directions), tuple(widths), np.asarray(deltas), linear, terms, ncols_t,
+                  n_terms)
+    reps = () if box and exact else samp.as_mode("rqmc").error_passes()
     gauss = sim.plan(True)
-    n_steps = len(gauss) + 2 * len(reps)
+    per_rep = 1 if box else 2
+    n_steps = len(gauss) + per_rep * len(reps)
     step = [0]
 
     def prog():
@@ -146,29 +405,48 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
         step[0] += 1
         return lambda done, total: progress(k * total + done, n_steps * total)
 
+    # the box filter of every harmonic column: sinc(k / 2 pi), the staircase's mean of
+    # exp(i k c) over a monitor pixel
+    fbox = np.concatenate([lay.k_u, lay.k_v]) / (2 * np.pi)
+    scale = np.ones(lay.ncols_h)
+    if box:
+        scale[kb.OUT_FIRST::2] = np.sinc(fbox)
+        scale[kb.OUT_FIRST + 1::2] = np.sinc(fbox)
     # the smooth part: the rule and its embedded rules (Simulation._render's passes)
     smooth = sim._render_set(gauss[0], kb.MODE_HARMONIC, lay.ncols_h, k_u=lay.k_u, k_v=lay.k_v,
                              progress=prog())
-    s_err = None
+    smooth *= scale
+    coarse = None
     if len(gauss) > 1:
         coarse = sim._render_set(gauss[1], kb.MODE_HARMONIC, lay.ncols_h, k_u=lay.k_u,
                                  k_v=lay.k_v, progress=prog())
+        coarse *= scale
+        step[0] += len(gauss) - 2  # the second embedded rule is not needed here
+    bound = lay.select_terms(sig, smooth, coarse, exact) if box else None
+    s_err = None
+    if coarse is not None:
         s_err = lay.fringe_sums(lay.to_tables(smooth - coarse))
         del coarse
-        step[0] += len(gauss) - 2  # the second embedded rule is not needed here
     out = lay.to_tables(smooth)
     del smooth
-    # the residual: t - h at the same points, replicate by replicate (Welford on S)
+    if box and not linear and not exact:  # the profile less the terms, at the pixel centres
+        table_u, table_v = lay.residual_tables(table_u, table_v)
+    # the residual, replicate by replicate (Welford on S): t - h at the same points, or
+    # (box) the residual tables alone
     mean_res = np.zeros_like(out)
     mean_s = m2_re = m2_im = None
     for r, rep in enumerate(reps):
         t = sim._render_set(rep, kb.MODE_TABLES, ncols_t, table_u=table_u, table_v=table_v,
                             progress=prog())
-        h = sim._render_set(rep, kb.MODE_HARMONIC, lay.ncols_h, k_u=lay.k_u, k_v=lay.k_v,
-                            progress=prog())
-        res = t - lay.to_tables(h)
-        res[..., :kb.OUT_FIRST] = 0.0  # the same rays: f_total, f_hit cancel exactly
-        del t, h
+        if box:
+            res = t
+        else:
+            h = sim._render_set(rep, kb.MODE_HARMONIC, lay.ncols_h, k_u=lay.k_u, k_v=lay.k_v,
+                                progress=prog())
+            res = t - lay.to_tables(h)
+            del h
+        res[..., :kb.OUT_FIRST] = 0.0  # f_total, f_hit: the rule's
+        del t
         mean_res += (res - mean_res) / (r + 1)
         s = lay.fringe_sums(res)
         if mean_s is None:
@@ -179,21 +457,46 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
         m2_re += d.real * (s - mean_s).real
         m2_im += d.imag * (s - mean_s).imag
     n = len(reps)
-    half = student_t975(n - 1) / np.sqrt((n - 1) * n)
-    err = half * np.sqrt(m2_re) + 1j * half * np.sqrt(m2_im)
     out += mean_res
     sums = lay.fringe_sums(out)
-    stated = phase_error(sums, err, "replicates")
+    if n:
+        half = student_t975(n - 1) / np.sqrt((n - 1) * n)
+        err = half * np.sqrt(m2_re) + 1j * half * np.sqrt(m2_im)
+        stated = phase_error(sums, err, "replicates")
+    else:
+        err = np.zeros(sums.shape, np.complex128)
+        stated = np.zeros(sums.shape)
     if s_err is not None:  # the smooth part: the embedded rule's statement
         stated = stated + phase_error(sums, s_err, "embedded")
         err = err + np.abs(s_err) * (1 + 1j)
+    if bound is not None:  # the terms left out and the aliases: bounds
+        stated = stated + phase_error(sums, bound * (1 + 1j), "replicates")
+        err = err + bound * (1 + 1j)
+        # a lobe mostly off the monitor: no bound (the phase is known to within pi)
+        far = np.abs(out[..., kb.OUT_FHIT]) < (1.0 - EDGE_MAX_OFF) * np.abs(out[..., kb.OUT_FTOTAL])
+        stated = np.where(far, np.pi, stated)
+        big = np.abs(sums)
+        err = np.where(far, np.maximum(err.real, big) + 1j * np.maximum(err.imag, big), err)
     rule = gauss[0].rule(sim._lobe)
-    info = {"mode": "rule+rqmc", "rule": rule.describe(), "kind": rule.kind, "nodes": rule.n,
-            "order": list(rule.order), "passes": len(gauss) + 2 * n,
-            "error": "replicates", "smooth": False,
-            "control_variate": (f"smooth fringe ({'cos/sin' if linear else f'{lay.harm} response terms'}) "
-                                f"on the rule, the staircase residual on {n} rqmc replicates "
-                                f"of {max(1, samp.n_rays // samp.replicates)} points"),
+    kind = "cos/sin" if linear else f"{lay.harm} response terms"
+    if box:
+        kind = "cos/sin" if linear else (f"the displayed profile's Fourier terms 1-{lay.harm} at the "
+                                         "pixel centres" if exact else kind)
+        what = (f"the staircase of the smooth fringe ({kind}) as the rule's box-filtered "
+                f"fringe (sinc per term), its aliases and the terms the rule leaves out bounded "
+                f"for lobes at least {sig['x']:.3g} x {sig['y']:.3g} monitor px wide (u x v, "
+                f"std.)")
+        if n:
+            what += (f"; the profile's rest at the pixel centres on {n} rqmc replicates of "
+                     f"{max(1, samp.n_rays // samp.replicates)} points")
+    else:
+        what = (f"smooth fringe ({kind}) on the rule, the staircase residual on {n} rqmc "
+                f"replicates of {max(1, samp.n_rays // samp.replicates)} points")
+    info = {"mode": ("rule+box+rqmc" if n else "rule+box") if box else "rule+rqmc",
+            "rule": rule.describe(), "kind": rule.kind, "nodes": rule.n,
+            "order": list(rule.order), "passes": len(gauss) + per_rep * n,
+            "error": "replicates" if n else "embedded", "smooth": False,
+            "control_variate": what, "lobe_width_px": sig,
             "embedded_rule": gauss[1].rule(sim._lobe).describe() if len(gauss) > 1 else None}
     return out, err, stated, info
 
@@ -205,8 +508,13 @@ def table_fringe_sums(out, directions, widths, deltas, linear) -> np.ndarray:
                    ncols).fringe_sums(out)
 
 
-def rays_share(sim) -> float:
+def rays_share(sim, widths=None) -> float:
     """The rays of one control-variate fringe render per ``n_rays``: the rule and its
-    embedded rule, then the replicates twice (the profiles and the smooth part)."""
+    embedded rule, then the replicates twice (the profiles and the smooth part), once (wide
+    lobes: the residual tables) or not at all (wide lobes: a linear display or integer
+    periods; ``widths``: the fringe periods, integer when None)."""
     gauss = sim.plan(True)[:2]
-    return sum(p.rule(sim._lobe).n for p in gauss) / max(sim.scene.rays_per_pixel, 1) + 2.0
+    sig, exact = box_plan(sim, (3.0,) if widths is None else tuple(widths),
+                          sim.scene.monitor.is_linear)
+    reps = 2.0 if sig is None else (0.0 if exact else 1.0)
+    return sum(p.rule(sim._lobe).n for p in gauss) / max(sim.scene.rays_per_pixel, 1) + reps

@@ -470,12 +470,14 @@ class Simulation:
             for d in directions:
                 c = coords[d]
                 for w in widths:
+                    # the phase of c mod P: the same bytes in every period (a level on a
+                    # drive step's edge rounds alike in each; control.profile_terms)
+                    ph = 2 * np.pi * np.mod(c, w) / w
                     if linear:
-                        ph = 2 * np.pi * c / w
                         per_dir[d] += [np.cos(ph), np.sin(ph)]
                     else:
                         for delta in deltas:
-                            per_dir[d].append(mon.luminance(0.5 + 0.5 * np.cos(2 * np.pi * c / w + delta)))
+                            per_dir[d].append(mon.luminance(0.5 + 0.5 * np.cos(ph + delta)))
             tu = np.array(per_dir["x"]).reshape(-1, mon.width)
             tv = np.array(per_dir["y"]).reshape(-1, mon.height)
             ncols = kb.OUT_FIRST + tu.shape[0] + tv.shape[0]
@@ -604,9 +606,12 @@ class Simulation:
                 err, slice(kb.OUT_FHIT, kb.OUT_FHIT + 1), norm)
         return images, None if e is None else np.moveaxis(e, -1, 0).astype(np.float32)
 
-    def transport(self, rows: Sequence[int], cols: Sequence[int], directions: bool = True):
+    def transport(self, rows: Sequence[int], cols: Sequence[int], directions: bool = True,
+                  totals: bool = False):
         """The scattered rays of selected pixels (``directions=False``: without the world
-        directions, returned as None; the other results are the same).
+        directions, returned as None; the other results are the same; ``totals``: a sixth
+        result, (P,) the weight of every pixel's rays, those that miss the monitor included,
+        as the render's ``f_total``).
 
         Returns
         -------
@@ -657,8 +662,9 @@ class Simulation:
         else:
             kb.render_tile(geo, scene.brdf.kernel_params(), u1, u2, rot, samp.scheme_id,
                            samp.theta_max, principal, *args, w_ray=w_ray)
+        extra = (out[:, kb.OUT_FTOTAL].copy(),) if totals else ()
         if not directions:
-            return ou, ov, of, None, hits.point[0].copy()
+            return (ou, ov, of, None, hits.point[0].copy()) + extra
         dirs = np.empty((len(rows), n, 3))
         origin = np.empty((len(rows), 3))
         cone = cone_basis(hits)
@@ -679,5 +685,5 @@ class Simulation:
                     off = tuple(rot[p]) if rot.shape[0] else (0.0, 0.0)
                     loc = samp.local_directions(off)
             dirs[p] = loc[:, :1] * e1 + loc[:, 1:2] * e2 + loc[:, 2:3] * e3
-        return ou, ov, of, dirs, origin
+        return (ou, ov, of, dirs, origin) + extra
 

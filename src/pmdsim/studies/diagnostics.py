@@ -427,20 +427,35 @@ def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
     rows, cols = grid.pixel_rows, grid.pixel_cols
     valid, _ = incidence(sim.scene, rows, cols)
     cv = control.applies(sim)  # the nearest monitor's control variate: rule + rqmc residual
+    # a wide lobe: the box-filtered rule and the alias bound (linear fringes: no replicates)
+    sig = control.box_plan(sim, tuple(widths), True)[0] if cv else None
     passes = sim.plan(True)[:2] if cv else sim.plan(sim.fringes_smooth())
-    reps = sim.scene.sampling.as_mode("rqmc").error_passes() if cv else ()
+    reps = sim.scene.sampling.as_mode("rqmc").error_passes() if cv and sig is None else ()
     sums, res = [], []
     for k, samp in enumerate(passes + reps):
         run = Simulation(sim.scene.replace(sampling=samp), sim.tile_rows, sim.scheduler,
                          sim.num_workers)
-        u, v, w, _, _ = run.transport(rows, cols, directions=False)
+        u, v, w, _, _, wtot = run.transport(rows, cols, directions=False, totals=True)
         smooth = ray_sums(u, v, w, tuple(widths), tuple(directions), nearest and not cv)
+        if sig is not None:
+            smooth = smooth * np.sinc(1.0 / np.asarray(widths, np.float64))[None, :, None]
+        if k == 0 and sig is not None:  # the rule's weight on and off the monitor
+            wsum = np.where(np.isfinite(u), w, 0.0).sum(-1)
+            wall = np.maximum(np.abs(wtot), wsum)
         if k < len(passes):
             sums.append(smooth)
         else:
             res.append(ray_sums(u, v, w, tuple(widths), tuple(directions), True) - smooth)
     z = np.stack(sums)  # (passes, nd, nw, K)
-    if cv:
+    if sig is not None:
+        se = phase_error(z[0], z[0] - z[1], "embedded") if len(passes) > 1 else 0.0
+        off = np.where(wall > 0, 1.0 - wsum / np.where(wall > 0, wall, 1.0), 0.0)
+        bound = np.stack([np.stack([2.0 * (control.alias_bound(sig[d], 1.0 / wd) * wsum
+                                           + control.edge_bound(sig[d], 1.0 / wd, off) * wall)
+                                    for wd in widths]) for d in directions])
+        se = se + phase_error(z[0], bound * (1 + 1j), "replicates")
+        se = np.where(off > control.EDGE_MAX_OFF, np.pi, se)
+    elif cv:
         r = np.stack(res)
         half = student_t975(len(res) - 1) / math.sqrt(len(res))
         total = z[0] + r.mean(0)
