@@ -101,10 +101,12 @@ BOX_SIGMA_MIN = 3.0
 ALIAS_SIGMA_SAFETY = 0.8
 
 #: Terms of the smooth fringe the rule integrates on a wide lobe: the display profile's
-#: Fourier terms 1..8 at the pixel centres (integer periods: exact, quantisation included),
-#: else the response's cosine terms 1..3 (the replicates take the rest). Each pixel keeps a
-#: term only where the embedded rule's difference is below the term's Gaussian bound; else
-#: the term counts as zero and its bound as its error.
+#: Fourier terms 1..8 at the pixel centres (integer periods: exact, quantisation included;
+#: the terms above are bounded), else the response's cosine terms 1..3 (the replicates take
+#: the rest). Each pixel keeps a term only where the embedded rule's difference is below the
+#: term's Gaussian bound; else the term counts as zero and its bound as its error. Each term
+#: is two columns per fringe and pixel in the rule's sums (float64) and the embedded rule's
+#: (float32).
 BOX_TERMS = 8
 
 #: Where more than this share of a lobe's weight is off the monitor (the chain masks such
@@ -412,20 +414,28 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
     if box:
         scale[kb.OUT_FIRST::2] = np.sinc(fbox)
         scale[kb.OUT_FIRST + 1::2] = np.sinc(fbox)
-    # the smooth part: the rule and its embedded rules (Simulation._render's passes)
+    # the smooth part: the rule and its embedded rule (Simulation._render's passes); the
+    # embedded rule first, kept in float32 (it only gives the difference; its rounding,
+    # 6e-8 of a sum, is far below any statement), so that the rule's float64 sums and it
+    # never make two float64 (H, W, 2 terms) arrays at once
+    coarse = None
+    if len(gauss) > 1:
+        step[0] = 1
+        c64 = sim._render_set(gauss[1], kb.MODE_HARMONIC, lay.ncols_h, k_u=lay.k_u,
+                              k_v=lay.k_v, progress=prog())
+        c64 *= scale
+        coarse = c64.astype(np.float32)
+        del c64
+        step[0] = 0
     smooth = sim._render_set(gauss[0], kb.MODE_HARMONIC, lay.ncols_h, k_u=lay.k_u, k_v=lay.k_v,
                              progress=prog())
     smooth *= scale
-    coarse = None
-    if len(gauss) > 1:
-        coarse = sim._render_set(gauss[1], kb.MODE_HARMONIC, lay.ncols_h, k_u=lay.k_u,
-                                 k_v=lay.k_v, progress=prog())
-        coarse *= scale
-        step[0] += len(gauss) - 2  # the second embedded rule is not needed here
+    step[0] = len(gauss)  # the second embedded rule is not needed here
     bound = lay.select_terms(sig, smooth, coarse, exact) if box else None
     s_err = None
-    if coarse is not None:
-        s_err = lay.fringe_sums(lay.to_tables(smooth - coarse))
+    if coarse is not None:  # the difference in place, in float32 (6e-8 of itself)
+        np.subtract(smooth, coarse, out=coarse, casting="unsafe")
+        s_err = lay.fringe_sums(lay.to_tables(coarse))
         del coarse
     out = lay.to_tables(smooth)
     del smooth
