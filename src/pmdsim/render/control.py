@@ -41,8 +41,8 @@ summation formula gives exactly
 with ``L(f) = int l(u) exp(2 pi i f u) du`` the smooth integral the rule computes (the
 harmonic sums) and ``|f| <= 1/2``: the staircase is the rule's fringe times ``sinc(f)``
 (the box filter of one monitor pixel) plus aliases at ``|nu| >= 1/2`` cycles per px, where
-a lobe several px wide has no weight (:func:`alias_bound`: a Gaussian of half the measured
-width, ``< 1e-20`` of the weight at 3 px). The displayed profile itself:
+a lobe several px wide has no weight (:func:`alias_bound`: a Gaussian of 0.8 times the
+measured width, ``< 1e-20`` of the weight at 3 px). The displayed profile itself:
 
 - a linear display: ``cos``/``sin`` of ``2 pi c / P``, one term;
 - a non-linear display with integer periods ``P``: the profile at the pixel centres is
@@ -70,8 +70,8 @@ import numpy as np
 from ..kernels import bundle as kb
 
 #: Fourier terms of the display response in the smooth part of a non-linear display (gamma,
-#: LUT, drive bits) on a narrow lobe (wide lobes: :data:`BOX_TERMS`): the fundamental only. A higher term m varies over the lobe m times
-#: faster, and the Gauss rule does not resolve it: on the realistic example (Ward 0.004, 60 px
+#: LUT, drive bits) on a narrow lobe (wide lobes: :data:`BOX_TERMS`): the fundamental only.
+#: A higher term m varies over the lobe m times faster, and the Gauss rule does not resolve it: on the realistic example (Ward 0.004, 60 px
 #: fringes, gamma 2.2) with 4 terms the embedded rule's difference of the third term (20 px
 #: period, 0.5 % of white) stated 9 mrad. The terms above the first stay in the residual:
 #: those that do not alias into the K-step phase (m != +-1 mod K) cancel in its fringe sum
@@ -95,9 +95,10 @@ def response_series(monitor, n: int = 4096) -> tuple[np.ndarray, np.ndarray]:
 #: (module docstring, "Wide lobes"); below it the replicates sample it.
 BOX_SIGMA_MIN = 3.0
 
-#: The bounds take the lobe half as wide as its measured lower bound: they assume that the
-#: lobe's Fourier transform falls as a Gaussian's of that width (a Gaussian slope density
-#: pushed onto the monitor by a smooth map); halving the width squares their margin.
+#: The bounds take the lobe 0.8 times as wide as its measured lower bound: they assume that
+#: the lobe's Fourier transform falls as a Gaussian's of that width (a Gaussian slope density
+#: pushed onto the monitor by a smooth map); a factor a on the width raises the bounds to
+#: the power 1 / a^2.
 ALIAS_SIGMA_SAFETY = 0.8
 
 #: Terms of the smooth fringe the rule integrates on a wide lobe: the display profile's
@@ -108,11 +109,11 @@ ALIAS_SIGMA_SAFETY = 0.8
 #: is two columns per fringe and pixel in the rule's sums (float64) and the embedded rule's
 #: (float32).
 BOX_TERMS = 8
+BOX_SERIES_TERMS = 3
 
 #: Where more than this share of a lobe's weight is off the monitor (the chain masks such
 #: pixels above 5 %), the box rule states no bound: the phase error is stated as pi.
 EDGE_MAX_OFF = 0.5
-BOX_SERIES_TERMS = 3
 
 
 def lobe_widths(sim, n: int = 12) -> dict | None:
@@ -186,6 +187,23 @@ def edge_bound(sigma: float, f, off) -> np.ndarray:
     dens = np.minimum(off * (z + 2.5), 1.0 / np.sqrt(2 * np.pi)) / (ALIAS_SIGMA_SAFETY * sigma)
     f = float(f)
     return (1.0 - np.sinc(f) ** 2) * off + (np.pi * f / 3.0) * dens
+
+
+def off_share(f_hit, f_total) -> tuple[np.ndarray, np.ndarray]:
+    """(off, f_total): the share of each lobe's weight off the monitor from the weights on
+    it (``f_hit``) and in all (``f_total``, at least ``f_hit``)."""
+    f_hit = np.abs(np.asarray(f_hit, np.float64))
+    f_tot = np.maximum(np.abs(np.asarray(f_total, np.float64)), f_hit)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.where(f_tot > 0, 1.0 - f_hit / np.where(f_tot > 0, f_tot, 1.0), 0.0)
+    return off, f_tot
+
+
+def linear_bound(sigma: float, width: float, f_hit, f_tot, off) -> np.ndarray:
+    """The box rule's bound on a linear fringe sum ``cos + i sin`` (unnormalised, as the
+    weights): its aliases and the monitor edge's share, on both parts."""
+    f = 1.0 / width
+    return 2.0 * (float(alias_bound(sigma, f)) * np.abs(f_hit) + edge_bound(sigma, f, off) * f_tot)
 
 
 def box_plan(sim, widths, linear) -> tuple[dict | None, bool]:
@@ -306,17 +324,14 @@ class _Layout:
         the monitor edge's share where it cuts the lobe (:func:`edge_bound`) and, with
         ``exact`` profile terms, the bound of the terms above ``terms``."""
         f_hit = np.abs(smooth[..., kb.OUT_FHIT])
-        f_tot = np.maximum(np.abs(smooth[..., kb.OUT_FTOTAL]), f_hit)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            off = np.where(f_tot > 0, 1.0 - f_hit / f_tot, 0.0)
+        off, f_tot = off_share(f_hit, smooth[..., kb.OUT_FTOTAL])
         nd, nw = len(self.directions), len(self.widths)
         out = np.zeros((nd, nw) + f_hit.shape)
         for di, wi, _, hc in self.fringes:
             d, w = self.directions[di], self.widths[wi]
             s = sig[d]
             if self.linear:
-                out[di, wi] = 2.0 * (float(alias_bound(s, 1.0 / w)) * f_hit
-                                     + edge_bound(s, 1.0 / w, off) * f_tot)
+                out[di, wi] = linear_bound(s, w, f_hit, f_tot, off)
                 continue
             # each term's weight in S = sum_k I_k exp(-i delta_k), I_k = Re sum_j A_kj L_j:
             # (|sum_k e^-i delta_k A_kj| + |sum_k e^-i delta_k conj A_kj|) / 2 (terms that
@@ -483,7 +498,7 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
         stated = stated + phase_error(sums, bound * (1 + 1j), "replicates")
         err = err + bound * (1 + 1j)
         # a lobe mostly off the monitor: no bound (the phase is known to within pi)
-        far = np.abs(out[..., kb.OUT_FHIT]) < (1.0 - EDGE_MAX_OFF) * np.abs(out[..., kb.OUT_FTOTAL])
+        far = off_share(out[..., kb.OUT_FHIT], out[..., kb.OUT_FTOTAL])[0] > EDGE_MAX_OFF
         stated = np.where(far, np.pi, stated)
         big = np.abs(sums)
         err = np.where(far, np.maximum(err.real, big) + 1j * np.maximum(err.imag, big), err)
@@ -518,13 +533,15 @@ def table_fringe_sums(out, directions, widths, deltas, linear) -> np.ndarray:
                    ncols).fringe_sums(out)
 
 
-def rays_share(sim, widths=None) -> float:
+#: Replicate passes of each control-variate mode, per ``n_rays`` (:func:`rays_share`).
+REPLICATE_PASSES = {"rule+rqmc": 2.0, "rule+box+rqmc": 1.0, "rule+box": 0.0}
+
+
+def rays_share(sim, mode: str) -> float:
     """The rays of one control-variate fringe render per ``n_rays``: the rule and its
-    embedded rule, then the replicates twice (the profiles and the smooth part), once (wide
-    lobes: the residual tables) or not at all (wide lobes: a linear display or integer
-    periods; ``widths``: the fringe periods, integer when None)."""
+    embedded rule, then, by the ``mode`` it rendered (:attr:`FringeResult.sampling`), the
+    replicates twice (the profiles and the smooth part), once (wide lobes: the residual
+    tables) or not at all (wide lobes: a linear display or integer periods)."""
     gauss = sim.plan(True)[:2]
-    sig, exact = box_plan(sim, (3.0,) if widths is None else tuple(widths),
-                          sim.scene.monitor.is_linear)
-    reps = 2.0 if sig is None else (0.0 if exact else 1.0)
-    return sum(p.rule(sim._lobe).n for p in gauss) / max(sim.scene.rays_per_pixel, 1) + reps
+    return (sum(p.rule(sim._lobe).n for p in gauss) / max(sim.scene.rays_per_pixel, 1)
+            + REPLICATE_PASSES[mode])

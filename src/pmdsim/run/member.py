@@ -360,9 +360,8 @@ def result(m: Member) -> RunResult:
     # share n_rays; the other modes render one set)
     from ..render import control
 
-    fr_cfg = m.cfg.patterns.fringes
-    fringe_share = (control.rays_share(sim, None if fr_cfg is None else fr_cfg.widths_px)
-                    if control.applies(sim)
+    fringe_share = (control.rays_share(sim, m.fringes.sampling["mode"])
+                    if m.fringes is not None and control.applies(sim)
                     else _passes_share(sim, sim.fringes_smooth()))
     n_calls = ((m.cfg.patterns.fringes is not None) * fringe_share
                + (bool(m.dots) + (m.inputs[2] is not None)) * _passes_share(sim, False))

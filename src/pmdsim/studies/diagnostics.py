@@ -441,7 +441,7 @@ def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
             smooth = smooth * np.sinc(1.0 / np.asarray(widths, np.float64))[None, :, None]
         if k == 0 and sig is not None:  # the rule's weight on and off the monitor
             wsum = np.where(np.isfinite(u), w, 0.0).sum(-1)
-            wall = np.maximum(np.abs(wtot), wsum)
+            off, wall = control.off_share(wsum, wtot)
         if k < len(passes):
             sums.append(smooth)
         else:
@@ -449,9 +449,7 @@ def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
     z = np.stack(sums)  # (passes, nd, nw, K)
     if sig is not None:
         se = phase_error(z[0], z[0] - z[1], "embedded") if len(passes) > 1 else 0.0
-        off = np.where(wall > 0, 1.0 - wsum / np.where(wall > 0, wall, 1.0), 0.0)
-        bound = np.stack([np.stack([2.0 * (control.alias_bound(sig[d], 1.0 / wd) * wsum
-                                           + control.edge_bound(sig[d], 1.0 / wd, off) * wall)
+        bound = np.stack([np.stack([control.linear_bound(sig[d], wd, wsum, wall, off)
                                     for wd in widths]) for d in directions])
         se = se + phase_error(z[0], bound * (1 + 1j), "replicates")
         se = np.where(off > control.EDGE_MAX_OFF, np.pi, se)
