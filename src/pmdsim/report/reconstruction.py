@@ -9,6 +9,7 @@ import json
 import numpy as np
 
 from .scene import _axes_at, _fixed_figure
+from .text import value_pm as _pm
 
 CMAP = "RdBu_r"
 
@@ -60,8 +61,8 @@ def plot_surface_errors(ds, name: str = "", description: str = ""):
         ax.set_aspect("equal")
         title = f"{label} ({unit})"
         if st:
-            rms = st.get("rms_about_zero", st["rms"])
-            title += f"\nRMS {rms:.3g}  PV {st['pv']:.3g}  P95 {st['p95']:.3g} {unit}"
+            rms = "rms_about_zero" if "rms_about_zero" in st else "rms"
+            title += (f"\nRMS {_pm(st, rms)}  PV {_pm(st, 'pv')}  P95 {_pm(st, 'p95')} {unit}")
         ax.set_title(title, fontsize=10)
         fig.colorbar(im, cax=cax, label=f"{unit}, scale +-{lim:.3g} (P99.5 of |error|)")
     removed = stats.get("removed", "")

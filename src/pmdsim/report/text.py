@@ -178,6 +178,15 @@ def summary_text_of(statistics: dict) -> str:
     return "\n".join(parts)
 
 
+def value_pm(st: dict, stat: str) -> str:
+    """``st[stat]`` as "value ± numerical error" (``st[stat + "_err"]``; the value alone
+    where none is stated): the reconstruction's statistics in summary.txt and the figure."""
+    e = st.get(stat + "_err")
+    if e is None or not math.isfinite(e):
+        return f"{st[stat]:.3g}"
+    return f"{st[stat]:.3g} ± {e:.2g}"
+
+
 def reconstruction_text(name: str, rec: dict) -> str:
     """The surface-error lines of summary.txt (reconstructed minus true surface)."""
     if "error" in rec:
@@ -187,9 +196,10 @@ def reconstruction_text(name: str, rec: dict) -> str:
         f"reconstruction ({name}): {rec['grid_points']} points on a {rec['spacing_mm']:g} mm grid "
         f"({100 * rec['aperture_fraction']:.1f} % of the aperture), {rec['removed']} removed, "
         f"{rec['iterations']} iterations" + ("" if rec["converged"] else " (NOT converged)"),
-        f"  height error  RMS {h['rms']:.3g} nm  PV {h['pv']:.3g} nm  P95 {h['p95']:.3g} nm",
-        f"  slope error x RMS {sx['rms_about_zero']:.3g} urad  PV {sx['pv']:.3g} urad;  "
-        f"y RMS {sy['rms_about_zero']:.3g} urad  PV {sy['pv']:.3g} urad",
+        f"  height error  RMS {value_pm(h, 'rms')} nm  PV {value_pm(h, 'pv')} nm  P95 {value_pm(h, 'p95')} nm",
+        f"  slope error x RMS {value_pm(sx, 'rms_about_zero')} urad  PV {value_pm(sx, 'pv')} urad;  "
+        f"y RMS {value_pm(sy, 'rms_about_zero')} urad  PV {value_pm(sy, 'pv')} urad"
+        + ("  (value ± the rendering's numerical error)" if "rms_err" in h else ""),
     ]
     if rec.get("sphere"):
         sp = rec["sphere"]

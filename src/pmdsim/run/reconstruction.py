@@ -48,10 +48,51 @@ def from_chain(cfg, scene, measured, reference_rec=None):
     dx, dy = measured.directions["x"], measured.directions["y"]
     u = np.where(dx.deviation.valid, dx.decoded.monitor_coord_px, np.nan)
     v = np.where(dy.deviation.valid, dy.decoded.monitor_coord_px, np.nan)
-    rec, err, problem = reconstruct_coords(cfg, scene, u, v, np.isfinite(u) & np.isfinite(v))
+    valid = np.isfinite(u) & np.isfinite(v)
+    rec, err, problem = reconstruct_coords(cfg, scene, u, v, valid)
     if rec is None:
         return {}, {"reconstruction": {"error": problem}}
-    return variables(rec, err, reference_rec), {"reconstruction": statistics(cfg, rec, err, reference_rec)}
+    stats = statistics(cfg, rec, err, reference_rec)
+    ex, ey = ((dc.numerical or {}).get("coord_px") for dc in (dx, dy))
+    if ex is not None and ey is not None:  # the render's numerical error, carried through
+        _, moved, _ = reconstruct_coords(cfg, scene, u + np.nan_to_num(ex),
+                                         v + np.nan_to_num(ey), valid)
+        if moved is not None and moved.height_nm.shape == err.height_nm.shape:
+            add_numerical_error(stats, err, moved)
+    return variables(rec, err, reference_rec), {"reconstruction": stats}
+
+
+#: The statistics of each surface error that get a numerical error, with what they are of:
+#: deviations about the mean (RMS, P95 of |d|), about zero (slopes' RMS) and the PV.
+_ERROR_STATS = {"height_error_nm": "height_nm", "slope_error_x_urad": "slope_x_urad",
+                "slope_error_y_urad": "slope_y_urad"}
+
+
+def add_numerical_error(stats: dict, err, moved) -> None:
+    """Add ``<stat>_err`` to the RMS / PV / P95 of each surface error in ``stats``: the
+    reconstruction is repeated with every decoded coordinate moved by its numerical error
+    (x and y together; the reconstruction is linear in small coordinate changes), each
+    node's change is its error, carried to the statistics as the budget's height rows are
+    (:func:`pmdsim.studies.budget_error.stat_error`: exact intervals for RMS and P95; the
+    PV by the widest range the nodes' errors allow)."""
+    from ..studies.budget_error import stat_error
+
+    for key, attr in _ERROR_STATS.items():
+        st = stats.get(key)
+        a = np.asarray(getattr(err, attr), np.float64)
+        e = np.abs(np.asarray(getattr(moved, attr), np.float64) - a)
+        m = np.isfinite(a)
+        if not st or not m.any():
+            continue
+        ok = m & np.isfinite(e)
+        e = np.where(ok, e, 0.0)
+        d = np.where(m, a - np.mean(a[m]), np.nan)
+        st["rms_err"] = stat_error(d, e, m, "rms")
+        st["p95_err"] = stat_error(d, e, m, "p95")
+        st["pv_err"] = float(np.max(a[m] + e[m]) - np.min(a[m] - e[m]) - np.ptp(a[m]))
+        if "rms_about_zero" in st:
+            st["rms_about_zero_err"] = stat_error(a, e, m, "rms")
+        st["unknown_share"] = float(np.count_nonzero(m & ~ok) / np.count_nonzero(m))
 
 
 def reference_reconstruction(cfg, scene, decoded):
