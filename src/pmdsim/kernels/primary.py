@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ._jit import borrow, fastjit
+from ._jit import borrow, fastjit, jit
 from .bundle import G_A, G_B, G_C, G_SIZE, G_T, G_U0, G_V0, G_VALID, G_X, G_Y, G_Z
 from .surface import SURF_SAG, intersect_sag
 
@@ -290,3 +290,28 @@ def geometry_lens(pos, rot, chief, aperture, focus, surf, frame, mon, geo, spec)
                 oz = pos[2] + rot[2, 0] * ax + rot[2, 1] * ay
                 _fill_row(surf, frame, mon, ox, oy, oz, dx, dy, dz, geo[k], spec[k])
                 k += 1
+
+
+@jit
+def orient_rows(geo, ix2, iy2):
+    """Turn each row's cone basis (b1, b2) of the geometry rows ``geo`` (P, G_SIZE) about P,
+    in place, so that b1 lies on the long axis of the lobe ``exp(-(h_x^2 ix2 + h_y^2 iy2))``
+    (``ix2 = 1 / ax^2``, ``iy2 = 1 / ay^2``): the angle ``phi0 = atan2(2 Q12, Q11 - Q22) / 2
+    + pi / 2`` of :meth:`pmdsim.scene.sampling.ConeSampling.orient`, whose NumPy passes this
+    replaces (strict IEEE arithmetic)."""
+    for p in range(geo.shape[0]):
+        x1 = geo[p, G_X + 1]
+        x2 = geo[p, G_X + 2]
+        y1 = geo[p, G_Y + 1]
+        y2 = geo[p, G_Y + 2]
+        q11 = x1 * x1 * ix2 + y1 * y1 * iy2
+        q12 = x1 * x2 * ix2 + y1 * y2 * iy2
+        q22 = x2 * x2 * ix2 + y2 * y2 * iy2
+        phi0 = 0.5 * math.atan2(2.0 * q12, q11 - q22) + 0.5 * math.pi
+        c = math.cos(phi0)
+        s = math.sin(phi0)
+        for k in (G_A, G_B, G_C, G_X + 1, G_Y + 1, G_Z + 1):
+            p1 = geo[p, k]
+            p2 = geo[p, k + 1]
+            geo[p, k] = c * p1 + s * p2
+            geo[p, k + 1] = c * p2 - s * p1

@@ -154,20 +154,10 @@ class ConeSampling:
         nodes do."""
         if self.phi_rho is None or geo.shape[0] == 0:
             return geo
+        from ..kernels.primary import orient_rows
+
         ax, ay = float(brdf[kb.B_AX]), float(brdf[kb.B_AY])
-        x1, x2 = geo[:, kb.G_X + 1], geo[:, kb.G_X + 2]
-        y1, y2 = geo[:, kb.G_Y + 1], geo[:, kb.G_Y + 2]
-        ix2, iy2 = 1.0 / (ax * ax), 1.0 / (ay * ay)
-        q11 = x1 * x1 * ix2 + y1 * y1 * iy2
-        q12 = x1 * x2 * ix2 + y1 * y2 * iy2
-        q22 = x2 * x2 * ix2 + y2 * y2 * iy2
-        phi0 = 0.5 * np.arctan2(2.0 * q12, q11 - q22) + 0.5 * np.pi
-        c, s = np.cos(phi0), np.sin(phi0)
-        for k in (kb.G_A, kb.G_B, kb.G_C, kb.G_X + 1, kb.G_Y + 1, kb.G_Z + 1):
-            p1 = geo[:, k].copy()
-            p2 = geo[:, k + 1]
-            geo[:, k] = c * p1 + s * p2
-            geo[:, k + 1] = c * p2 - s * p1
+        orient_rows(geo, 1.0 / (ax * ax), 1.0 / (ay * ay))  # one compiled pass
         return geo
 
     def _part_order(self, order: tuple[int, int]) -> tuple[int, int]:
