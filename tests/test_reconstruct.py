@@ -285,6 +285,26 @@ def test_iterative_solves_give_the_exact_solves_answer():
     assert got.converged and exact.converged and got.iterations < 6
 
 
+def test_a_start_next_to_the_fixed_point_ends_there_sooner():
+    """``start``: from a reconstruction's own height, the coordinates moved by 3e-3 monitor
+    px (as the run's numerical-error reconstruction moves them) end within 2 tol_mm of the
+    reconstruction started from the nominal shape, in fewer iterations; a start of the
+    wrong shape is refused, naming the field."""
+    truth, nominal = CASES["freeform"]
+    scene, u, v = decoded(truth)
+    args = (scene.camera, scene.monitor, prior(nominal))
+    first = reconstruct(u, v, *args, spacing_mm=0.5)
+    du = 3e-3 * np.cos(0.01 * np.arange(u.size)).reshape(u.shape)  # uneven, x only
+    cold = reconstruct(u + du, v, *args, spacing_mm=0.5)
+    warm = reconstruct(u + du, v, *args, spacing_mm=0.5, start=first.height_mm)
+    assert np.array_equal(warm.mask, cold.mask)
+    assert np.nanmax(np.abs(warm.height_mm - cold.height_mm)) < 2e-8
+    assert np.nanmax(np.abs(cold.height_mm - first.height_mm)) > 1e-7  # the move shows
+    assert warm.converged and warm.iterations < cold.iterations
+    with pytest.raises(ValueError, match="start"):
+        reconstruct(u, v, *args, spacing_mm=0.5, start=first.height_mm[:-1])
+
+
 def test_settled_rule():
     """Stop when the last change is below tol, or when the contracting iteration's geometric
     tail (last * q / (1 - q), q the ratio of the last two changes) is."""

@@ -337,12 +337,14 @@ class FormResult:
 
 
 def remove_form(error, mask, x, y, spec: FormSpec, *, true_height=None, disc=(None, None),
-                spacing=None) -> FormResult:
+                spacing=None, tables: bool = True) -> FormResult:
     """Apply ``spec`` to the height error ``error`` (H, W) over ``mask`` on the grid
     (x, y) (each (H, W), mm); ``true_height``: the true sag on the grid (needed for the
     best-fit sphere; zeros when None); ``disc``: (centre, radius) of the Zernike disc
     (default :func:`disc_of` of the rim-trimmed mask); ``spacing``: (dx, dy) for the rim band
-    (default from x, y). Units: those of ``error`` and ``true_height`` (must agree: mm)."""
+    (default from x, y); ``tables=False``: no Zernike tables (empty lists), for a caller
+    that needs only the residual. Units: those of ``error`` and ``true_height`` (must agree:
+    mm)."""
     e = np.asarray(error, np.float64)
     x = np.asarray(x, np.float64)
     y = np.asarray(y, np.float64)
@@ -384,6 +386,8 @@ def remove_form(error, mask, x, y, spec: FormSpec, *, true_height=None, disc=(No
         a = np.stack(cols, axis=1)
         r = r - a @ _lstsq(a, r)
     out[m] = r
+    if not tables:
+        return FormResult(out, m, spec.describe(), sphere, [], [], int(m0.sum() - m.sum()))
     removed = spec.removed_noll
     shared = (m, (c, rad), basis)
     noll = zernike_table(out, m, x, y, order="noll", n_terms=spec.n_zernike, centre=c, radius=rad,

@@ -22,9 +22,11 @@ def wanted(cfg, directions) -> bool:
     return have
 
 
-def reconstruct_coords(cfg, scene, u, v, valid):
+def reconstruct_coords(cfg, scene, u, v, valid, start=None, tables=True):
     """:class:`~pmdsim.measure.reconstruct.Reconstruction` and its
-    :class:`~pmdsim.measure.reconstruct.SurfaceErrors` (None, message on failure)."""
+    :class:`~pmdsim.measure.reconstruct.SurfaceErrors` (None, message on failure).
+    ``start``: the first height (:func:`~pmdsim.measure.reconstruct.reconstruct`);
+    ``tables=False``: the errors without their Zernike tables."""
     rc = cfg.reconstruct
     if rc.prior is None:
         prior = scene.surface
@@ -34,10 +36,11 @@ def reconstruct_coords(cfg, scene, u, v, valid):
         prior = surface_from_config(rc.prior)
     try:
         rec = reconstruct(u, v, scene.camera, scene.monitor, prior, valid=valid,
-                          spacing_mm=rc.spacing_mm, anchor=rc.anchor, order=rc.order)
+                          spacing_mm=rc.spacing_mm, anchor=rc.anchor, order=rc.order,
+                          start=start)
     except ValueError as err:
         return None, None, str(err)
-    return rec, surface_errors(rec, scene.surface, rc.remove), None
+    return rec, surface_errors(rec, scene.surface, rc.remove, tables=tables), None
 
 
 def from_chain(cfg, scene, measured, reference_rec=None):
@@ -55,8 +58,10 @@ def from_chain(cfg, scene, measured, reference_rec=None):
     stats = statistics(cfg, rec, err, reference_rec)
     ex, ey = ((dc.numerical or {}).get("coord_px") for dc in (dx, dy))
     if ex is not None and ey is not None:  # the render's numerical error, carried through
+        # from the reconstructed height: the moved coordinates' fixed point is next to it
         _, moved, _ = reconstruct_coords(cfg, scene, u + np.nan_to_num(ex),
-                                         v + np.nan_to_num(ey), valid)
+                                         v + np.nan_to_num(ey), valid,
+                                         start=rec.height_mm, tables=False)
         if moved is not None and moved.height_nm.shape == err.height_nm.shape:
             add_numerical_error(stats, err, moved)
     return variables(rec, err, reference_rec), {"reconstruction": stats}
