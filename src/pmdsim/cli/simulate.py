@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import gc
 import time
 from pathlib import Path
 
@@ -104,6 +105,10 @@ def simulate(
         from ..run.files import check_output_dir
 
         check_output_dir(output, overwrite)
+    # the objects of the imports so far (modules, classes, the configuration) live as long
+    # as this process: out of the garbage collector's way, which otherwise scans them
+    # again in every full collection of the run (~3 % of its CPU time)
+    gc.freeze()
     figures = False if no_figures else None
     t0 = time.perf_counter()
     columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
