@@ -4,6 +4,9 @@ the fringes' finishing step run in the render's tile tasks (:class:`FringeFinish
 
 from __future__ import annotations
 
+import threading
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..kernels import bundle as kb
@@ -140,6 +143,7 @@ class FringeFinish:
         self.cos_d, self.sin_d = np.cos(deltas), np.sin(deltas)
         self.black, self.white = float(black), float(white)
         self.done: list = []  # (sums array, rows) per finished tile (list.append: atomic)
+        self.tile_errors: TileErrors | None = None
 
     def kw(self, mode: int, ncols: int) -> dict:
         """The ``finish`` keyword of the render of ``mode`` into ``ncols`` columns (empty
@@ -155,6 +159,29 @@ class FringeFinish:
                     self.f_hit.reshape(-1)[p0:p1], self.sums[:, p0:p1],
                     self.images[:, :, p0:p1])
         self.done.append((full, r1 - r0))
+
+    def want_errors(self, second: bool) -> "TileErrors":
+        """Buffers for the numerical error of the sums, filled tile by tile
+        (:meth:`errors`) by :func:`render_rule_fused`; ``second``: with the inputs of the
+        observed convergence (a second embedded rule)."""
+        nb, (h, w) = len(self.cols), self.shape
+        ratio = np.empty((nb, h * w)) if second else np.empty((nb, 0))
+        self.tile_errors = TileErrors(np.empty((nb, h, w), np.complex128), ratio,
+                                      np.empty_like(ratio), 2 if second else 1)
+        return self.tile_errors
+
+    def errors(self, r0: int, r1: int, diffs) -> None:
+        """The error of rows ``r0:r1`` from their differences to the embedded rules
+        (``diffs``, (rows * W, C) each), after :meth:`__call__` finished those rows: what
+        :func:`fringe_errors` computes for them, in the tile's task."""
+        w, te = self.shape[1], self.tile_errors
+        p0, p1 = r0 * w, r1 * w
+        second = te.n_diffs > 1
+        fringe_error_rows(diffs[0], diffs[1] if second else np.zeros((0, 0)), self.cols,
+                          self.norm.reshape(-1)[p0:p1], self.sums[:, p0:p1],
+                          te.err.reshape(len(self.cols), -1)[:, p0:p1],
+                          te.ratio[:, p0:p1] if second else te.ratio,
+                          te.rel[:, p0:p1] if second else te.rel)
 
     def complete(self, out: np.ndarray):
         """Finish from the render's result ``out`` (H, W, C) unless its tiles did; returns
@@ -199,3 +226,79 @@ def fringe_errors(diffs, cols, norm, sums, second: bool, workers=None):
     with ThreadPoolExecutor(workers) as pool:  # the kernel releases the GIL
         list(pool.map(block, range(0, h * w, step)))
     return err, ((ratio, rel) if second else None)
+
+
+@dataclass(frozen=True)
+class TileErrors:
+    """The numerical error of the normalised complex sums (B, H, W) and the inputs of the
+    observed convergence ((B, H*W) each, empty without a second embedded rule), computed
+    tile by tile inside the render (:func:`render_rule_fused`): what :func:`fringe_errors`
+    returns, and the number of embedded rules they came from."""
+
+    err: np.ndarray
+    ratio: np.ndarray
+    rel: np.ndarray
+    n_diffs: int
+
+
+def fuses(sim, passes, mode: int, ncols: int, finish) -> bool:
+    """Whether :func:`render_rule_fused` renders this rule with its embedded rules: an
+    in-process scheduler, pinhole camera rays, no specular peak, one BRDF for the whole
+    part, tiles that finish the rule's linear fringes (``finish`` of that sample set, mode
+    and columns) and one orientation of the cone bases for every pass."""
+    from .specular import specular_reflectance
+
+    scene = sim.scene
+    return (finish is not None and len(passes) > 1 and passes[0].mode == "rule"
+            and sim.scheduler in ("threads", "synchronous")
+            and scene.camera.is_simple_pinhole and not scene.brdf.is_delta
+            and specular_reflectance(scene.brdf) == 0 and scene.brdf_variation is None
+            and tuple(finish[:3]) == (passes[0], mode, ncols)
+            and len({p.phi_rho is None for p in passes}) == 1)
+
+
+def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
+                      patterns=None):
+    """Sums (H, W, ncols) of the rule ``passes[0]`` and the numerical error of its linear
+    fringes, with every embedded rule ``passes[1:]`` rendered in the same tile task: the
+    tile's geometry rows are traced and turned onto the lobe's axis once, the rule's rows
+    finished (:class:`FringeFinish`), each embedded rule's rows rendered into a buffer of
+    the worker thread and differenced in place, and the error of those rows computed
+    (:meth:`FringeFinish.errors`) while they are in cache. The same bytes as rendering the
+    passes one after another (:meth:`pmdsim.render.Simulation._render`) and
+    :func:`fringe_errors` over the whole differences, without the (H, W, ncols) arrays of
+    the embedded passes. Returns ``(sums, TileErrors)``; :func:`fuses` says when it
+    applies."""
+    fin = finish[3]
+    patterns = patterns or {}
+    scenes = [sim.scene.replace(sampling=p) for p in passes]
+    kernels = [sim._kernel(sc, mode, ncols, orient=False, **patterns) for sc in scenes]
+    brdf = sim.scene.brdf.kernel_params()
+    turn = sim.scene.estimator != "radiometric"  # the cone rules' phi = 0 on the lobe's axis
+    h, w = sim.shape
+    full = np.empty((h, w, ncols))
+    errors = fin.want_errors(len(passes) > 2)
+    local = threading.local()
+    tile_px = sim.tile_rows * w
+
+    def tile(r0, r1):
+        if not hasattr(local, "buffers"):  # per worker thread, reused across its tiles
+            local.buffers = (np.empty((tile_px, kb.G_SIZE)), np.empty((tile_px, 2)),
+                             [np.empty((tile_px, ncols)) for _ in passes[1:]])
+        geo_buf, spec_buf, coarse = local.buffers
+        geo, _ = scene_geometry_rows(scenes[0], r0, r1, (geo_buf, spec_buf))
+        if turn:
+            passes[0].orient(geo, brdf)
+        rot = np.zeros((0, 2))
+        out = full[r0:r1].reshape(-1, ncols)
+        kernels[0](geo, rot, out)
+        fin(r0, r1, full)
+        diffs = []
+        for kernel, buf in zip(kernels[1:], coarse):
+            c = buf[: out.shape[0]]
+            kernel(geo, rot, c)
+            diffs.append(np.subtract(out, c, out=c))
+        fin.errors(r0, r1, diffs)
+
+    sim._compute(tile, sim._tiles(), progress)
+    return full, errors

@@ -44,8 +44,9 @@ from ..scene.brdf_variation import with_params
 from ..scene.quadrature import convergence_exponent
 from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, convergence_factor,  # noqa: F401
                       convergence_of_ratios, phase_error, value_error, worst_phase_error)
-from .rows import (FringeFinish, fringe_errors, local_scheduler, reduce_subrays,  # noqa: F401
-                   scene_geometry_rows, vision_geometry_rows)
+from .rows import (FringeFinish, TileErrors, fringe_errors, fuses,  # noqa: F401
+                   local_scheduler, reduce_subrays, render_rule_fused, scene_geometry_rows,
+                   vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
@@ -173,6 +174,10 @@ class Simulation:
 
         passes = self.plan(smooth)
         n = len(passes)
+        if fuses(self, passes, mode, ncols, kw.get("finish")):  # every pass in one tile task
+            finish = kw.pop("finish")
+            kw.pop("progress", None)
+            return render_rule_fused(self, passes, mode, ncols, finish, progress, kw)
 
         def prog(k):
             if progress is None:
@@ -210,40 +215,16 @@ class Simulation:
             out = add_specular(out, mirror, scene.brdf, scene.estimator, scene.rays_per_pixel)
         return out
 
-    def _render_brdf(self, scene, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
-                     images=None, dots=None, progress=None, finish=None):
+    def _render_brdf(self, scene, mode, ncols, progress=None, finish=None, **patterns):
         """Pixel sums (H, W, ncols) of one pass. ``finish``: optional ``(sampling, mode,
         ncols, fn)``: when this pass renders that sample set, mode and columns on an
         in-process scheduler, each tile task calls ``fn(r0, r1, sums)`` (``sums`` the whole
         (H, W, ncols) array, rows ``r0:r1`` final) right after its kernel, while the rows
         are in cache (:meth:`result_pass`)."""
-        delta = scene.brdf.is_delta
-        samp = scene.sampling
-        lobe = scene.estimator == "radiometric" and not delta
-        if delta:
-            u1 = u2 = np.zeros(0)
-        elif lobe:
-            u1, u2 = samp.lobe_unit_points()
-        else:
-            u1, u2 = samp.unit_points()
-        w_ray = np.ones(1) if delta else samp.ray_weights(lobe)  # the mirror: P alone
-        principal = True if delta else samp.include_principal
-        brdf = scene.brdf.kernel_params()
-        mshape = np.array(scene.monitor.shape, dtype=np.int64)
-        e1 = np.zeros((0, 1))
-        table_u = e1 if table_u is None else np.ascontiguousarray(table_u, np.float64)
-        table_v = e1 if table_v is None else np.ascontiguousarray(table_v, np.float64)
-        k_u = np.zeros(0) if k_u is None else np.asarray(k_u, np.float64)
-        k_v = np.zeros(0) if k_v is None else np.asarray(k_v, np.float64)
-        images = np.zeros((0, 1, 1), np.float32) if images is None else images
-        dots = np.zeros((0, 4)) if dots is None else np.asarray(dots, np.float64)
-        width = scene.camera.width
-        none = np.zeros((0, 0))
-        mc = scene.monitor.correction_params()
-        extra = () if mc is None else (mc,)
-        cam = scene.camera
-        simple = cam.is_simple_pinhole
-        n_sub = cam.rays_per_pixel
+        kernel = self._kernel(scene, mode, ncols, **patterns)
+        samp, delta = scene.sampling, scene.brdf.is_delta
+        width, cam = scene.camera.width, scene.camera
+        simple, n_sub = cam.is_simple_pinhole, cam.rays_per_pixel
 
         # In-process schedulers: the tiles write straight into one (H, W, ncols) array (no
         # per-tile result arrays, no concatenation copy: half the render's peak memory).
@@ -251,37 +232,6 @@ class Simulation:
                 if self.scheduler in ("threads", "synchronous") else None)
         fin = (finish[3] if finish is not None and full is not None
                and (scene.sampling, mode, ncols) == finish[:3] else None)
-
-        var = None if delta else scene.brdf_variation
-
-        def kernel(geo, rot, out=None):
-            out = np.empty((geo.shape[0], ncols)) if out is None else out
-            if not (lobe or delta):  # phi = 0 on the lobe's long axis where the rule needs it
-                samp.orient(geo, brdf)
-            if var is not None:  # spatially varying alpha/rho_s: per-pixel parameters
-                px = var.geometry_params(geo, scene.monitor, brdf)
-                args = (geo, brdf, u1, u2, rot)
-                tail = (table_u, table_v, k_u, k_v, images, dots, out, none, none, none, mc, px,
-                        w_ray)
-                if lobe:
-                    kb.render_tile_lobe(*args, mshape, mode, *tail)
-                else:
-                    kb.render_tile(*args, samp.scheme_id, samp.theta_max, principal, mshape, mode,
-                                   *tail)
-                return out
-            if lobe:
-                kb.render_tile_lobe(
-                    geo, brdf, u1, u2, rot, mshape, mode,
-                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
-                    w_ray=w_ray,
-                )
-            else:
-                kb.render_tile(
-                    geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, principal, mshape, mode,
-                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
-                    w_ray=w_ray,
-                )
-            return out
 
         # In-process schedulers: each worker thread reuses its geometry buffers across tiles
         # (no fresh 200 bytes per pixel, page faults and zeroing per tile).
@@ -320,6 +270,69 @@ class Simulation:
 
         parts = self._compute(tile, self._tiles(), progress)
         return full if full is not None else np.concatenate(parts, axis=0)
+
+    def _kernel(self, scene, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
+                images=None, dots=None, orient=True):
+        """The bundle kernel of ``scene`` (its sample set) for ``mode``: ``kernel(geo, rot,
+        out=None)`` writes the sums (P, ncols) of the geometry rows ``geo``; with
+        ``orient`` it first turns their cone bases onto the lobe's axis in place (as each
+        pass needs it; :meth:`~pmdsim.scene.sampling.ConeSampling.orient` is not
+        idempotent)."""
+        delta = scene.brdf.is_delta
+        samp = scene.sampling
+        lobe = scene.estimator == "radiometric" and not delta
+        if delta:
+            u1 = u2 = np.zeros(0)
+        elif lobe:
+            u1, u2 = samp.lobe_unit_points()
+        else:
+            u1, u2 = samp.unit_points()
+        w_ray = np.ones(1) if delta else samp.ray_weights(lobe)  # the mirror: P alone
+        principal = True if delta else samp.include_principal
+        brdf = scene.brdf.kernel_params()
+        mshape = np.array(scene.monitor.shape, dtype=np.int64)
+        e1 = np.zeros((0, 1))
+        table_u = e1 if table_u is None else np.ascontiguousarray(table_u, np.float64)
+        table_v = e1 if table_v is None else np.ascontiguousarray(table_v, np.float64)
+        k_u = np.zeros(0) if k_u is None else np.asarray(k_u, np.float64)
+        k_v = np.zeros(0) if k_v is None else np.asarray(k_v, np.float64)
+        images = np.zeros((0, 1, 1), np.float32) if images is None else images
+        dots = np.zeros((0, 4)) if dots is None else np.asarray(dots, np.float64)
+        none = np.zeros((0, 0))
+        mc = scene.monitor.correction_params()
+        extra = () if mc is None else (mc,)
+        var = None if delta else scene.brdf_variation
+
+        def kernel(geo, rot, out=None):
+            out = np.empty((geo.shape[0], ncols)) if out is None else out
+            if orient and not (lobe or delta):  # phi = 0 on the lobe's long axis (the rule)
+                samp.orient(geo, brdf)
+            if var is not None:  # spatially varying alpha/rho_s: per-pixel parameters
+                px = var.geometry_params(geo, scene.monitor, brdf)
+                args = (geo, brdf, u1, u2, rot)
+                tail = (table_u, table_v, k_u, k_v, images, dots, out, none, none, none, mc, px,
+                        w_ray)
+                if lobe:
+                    kb.render_tile_lobe(*args, mshape, mode, *tail)
+                else:
+                    kb.render_tile(*args, samp.scheme_id, samp.theta_max, principal, mshape, mode,
+                                   *tail)
+                return out
+            if lobe:
+                kb.render_tile_lobe(
+                    geo, brdf, u1, u2, rot, mshape, mode,
+                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
+                    w_ray=w_ray,
+                )
+            else:
+                kb.render_tile(
+                    geo, brdf, u1, u2, rot, samp.scheme_id, samp.theta_max, principal, mshape, mode,
+                    table_u, table_v, k_u, k_v, images, dots, out, none, none, none, *extra,
+                    w_ray=w_ray,
+                )
+            return out
+
+        return kernel
 
     def _normalise(self, out):
         """(H, W) factor turning weighted sums into estimator values."""
@@ -516,11 +529,15 @@ class Simulation:
             if linear:
                 sums_err = cv_err * np.abs(norm)
         if linear and err is not None:  # the error of every normalised complex sum
-            diffs = err if isinstance(err, tuple) else (err,)
-            kexp = (convergence_exponent(tuple(info["order"]), info["kind"]) if len(diffs) > 1
-                    else None)
-            sums_err, ratios = fringe_errors(diffs, cols, norm, sums.reshape(nd * nw, h, w_),
-                                             kexp is not None, self.num_workers)
+            tiled = isinstance(err, TileErrors)  # computed in the render's tiles
+            diffs = () if tiled else err if isinstance(err, tuple) else (err,)
+            kexp = (convergence_exponent(tuple(info["order"]), info["kind"])
+                    if (err.n_diffs if tiled else len(diffs)) > 1 else None)
+            if tiled:
+                sums_err, ratios = err.err, (err.ratio, err.rel) if kexp is not None else None
+            else:
+                sums_err, ratios = fringe_errors(diffs, cols, norm, sums.reshape(nd * nw, h, w_),
+                                                 kexp is not None, self.num_workers)
             sums_err = sums_err.reshape(nd, nw, h, w_)
             if kexp is not None:  # the observed convergence from the second embedded rule
                 convergence = convergence_of_ratios(ratios[0].reshape(nd, nw, -1),

@@ -1,0 +1,51 @@
+"""The rule and its embedded rules rendered in one tile task (:func:`pmdsim.render.rows.
+render_rule_fused`) against the passes rendered one after another, with the error computed
+over the whole differences afterwards (:func:`pmdsim.render.rows.fringe_errors`): the same
+bytes, for each estimator, on tiles that do not divide the camera."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pmdsim.config import parse_config
+from pmdsim.render import Simulation
+from pmdsim.render import simulation as simulation_mod
+from test_quadrature import fig3
+
+
+def _render(cfg, fused: bool, monkeypatch):
+    calls = []
+    original = simulation_mod.render_rule_fused
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    with monkeypatch.context() as mp:
+        mp.setattr(simulation_mod, "render_rule_fused", counted)
+        if not fused:
+            mp.setattr(simulation_mod, "fuses", lambda *args: False)
+        sim = Simulation.from_config(cfg)
+        sim.tile_rows, sim.num_workers = 5, 2  # 32 rows: six tiles of 5 and one of 2
+        fr = sim.render_fringes((50.0, 400.0, 3200.0), ["x", "y"], 4)
+    return fr, len(calls)
+
+
+@pytest.mark.parametrize("estimator", ["paper", "weighted_mean", "radiometric"])
+def test_the_embedded_rules_in_the_rules_tiles_give_the_same_bytes(estimator, monkeypatch):
+    d = fig3(n_rays=256, mode="rule")
+    d["sampling"]["estimator"] = estimator
+    d["brdf"]["alpha_y"] = 0.003  # unequal alphas, a lobe narrower along y
+    d["camera"]["position_mm"] = [-845.2, 420.0, 1812.6]  # off the x-z plane: phi0 varies
+    cfg = parse_config(d)
+    fused, n_fused = _render(cfg, True, monkeypatch)
+    apart, n_apart = _render(cfg, False, monkeypatch)
+    assert (n_fused, n_apart) == (1, 0)
+    assert fused.sampling["passes"] == 3 and fused.sampling == apart.sampling
+    assert np.isfinite(fused.sums).any()
+    for name in ("images", "sums", "f_total", "f_hit", "sums_err"):
+        a, b = getattr(fused, name), getattr(apart, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True), name
+    assert np.array_equal(fused.convergence, apart.convergence)
+    assert np.array_equal(fused.phase_error(), apart.phase_error(), equal_nan=True)
