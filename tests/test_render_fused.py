@@ -49,3 +49,54 @@ def test_the_embedded_rules_in_the_rules_tiles_give_the_same_bytes(estimator, mo
         assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True), name
     assert np.array_equal(fused.convergence, apart.convergence)
     assert np.array_equal(fused.phase_error(), apart.phase_error(), equal_nan=True)
+
+
+def _render_cv(cfg, fused: bool, widths, monkeypatch):
+    from pmdsim.render import control
+
+    calls = []
+    original = control.replicates_fused
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    with monkeypatch.context() as mp:
+        mp.setattr(control, "replicates_fused", counted)
+        if not fused:
+            mp.setattr(control, "fuses_replicates", lambda *args: False)
+        sim = Simulation.from_config(cfg)
+        sim.tile_rows, sim.num_workers = 5, 2
+        fr = sim.render_fringes(widths, ["x", "y"], 4)
+    return fr, len(calls)
+
+
+@pytest.mark.parametrize("estimator, gamma, widths, alpha_y, mode", [
+    ("paper", 1.0, (50.0, 400.0, 3200.0), 0.003, "rule+rqmc"),  # the cone: no box rule
+    ("paper", 2.2, (50.0, 400.0, 3200.0), 0.003, "rule+rqmc"),  # a response: its harmonics
+    # a wide radiometric lobe, periods not integer: the box rule and the profile's rest
+    ("radiometric", 2.2, (50.5, 401.0, 3200.0), 0.02, "rule+box+rqmc"),
+])
+def test_the_replicates_in_the_tiles_give_the_same_bytes(estimator, gamma, widths, alpha_y,
+                                                         mode, monkeypatch):
+    """The nearest monitor's control variate with every rqmc replicate rendered in each
+    tile's task (:func:`pmdsim.render.rows.replicates_fused`) against the replicates
+    rendered one after another over the whole camera: the same bytes."""
+    d = fig3(n_rays=64, mode="rule")
+    d["monitor"].update(pixel_model="nearest", gamma=gamma)
+    d["brdf"]["alpha_y"] = alpha_y
+    d["sampling"]["estimator"] = estimator
+    if estimator == "paper":  # off the x-z plane: phi0 varies (the box case keeps Fig. 3's)
+        d["camera"]["position_mm"] = [-845.2, 420.0, 1812.6]
+    cfg = parse_config(d)
+    fused, n_fused = _render_cv(cfg, True, widths, monkeypatch)
+    apart, n_apart = _render_cv(cfg, False, widths, monkeypatch)
+    assert fused.sampling["mode"] == mode and fused.sampling == apart.sampling
+    assert (n_fused, n_apart) == (1, 0)
+    for name in ("images", "sums", "f_total", "f_hit", "sums_err"):
+        a, b = getattr(fused, name), getattr(apart, name)
+        if a is None:
+            assert b is None, name
+            continue
+        assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True), name
+    assert np.array_equal(fused.phase_error(), apart.phase_error(), equal_nan=True)

@@ -68,6 +68,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels import bundle as kb
+from .rows import fuses_replicates, replicates_fused
 
 #: Fourier terms of the display response in the smooth part of a non-linear display (gamma,
 #: LUT, drive bits) on a narrow lobe (wide lobes: :data:`BOX_TERMS`): the fundamental only.
@@ -460,7 +461,14 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
     # (box) the residual tables alone
     mean_res = np.zeros_like(out)
     mean_s = m2_re = m2_im = None
-    for r, rep in enumerate(reps):
+    fused = fuses_replicates(sim, reps)
+    if fused:  # every replicate in each tile's task: the same bytes as the loop below
+        k0, left = step[0], n_steps - step[0]
+        mean_res, mean_s, m2_re, m2_im = replicates_fused(
+            sim, reps, lay, box, table_u, table_v,
+            None if progress is None else
+            lambda done, total: progress(k0 * total + done * left, n_steps * total))
+    for r, rep in enumerate(() if fused else reps):
         t = sim._render_set(rep, kb.MODE_TABLES, ncols_t, table_u=table_u, table_v=table_v,
                             progress=prog())
         if box:

@@ -302,3 +302,76 @@ def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
 
     sim._compute(tile, sim._tiles(), progress)
     return full, errors
+
+
+def fuses_replicates(sim, reps) -> bool:
+    """Whether :func:`replicates_fused` renders the control variate's rqmc replicates
+    ``reps``: as :func:`fuses` (in-process scheduler, pinhole camera rays, no specular
+    peak, one BRDF), with at least one replicate."""
+    from .specular import specular_reflectance
+
+    scene = sim.scene
+    return (len(reps) > 0 and sim.scheduler in ("threads", "synchronous")
+            and scene.camera.is_simple_pinhole and not scene.brdf.is_delta
+            and specular_reflectance(scene.brdf) == 0 and scene.brdf_variation is None)
+
+
+def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None):
+    """The nearest monitor's control variate (:func:`pmdsim.render.control.
+    render_fringes_cv`): every rqmc replicate of ``reps`` rendered in each tile's task,
+    the tile's geometry traced once, its residual (the profile tables less the smooth
+    fringe at the same points, or with ``box`` the residual tables alone) and the
+    replicates' running means and sums of squares (Welford, replicate by replicate as
+    the whole-camera loop does) updated for those rows while they are in cache. Returns
+    ``(mean_res (H, W, ncols_t), mean_s, m2_re, m2_im)`` ((nd, nw, H, W) each): the same
+    bytes as the loop over whole-camera renders, without its whole-camera temporaries.
+    ``lay`` is the control variate's column layout (``_Layout``)."""
+    h, w = sim.shape
+    nd, nw = len(lay.directions), len(lay.widths)
+    scenes = [sim.scene.replace(sampling=rep) for rep in reps]
+    tables = [sim._kernel(sc, kb.MODE_TABLES, lay.ncols_t, table_u=table_u,
+                          table_v=table_v, orient=False) for sc in scenes]
+    smooth = [None if box else sim._kernel(sc, kb.MODE_HARMONIC, lay.ncols_h, k_u=lay.k_u,
+                                            k_v=lay.k_v, orient=False) for sc in scenes]
+    turn = [rep.phi_rho is not None for rep in reps]  # rqmc sets: never (kept general)
+    brdf = sim.scene.brdf.kernel_params()
+    mean_res = np.zeros((h, w, lay.ncols_t))
+    mean_s = np.empty((nd, nw, h, w), np.complex128)
+    m2_re, m2_im = np.zeros((nd, nw, h, w)), np.zeros((nd, nw, h, w))
+    local = threading.local()
+    tile_px = sim.tile_rows * w
+
+    def tile(r0, r1):
+        if not hasattr(local, "buffers"):  # per worker thread, reused across its tiles
+            local.buffers = (np.empty((tile_px, kb.G_SIZE)), np.empty((tile_px, 2)),
+                             np.empty((tile_px, kb.G_SIZE)), np.empty((tile_px, lay.ncols_t)),
+                             np.empty((tile_px, lay.ncols_h)))
+        geo_buf, spec_buf, turned_buf, t_buf, h_buf = local.buffers
+        geo, _ = scene_geometry_rows(scenes[0], r0, r1, (geo_buf, spec_buf))
+        n = geo.shape[0]
+        mr = mean_res[r0:r1].reshape(n, -1)
+        ms = mean_s[:, :, r0:r1].reshape(nd, nw, n)
+        q_re = m2_re[:, :, r0:r1].reshape(nd, nw, n)
+        q_im = m2_im[:, :, r0:r1].reshape(nd, nw, n)
+        rot = np.zeros((0, 2))
+        for r, (kt, kh) in enumerate(zip(tables, smooth)):
+            g = geo
+            if turn[r]:  # each pass turns its own copy (the turn is not idempotent)
+                g = turned_buf[:n]
+                g[...] = geo
+                reps[r].orient(g, brdf)
+            t = kt(g, rot, t_buf[:n])
+            res = t if box else t - lay.to_tables(kh(g, rot, h_buf[:n]))
+            res[..., :kb.OUT_FIRST] = 0.0  # f_total, f_hit: the rule's
+            mr += (res - mr) / (r + 1)
+            s = lay.fringe_sums(res)
+            if r == 0:
+                ms[...] = s
+                continue
+            d = s - ms
+            ms += d / (r + 1)
+            q_re += d.real * (s - ms).real
+            q_im += d.imag * (s - ms).imag
+
+    sim._compute(tile, sim._tiles(), progress)
+    return mean_res, mean_s, m2_re, m2_im
