@@ -19,7 +19,16 @@ def phase_error(sums: np.ndarray, sums_err: np.ndarray, kind: str | None,
     rule's); where ``convergence`` (per fringe, the leading axes of ``sums`` without the
     pixel axes: :func:`convergence_factor`) is ``q < 1``, the rule is in its asymptotic
     regime and the statement is ``SAFETY q |Im(dS conj S)| / |S|^2 + FLOOR q |dS| / |S|``
-    (:data:`CONVERGENCE_SAFETY`). Never below :data:`ROUNDOFF_PHASE`."""
+    (:data:`CONVERGENCE_SAFETY`). Never below :data:`ROUNDOFF_PHASE`.
+
+    The replicates' statement of whole-camera arrays (complex128, ``sums_err`` of the same
+    shape) is one compiled pass in pixel blocks on a thread pool
+    (:func:`_phase_error_compiled`: the same bytes as the NumPy expressions below, a
+    tenth of their time)."""
+    if (kind == "replicates" and sums.size >= _COMPILED_MIN and sums.dtype == np.complex128
+            and getattr(sums_err, "dtype", None) == np.complex128
+            and sums_err.shape == sums.shape):
+        return _phase_error_compiled(sums, sums_err)
     mag = np.abs(sums)
     with np.errstate(divide="ignore", invalid="ignore"):
         if kind == "replicates":
@@ -38,6 +47,28 @@ def phase_error(sums: np.ndarray, sums_err: np.ndarray, kind: str | None,
                                across + EMBEDDED_FLOOR * rel)
         out = np.maximum(out, ROUNDOFF_PHASE)
     return np.where(mag > 0, out, np.nan)
+
+
+#: Arrays of at least this many sums take the compiled pass (:func:`phase_error`).
+_COMPILED_MIN = 65_536
+
+
+def _phase_error_compiled(sums, sums_err):
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ..kernels.synth import phase_error_rows
+
+    s = np.ascontiguousarray(sums).reshape(1, -1)
+    e = np.ascontiguousarray(sums_err).reshape(1, -1)
+    mag = np.abs(s)
+    out = np.empty(s.shape)
+    n = s.shape[1]
+    step = max(1, -(-n // 16))
+    with ThreadPoolExecutor(2) as pool:  # the kernel releases the GIL
+        list(pool.map(lambda p0: phase_error_rows(s, e, mag, ROUNDOFF_PHASE, p0,
+                                                  min(p0 + step, n), out),
+                      range(0, n, step)))
+    return out.reshape(sums.shape)
 
 
 #: The smallest phase error stated (rad): the kernels' arithmetic (fast exp and sincos with
