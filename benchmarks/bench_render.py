@@ -29,7 +29,9 @@ that a change of the machine's load during the run hits both trees alike.
 ``--set SECTION.KEY=VALUE`` overrides a value of the configuration in both trees (the
 issue's N = 100 aim: ``--set sampling.n_rays=100``; the nearest-pixel monitor:
 ``--set monitor.pixel_model=nearest``). Rays per CPU-second count every ray traced,
-including the passes of the error estimate (the embedded rule, the replicates).
+including the passes of the error estimate (the embedded rule, the replicates); the
+nearest monitor's control variate counts its rays as the run does
+(``control.rays_share``: the rule, its embedded rule and the replicates' passes).
 
 It prints both columns, their ratio, the issue's aims (>= 200 M rays per CPU-second at
 N = 100; the Fig. 3 sequence in <= 0.3 s wall on 2 cores) and the load average before and
@@ -83,10 +85,19 @@ for _ in range(repeat):
     res, w, c = timed(lambda: sim.render_fringes(widths, dirs, shifts))
     seq.append((w, c))
 np.save(out, res.images[:, :, :, ::8, ::8])
-# every ray traced: the passes of the error estimate (embedded rule, replicates) count too
-plan = getattr(sim, "plan", None)
-passes = plan(sim.fringes_smooth()) if plan is not None else (sim.scene.sampling,)
-rays = int(mask.sum()) * sum(sim.scene.replace(sampling=p).rays_per_pixel for p in passes)
+# every ray traced: the passes of the error estimate (embedded rule, replicates) count too;
+# the nearest monitor's control variate counts as the run counts it (control.rays_share)
+try:
+    from pmdsim.render import control as ctrl
+except ImportError:
+    ctrl = None
+if ctrl is not None and hasattr(ctrl, "rays_share") and ctrl.applies(sim):
+    rays = int(round(int(mask.sum()) * sim.scene.rays_per_pixel
+                     * ctrl.rays_share(sim, res.sampling["mode"])))
+else:
+    plan = getattr(sim, "plan", None)
+    passes = plan(sim.fringes_smooth()) if plan is not None else (sim.scene.sampling,)
+    rays = int(mask.sum()) * sum(sim.scene.replace(sampling=p).rays_per_pixel for p in passes)
 print(json.dumps({"first": first, "first_cpu": first_cpu, "one_wall": min(w for w, _ in one),
                   "one_cpu": min(c for _, c in one), "seq_wall": min(w for w, _ in seq),
                   "seq_cpu": min(c for _, c in seq), "rays": rays}))
