@@ -1,7 +1,9 @@
 """The rule and its embedded rules rendered in one tile task (:func:`pmdsim.render.rows.
 render_rule_fused`) against the passes rendered one after another, with the error computed
-over the whole differences afterwards (:func:`pmdsim.render.rows.fringe_errors`): the same
-bytes, for each estimator, on tiles that do not divide the camera."""
+over the whole differences afterwards (:func:`pmdsim.render.rows.fringe_errors`), and the
+nearest monitor's rqmc replicates in one tile task (:func:`pmdsim.render.rows.
+replicates_fused`) against the whole-camera loop: the same bytes, on tiles that do not
+divide the camera."""
 
 from __future__ import annotations
 
@@ -14,21 +16,26 @@ from pmdsim.render import simulation as simulation_mod
 from test_quadrature import fig3
 
 
-def _render(cfg, fused: bool, monkeypatch):
+def _render(cfg, fused: bool, monkeypatch, widths=(50.0, 400.0, 3200.0), module=None,
+            names=("render_rule_fused", "fuses")):
+    """The fringes of ``cfg`` on tiles of 5 rows (32 rows: six tiles of 5 and one of 2),
+    2 threads, with the fused path ``names[0]`` of ``module`` on or (``fused=False``) its
+    test ``names[1]`` refusing; and how often the fused path ran."""
+    module = simulation_mod if module is None else module
     calls = []
-    original = simulation_mod.render_rule_fused
+    original = getattr(module, names[0])
 
     def counted(*args, **kwargs):
         calls.append(1)
         return original(*args, **kwargs)
 
     with monkeypatch.context() as mp:
-        mp.setattr(simulation_mod, "render_rule_fused", counted)
+        mp.setattr(module, names[0], counted)
         if not fused:
-            mp.setattr(simulation_mod, "fuses", lambda *args: False)
+            mp.setattr(module, names[1], lambda *args: False)
         sim = Simulation.from_config(cfg)
-        sim.tile_rows, sim.num_workers = 5, 2  # 32 rows: six tiles of 5 and one of 2
-        fr = sim.render_fringes((50.0, 400.0, 3200.0), ["x", "y"], 4)
+        sim.tile_rows, sim.num_workers = 5, 2
+        fr = sim.render_fringes(widths, ["x", "y"], 4)
     return fr, len(calls)
 
 
@@ -51,26 +58,6 @@ def test_the_embedded_rules_in_the_rules_tiles_give_the_same_bytes(estimator, mo
     assert np.array_equal(fused.phase_error(), apart.phase_error(), equal_nan=True)
 
 
-def _render_cv(cfg, fused: bool, widths, monkeypatch):
-    from pmdsim.render import control
-
-    calls = []
-    original = control.replicates_fused
-
-    def counted(*args, **kwargs):
-        calls.append(1)
-        return original(*args, **kwargs)
-
-    with monkeypatch.context() as mp:
-        mp.setattr(control, "replicates_fused", counted)
-        if not fused:
-            mp.setattr(control, "fuses_replicates", lambda *args: False)
-        sim = Simulation.from_config(cfg)
-        sim.tile_rows, sim.num_workers = 5, 2
-        fr = sim.render_fringes(widths, ["x", "y"], 4)
-    return fr, len(calls)
-
-
 @pytest.mark.parametrize("estimator, gamma, widths, alpha_y, mode", [
     ("paper", 1.0, (50.0, 400.0, 3200.0), 0.003, "rule+rqmc"),  # the cone: no box rule
     ("paper", 2.2, (50.0, 400.0, 3200.0), 0.003, "rule+rqmc"),  # a response: its harmonics
@@ -89,8 +76,11 @@ def test_the_replicates_in_the_tiles_give_the_same_bytes(estimator, gamma, width
     if estimator == "paper":  # off the x-z plane: phi0 varies (the box case keeps Fig. 3's)
         d["camera"]["position_mm"] = [-845.2, 420.0, 1812.6]
     cfg = parse_config(d)
-    fused, n_fused = _render_cv(cfg, True, widths, monkeypatch)
-    apart, n_apart = _render_cv(cfg, False, widths, monkeypatch)
+    from pmdsim.render import control
+
+    cv = dict(module=control, names=("replicates_fused", "fuses_replicates"))
+    fused, n_fused = _render(cfg, True, monkeypatch, widths, **cv)
+    apart, n_apart = _render(cfg, False, monkeypatch, widths, **cv)
     assert fused.sampling["mode"] == mode and fused.sampling == apart.sampling
     assert (n_fused, n_apart) == (1, 0)
     for name in ("images", "sums", "f_total", "f_hit", "sums_err"):
