@@ -101,19 +101,18 @@ def fringe_error_rows(d1, d2, cols, norm, sums, err, ratio, rel):
 
 @jit
 def phase_error_rows(sums, err, mag, roundoff, p0, p1, out):
-    """The replicates' phase error of :func:`pmdsim.render.results.phase_error` for pixels
-    ``p0:p1`` of ``sums`` and their half-widths ``err`` ((F, P) complex each) into ``out``
-    (F, P): ``hypot(err.real sin, err.imag cos) / |S|``, at least ``roundoff``, NaN where
+    """The replicates' phase error of :func:`pmdsim.render.results.phase_error` for sums
+    ``p0:p1`` of ``sums`` and their half-widths ``err`` (1-D complex each) into ``out``:
+    ``hypot(err.real sin, err.imag cos) / |S|``, at least ``roundoff``, NaN where
     ``|S| = 0``, the same arithmetic in the same order as its NumPy expressions (strict
     IEEE: the same bytes), given ``mag = |sums|`` as NumPy computes it (its complex
     absolute value is not the C library's ``hypot`` in the last place)."""
     nan = math.nan
-    for f in range(sums.shape[0]):
-        for p in range(p0, p1):
-            m = mag[f, p]
-            c = sums[f, p].real / m
-            s = sums[f, p].imag / m
-            v = math.hypot(err[f, p].real * s, err[f, p].imag * c) / m
-            if v < roundoff:  # np.maximum: NaN stays NaN
-                v = roundoff
-            out[f, p] = v if m > 0 else nan
+    for p in range(p0, p1):
+        m = mag[p]
+        c = sums[p].real / m
+        s = sums[p].imag / m
+        v = math.hypot(err[p].real * s, err[p].imag * c) / m
+        if v < roundoff:  # np.maximum: NaN stays NaN
+            v = roundoff
+        out[p] = v if m > 0 else nan

@@ -58,11 +58,11 @@ def _phase_error_compiled(sums, sums_err):
 
     from ..kernels.synth import phase_error_rows
 
-    s = np.ascontiguousarray(sums).reshape(1, -1)
-    e = np.ascontiguousarray(sums_err).reshape(1, -1)
+    s = np.ascontiguousarray(sums).reshape(-1)
+    e = np.ascontiguousarray(sums_err).reshape(-1)
     mag = np.abs(s)
     out = np.empty(s.shape)
-    n = s.shape[1]
+    n = s.size
     step = max(1, -(-n // 16))
     with ThreadPoolExecutor(2) as pool:  # the kernel releases the GIL
         list(pool.map(lambda p0: phase_error_rows(s, e, mag, ROUNDOFF_PHASE, p0,

@@ -241,20 +241,26 @@ class TileErrors:
     n_diffs: int
 
 
-def fuses(sim, passes, mode: int, ncols: int, finish) -> bool:
-    """Whether :func:`render_rule_fused` renders this rule with its embedded rules: an
-    in-process scheduler, pinhole camera rays, no specular peak, one BRDF for the whole
-    part, tiles that finish the rule's linear fringes (``finish`` of that sample set, mode
-    and columns) and one orientation of the cone bases for every pass."""
+def _fusable(sim) -> bool:
+    """Whether a render's passes can share each tile's task: an in-process scheduler
+    (one array the tiles write into), pinhole camera rays (one geometry row per pixel),
+    no specular peak (its mirror pass is added after the tiles) and one BRDF for the
+    whole part."""
     from .specular import specular_reflectance
 
     scene = sim.scene
+    return (sim.scheduler in ("threads", "synchronous") and scene.camera.is_simple_pinhole
+            and not scene.brdf.is_delta and specular_reflectance(scene.brdf) == 0
+            and scene.brdf_variation is None)
+
+
+def fuses(sim, passes, mode: int, ncols: int, finish) -> bool:
+    """Whether :func:`render_rule_fused` renders this rule with its embedded rules
+    (:func:`_fusable`): tiles that finish the rule's linear fringes (``finish`` of that
+    sample set, mode and columns) and one orientation of the cone bases for every pass."""
     return (finish is not None and len(passes) > 1 and passes[0].mode == "rule"
-            and sim.scheduler in ("threads", "synchronous")
-            and scene.camera.is_simple_pinhole and not scene.brdf.is_delta
-            and specular_reflectance(scene.brdf) == 0 and scene.brdf_variation is None
             and tuple(finish[:3]) == (passes[0], mode, ncols)
-            and len({p.phi_rho is None for p in passes}) == 1)
+            and len({p.phi_rho is None for p in passes}) == 1 and _fusable(sim))
 
 
 def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
@@ -274,7 +280,6 @@ def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
     scenes = [sim.scene.replace(sampling=p) for p in passes]
     kernels = [sim._kernel(sc, mode, ncols, orient=False, **patterns) for sc in scenes]
     brdf = sim.scene.brdf.kernel_params()
-    turn = sim.scene.estimator != "radiometric"  # the cone rules' phi = 0 on the lobe's axis
     h, w = sim.shape
     full = np.empty((h, w, ncols))
     errors = fin.want_errors(len(passes) > 2)
@@ -287,7 +292,7 @@ def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
                              [np.empty((tile_px, ncols)) for _ in passes[1:]])
         geo_buf, spec_buf, coarse = local.buffers
         geo, _ = scene_geometry_rows(scenes[0], r0, r1, (geo_buf, spec_buf))
-        if turn:
+        if not sim._lobe:  # the cone rules' phi = 0 on the lobe's axis (once for all passes)
             passes[0].orient(geo, brdf)
         rot = np.zeros((0, 2))
         out = full[r0:r1].reshape(-1, ncols)
@@ -306,14 +311,9 @@ def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
 
 def fuses_replicates(sim, reps) -> bool:
     """Whether :func:`replicates_fused` renders the control variate's rqmc replicates
-    ``reps``: as :func:`fuses` (in-process scheduler, pinhole camera rays, no specular
-    peak, one BRDF), with at least one replicate."""
-    from .specular import specular_reflectance
-
-    scene = sim.scene
-    return (len(reps) > 0 and sim.scheduler in ("threads", "synchronous")
-            and scene.camera.is_simple_pinhole and not scene.brdf.is_delta
-            and specular_reflectance(scene.brdf) == 0 and scene.brdf_variation is None)
+    ``reps`` (:func:`_fusable`): at least one, none whose cone bases need turning (rqmc
+    sets do not follow the lobe)."""
+    return len(reps) > 0 and all(rep.phi_rho is None for rep in reps) and _fusable(sim)
 
 
 def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None):
@@ -333,8 +333,6 @@ def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None)
                           table_v=table_v, orient=False) for sc in scenes]
     smooth = [None if box else sim._kernel(sc, kb.MODE_HARMONIC, lay.ncols_h, k_u=lay.k_u,
                                             k_v=lay.k_v, orient=False) for sc in scenes]
-    turn = [rep.phi_rho is not None for rep in reps]  # rqmc sets: never (kept general)
-    brdf = sim.scene.brdf.kernel_params()
     mean_res = np.zeros((h, w, lay.ncols_t))
     mean_s = np.empty((nd, nw, h, w), np.complex128)
     m2_re, m2_im = np.zeros((nd, nw, h, w)), np.zeros((nd, nw, h, w))
@@ -344,9 +342,8 @@ def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None)
     def tile(r0, r1):
         if not hasattr(local, "buffers"):  # per worker thread, reused across its tiles
             local.buffers = (np.empty((tile_px, kb.G_SIZE)), np.empty((tile_px, 2)),
-                             np.empty((tile_px, kb.G_SIZE)), np.empty((tile_px, lay.ncols_t)),
-                             np.empty((tile_px, lay.ncols_h)))
-        geo_buf, spec_buf, turned_buf, t_buf, h_buf = local.buffers
+                             np.empty((tile_px, lay.ncols_t)), np.empty((tile_px, lay.ncols_h)))
+        geo_buf, spec_buf, t_buf, h_buf = local.buffers
         geo, _ = scene_geometry_rows(scenes[0], r0, r1, (geo_buf, spec_buf))
         n = geo.shape[0]
         mr = mean_res[r0:r1].reshape(n, -1)
@@ -355,13 +352,8 @@ def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None)
         q_im = m2_im[:, :, r0:r1].reshape(nd, nw, n)
         rot = np.zeros((0, 2))
         for r, (kt, kh) in enumerate(zip(tables, smooth)):
-            g = geo
-            if turn[r]:  # each pass turns its own copy (the turn is not idempotent)
-                g = turned_buf[:n]
-                g[...] = geo
-                reps[r].orient(g, brdf)
-            t = kt(g, rot, t_buf[:n])
-            res = t if box else t - lay.to_tables(kh(g, rot, h_buf[:n]))
+            t = kt(geo, rot, t_buf[:n])
+            res = t if box else t - lay.to_tables(kh(geo, rot, h_buf[:n]))
             res[..., :kb.OUT_FIRST] = 0.0  # f_total, f_hit: the rule's
             mr += (res - mr) / (r + 1)
             s = lay.fringe_sums(res)

@@ -176,7 +176,6 @@ class Simulation:
         n = len(passes)
         if fuses(self, passes, mode, ncols, kw.get("finish")):  # every pass in one tile task
             finish = kw.pop("finish")
-            kw.pop("progress", None)
             return render_rule_fused(self, passes, mode, ncols, finish, progress, kw)
 
         def prog(k):
