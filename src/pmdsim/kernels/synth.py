@@ -116,3 +116,37 @@ def phase_error_rows(sums, err, mag, roundoff, p0, p1, out):
         if v < roundoff:  # np.maximum: NaN stays NaN
             v = roundoff
         out[p] = v if m > 0 else nan
+
+
+@jit
+def phase_error_embedded_rows(sums, err, mag, emag, q, floor, safety, roundoff, p0, p1, out):
+    """The embedded rule's phase error of :func:`pmdsim.render.results.phase_error` for
+    fringe ``f`` = row of ``sums`` (F, P), pixels ``p0:p1``, into ``out`` (F, P):
+    ``|Im(dS conj S)| / |S|^2 + floor |dS| / |S|``, scaled as ``safety q`` and ``floor q``
+    where the fringe's convergence factor ``q[f] < 1`` (``q`` empty: no factors), at least
+    ``roundoff``, NaN where ``|S| = 0``; the same arithmetic in the same order as its NumPy
+    expressions (strict IEEE), given ``mag = |sums|`` and ``emag = |err|`` as NumPy
+    computes them, except ``Im(err conj S)``, which NumPy's SIMD complex product may round
+    through an FMA (a few ulp)."""
+    nan = math.nan
+    for f in range(sums.shape[0]):
+        fast = False
+        if q.shape[0] > 0:
+            qf = q[f]
+            fast = qf < 1.0
+            a_scale = safety * qf
+            r_scale = floor * qf
+        for p in range(p0, p1):
+            m = mag[f, p]
+            s = sums[f, p]
+            e = err[f, p]
+            im = e.real * -s.imag + e.imag * s.real  # (err * conj(sums)).imag
+            across = abs(im) / (m * m)
+            rel = emag[f, p] / m
+            if fast:
+                v = a_scale * across + r_scale * rel
+            else:
+                v = across + floor * rel
+            if v < roundoff:  # np.maximum: NaN stays NaN
+                v = roundoff
+            out[f, p] = v if m > 0 else nan
