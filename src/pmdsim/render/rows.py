@@ -152,13 +152,17 @@ class FringeFinish:
 
     def __call__(self, r0: int, r1: int, full: np.ndarray) -> None:
         w = self.shape[1]
-        p0, p1 = r0 * w, r1 * w
-        fringe_rows(full.reshape(-1, full.shape[-1])[p0:p1], self.cols, self.ratio, self.inv_n,
-                    self.cos_d, self.sin_d, self.black, self.white,
-                    self.norm.reshape(-1)[p0:p1], self.f_total.reshape(-1)[p0:p1],
-                    self.f_hit.reshape(-1)[p0:p1], self.sums[:, p0:p1],
-                    self.images[:, :, p0:p1])
+        self.rows(r0, r1, full.reshape(-1, full.shape[-1])[r0 * w:r1 * w])
         self.done.append((full, r1 - r0))
+
+    def rows(self, r0: int, r1: int, raw: np.ndarray) -> None:
+        """Finish rows ``r0:r1`` from their raw sums ``raw`` ((r1 - r0) * W, C)."""
+        w = self.shape[1]
+        p0, p1 = r0 * w, r1 * w
+        fringe_rows(raw, self.cols, self.ratio, self.inv_n, self.cos_d, self.sin_d,
+                    self.black, self.white, self.norm.reshape(-1)[p0:p1],
+                    self.f_total.reshape(-1)[p0:p1], self.f_hit.reshape(-1)[p0:p1],
+                    self.sums[:, p0:p1], self.images[:, :, p0:p1])
 
     def want_errors(self, second: bool) -> "TileErrors":
         """Buffers for the numerical error of the sums, filled tile by tile
@@ -265,15 +269,18 @@ def fuses(sim, passes, mode: int, ncols: int, finish) -> bool:
 
 def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
                       patterns=None):
-    """Sums (H, W, ncols) of the rule ``passes[0]`` and the numerical error of its linear
-    fringes, with every embedded rule ``passes[1:]`` rendered in the same tile task: the
+    """The linear fringes of the rule ``passes[0]`` (finished into ``finish``'s
+    :class:`FringeFinish`) and their numerical error, with every embedded rule ``passes[1:]`` rendered in the same tile task: the
     tile's geometry rows are traced and turned onto the lobe's axis once, the rule's rows
     finished (:class:`FringeFinish`), each embedded rule's rows rendered into a buffer of
     the worker thread and differenced in place, and the error of those rows computed
     (:meth:`FringeFinish.errors`) while they are in cache. The same bytes as rendering the
     passes one after another (:meth:`pmdsim.render.Simulation._render`) and
     :func:`fringe_errors` over the whole differences, without the (H, W, ncols) arrays of
-    the embedded passes. Returns ``(sums, TileErrors)``; :func:`fuses` says when it
+    the embedded passes, nor the rule's own: its raw sums live in a buffer of the worker
+    thread too, as only their finished values (:class:`FringeFinish`) are kept. Returns
+    ``(token, TileErrors)``, the token an empty (H, W, 0) array that
+    :meth:`FringeFinish.complete` recognises as finished; :func:`fuses` says when it
     applies."""
     fin = finish[3]
     patterns = patterns or {}
@@ -281,7 +288,7 @@ def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
     kernels = [sim._kernel(sc, mode, ncols, orient=False, **patterns) for sc in scenes]
     brdf = sim.scene.brdf.kernel_params()
     h, w = sim.shape
-    full = np.empty((h, w, ncols))
+    token = np.empty((h, w, 0))
     errors = fin.want_errors(len(passes) > 2)
     local = threading.local()
     tile_px = sim.tile_rows * w
@@ -289,24 +296,25 @@ def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
     def tile(r0, r1):
         if not hasattr(local, "buffers"):  # per worker thread, reused across its tiles
             local.buffers = (np.empty((tile_px, kb.G_SIZE)), np.empty((tile_px, 2)),
-                             [np.empty((tile_px, ncols)) for _ in passes[1:]])
-        geo_buf, spec_buf, coarse = local.buffers
+                             [np.empty((tile_px, ncols)) for _ in passes])
+        geo_buf, spec_buf, raw = local.buffers
         geo, _ = scene_geometry_rows(scenes[0], r0, r1, (geo_buf, spec_buf))
         if not sim._lobe:  # the cone rules' phi = 0 on the lobe's axis (once for all passes)
             passes[0].orient(geo, brdf)
         rot = np.zeros((0, 2))
-        out = full[r0:r1].reshape(-1, ncols)
+        out = raw[0][: geo.shape[0]]
         kernels[0](geo, rot, out)
-        fin(r0, r1, full)
+        fin.rows(r0, r1, out)
+        fin.done.append((token, r1 - r0))
         diffs = []
-        for kernel, buf in zip(kernels[1:], coarse):
+        for kernel, buf in zip(kernels[1:], raw[1:]):
             c = buf[: out.shape[0]]
             kernel(geo, rot, c)
             diffs.append(np.subtract(out, c, out=c))
         fin.errors(r0, r1, diffs)
 
     sim._compute(tile, sim._tiles(), progress)
-    return full, errors
+    return token, errors
 
 
 def fuses_replicates(sim, reps) -> bool:
