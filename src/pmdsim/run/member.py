@@ -179,8 +179,11 @@ def dataset(m: Member) -> None:
     m.ds = ds
     if m.fringes is not None and m.fringes.sums is not None:
         # the dataset holds the sums' real and imaginary parts: free the complex copy
-        # (2 directions x 3 widths x 16 bytes per pixel, 480 MB at 5 MP)
-        m.fringes = replace(m.fringes, sums=None)
+        # (2 directions x 3 widths x 16 bytes per pixel, 480 MB at 5 MP), and the complex
+        # errors of the sums, whose phase statement ``pe`` is all that is used of them
+        # (``phase_error()`` returns it from now on; half their memory)
+        m.fringes = replace(m.fringes, sums=None,
+                            **({} if pe is None else {"sums_err": None, "stated_phase_error": pe}))
     if out.write_images:  # zlib and NumPy release the GIL
         m.images_written = m.images_writer.submit(
             pio.write_images, m.folder, cfg, m.fringes, m.dots, m.dot_images, image_files,
