@@ -391,13 +391,13 @@ def test_fringes_finished_in_the_tiles_equal_the_finish_after_the_render(monkeyp
 
     sim = sim_of(make_config(compute={"tile_rows": 5}, sampling={"estimator": estimator}))
     blocks = []
-    call = FringeFinish.__call__
+    call = FringeFinish.rows  # what both paths finish rows with
 
-    def spy(self, r0, r1, full):
+    def spy(self, r0, r1, raw):
         blocks.append((r0, r1))
-        return call(self, r0, r1, full)
+        return call(self, r0, r1, raw)
 
-    monkeypatch.setattr(FringeFinish, "__call__", spy)
+    monkeypatch.setattr(FringeFinish, "rows", spy)
     tiles = sim.render_fringes(widths=(20.0, 45.0), shifts=3)
     assert sorted(blocks) == [(r, min(r + 5, 32)) for r in range(0, 32, 5)]  # the tiles
     blocks.clear()

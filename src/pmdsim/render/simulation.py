@@ -183,9 +183,10 @@ class Simulation:
                 return None
             return lambda done, total: progress(k * total + done, n * total)
 
+        if n == 1:  # nothing reads the raw sums of rows a tile finished
+            return self._render_set(passes[0], mode, ncols, progress=prog(0), raw=False,
+                                    **kw), None
         out = self._render_set(passes[0], mode, ncols, progress=prog(0), **kw)
-        if n == 1:
-            return out, None
         if passes[0].mode == "rule":  # the differences to the embedded rules, in place
             diffs = []
             for k in range(1, n):
@@ -214,12 +215,16 @@ class Simulation:
             out = add_specular(out, mirror, scene.brdf, scene.estimator, scene.rays_per_pixel)
         return out
 
-    def _render_brdf(self, scene, mode, ncols, progress=None, finish=None, **patterns):
+    def _render_brdf(self, scene, mode, ncols, progress=None, finish=None, raw=True,
+                     **patterns):
         """Pixel sums (H, W, ncols) of one pass. ``finish``: optional ``(sampling, mode,
         ncols, fn)``: when this pass renders that sample set, mode and columns on an
         in-process scheduler, each tile task calls ``fn(r0, r1, sums)`` (``sums`` the whole
         (H, W, ncols) array, rows ``r0:r1`` final) right after its kernel, while the rows
-        are in cache (:meth:`result_pass`)."""
+        are in cache (:meth:`result_pass`). With ``raw=False`` and pinhole rays the caller
+        reads only what ``fn`` (a :class:`~pmdsim.render.rows.FringeFinish`) keeps: the
+        tiles' raw sums live in a buffer of the worker thread, and the result is an empty
+        (H, W, 0) token that :meth:`FringeFinish.complete` sees as finished."""
         kernel = self._kernel(scene, mode, ncols, **patterns)
         samp, delta = scene.sampling, scene.brdf.is_delta
         width, cam = scene.camera.width, scene.camera
@@ -236,16 +241,26 @@ class Simulation:
         # (no fresh 200 bytes per pixel, page faults and zeroing per tile).
         local = threading.local() if full is not None else None
         tile_px = self.tile_rows * width
+        token = None
+        if fin is not None and not raw and simple:
+            full = token = np.empty((cam.height, width, 0))
 
         def tile(r0, r1):
             if simple:
                 buffers = None
                 if local is not None:
                     if not hasattr(local, "buffers"):
-                        local.buffers = (np.empty((tile_px, kb.G_SIZE)), np.empty((tile_px, 2)))
-                    buffers = local.buffers
+                        local.buffers = (np.empty((tile_px, kb.G_SIZE)), np.empty((tile_px, 2)),
+                                         np.empty((tile_px if token is not None else 0, ncols)))
+                    buffers = local.buffers[:2]
                 geo, _ = scene_geometry_rows(scene, r0, r1, buffers)
                 rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
+                if token is not None:  # the raw rows in the thread's buffer, finished there
+                    out = local.buffers[2][: geo.shape[0]]
+                    kernel(geo, rot, out)
+                    fin.rows(r0, r1, out)
+                    fin.done.append((token, r1 - r0))
+                    return None
                 if full is not None:
                     kernel(geo, rot, full[r0:r1].reshape(-1, ncols))
                     if fin is not None:
