@@ -11,7 +11,7 @@ import numpy as np
 
 from ..kernels import bundle as kb
 from ..kernels import primary as kprim
-from ..kernels.synth import fringe_error_rows, fringe_rows
+from ..kernels.synth import fringe_error_rows, fringe_rows, replicate_update_rows
 from ..scene import Scene
 
 
@@ -346,6 +346,11 @@ def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None)
     m2_re, m2_im = np.zeros((nd, nw, h, w)), np.zeros((nd, nw, h, w))
     local = threading.local()
     tile_px = sim.tile_rows * w
+    # a linear display: the residual, its mean and the sums' Welford update in one
+    # compiled pass per replicate (replicate_update_rows), the same bytes as the NumPy below
+    compiled = lay.linear
+    tcols = np.array([f[2] for f in lay.fringes], np.int64)
+    hcols = np.array([f[3] for f in lay.fringes], np.int64)
 
     def tile(r0, r1):
         if not hasattr(local, "buffers"):  # per worker thread, reused across its tiles
@@ -361,6 +366,11 @@ def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None)
         rot = np.zeros((0, 2))
         for r, (kt, kh) in enumerate(zip(tables, smooth)):
             t = kt(geo, rot, t_buf[:n])
+            if compiled:
+                hh = t_buf[:0] if box else kh(geo, rot, h_buf[:n])
+                replicate_update_rows(t, hh, box, hcols, tcols, r, mr, ms.reshape(nd * nw, n),
+                                      q_re.reshape(nd * nw, n), q_im.reshape(nd * nw, n))
+                continue
             res = t if box else t - lay.to_tables(kh(geo, rot, h_buf[:n]))
             res[..., :kb.OUT_FIRST] = 0.0  # f_total, f_hit: the rule's
             mr += (res - mr) / (r + 1)
