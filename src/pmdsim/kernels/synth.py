@@ -201,3 +201,29 @@ def replicate_update_rows(t, h, box, hcols, tcols, r, mean_res, mean_s, m2_re, m
             mean_s[f, p] = complex(nr, ni)
             m2_re[f, p] += dr * (sr - nr)
             m2_im[f, p] += di * (si - ni)
+
+
+@jit
+def complex_of_columns(t, cols, p0, p1, out):
+    """``out[f, p] = t[p, cols[f]] + 1j * t[p, cols[f] + 1]`` for pixels ``p0:p1`` (``t``
+    (P, C) float32 or float64, each value taken exactly as float64; ``out`` (F, P)
+    complex128), with NumPy's arithmetic for a float plus an imaginary float (signed zeros,
+    inf and NaN as NumPy gives them: the same bytes)."""
+    for f in range(cols.shape[0]):
+        c = cols[f]
+        for p in range(p0, p1):
+            a = np.float64(t[p, c])
+            x = np.float64(t[p, c + 1])
+            out[f, p] = complex(a + (0.0 * x - 1.0 * 0.0), 0.0 + (0.0 * 0.0 + 1.0 * x))
+
+
+@jit
+def half_width_rows(m2_re, m2_im, half, p0, p1, out):
+    """``out = half * sqrt(m2_re) + 1j * half * sqrt(m2_im)`` for elements ``p0:p1`` of the
+    1-D arrays (the rqmc replicates' half-widths of the sums' real and imaginary parts),
+    with NumPy's arithmetic for it (the same bytes)."""
+    hr, hi = 0.0 * half, 1.0 * half  # the Python scalar 1j * half
+    for p in range(p0, p1):
+        a = half * math.sqrt(m2_re[p])
+        x = math.sqrt(m2_im[p])
+        out[p] = complex(a + (hr * x - hi * 0.0), 0.0 + (hr * 0.0 + hi * x))

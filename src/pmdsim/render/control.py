@@ -370,12 +370,33 @@ class _Layout:
         argument is the decoded phase)."""
         nd, nw = len(self.directions), len(self.widths)
         out = np.empty((nd, nw) + t.shape[:-1], np.complex128)
+        if self.linear:  # one compiled pass (the same bytes as the expression below)
+            return self.sums_of_columns(t, [f[2] for f in self.fringes], out)
         rot = np.exp(-1j * np.asarray(self.deltas))
         for di, wi, tc, _ in self.fringes:
             if self.linear:
                 out[di, wi] = t[..., tc] + 1j * t[..., tc + 1]
             else:
                 out[di, wi] = np.tensordot(t[..., tc:tc + self.per_t], rot, axes=([-1], [0]))
+        return out
+
+
+    def sums_of_columns(self, t: np.ndarray, cols, out=None) -> np.ndarray:
+        """(nd, nw, H, W) complex ``t[..., c] + 1j t[..., c + 1]`` for the fringes' first
+        columns ``cols`` of ``t`` (H, W, C) (float32 or float64, taken as float64): for a
+        linear display the sums of the tables' layout (``cols`` its columns) or of the
+        harmonic layout (the harmonic columns: ``fringe_sums(to_tables(h))`` without the
+        tables)."""
+        from ..kernels.synth import complex_of_columns
+        from .results import in_blocks
+
+        nd, nw = len(self.directions), len(self.widths)
+        if out is None:
+            out = np.empty((nd, nw) + t.shape[:-1], np.complex128)
+        flat = np.ascontiguousarray(t).reshape(-1, t.shape[-1])
+        cols = np.asarray(cols, np.int64)
+        dest = out.reshape(nd * nw, -1)
+        in_blocks(flat.shape[0], lambda p0, p1: complex_of_columns(flat, cols, p0, p1, dest))
         return out
 
 
@@ -451,7 +472,8 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
     s_err = None
     if coarse is not None:  # the difference in place, in float32 (6e-8 of itself)
         np.subtract(smooth, coarse, out=coarse, casting="unsafe")
-        s_err = lay.fringe_sums(lay.to_tables(coarse))
+        s_err = (lay.sums_of_columns(coarse, [f[3] for f in lay.fringes]) if linear
+                 else lay.fringe_sums(lay.to_tables(coarse)))
         del coarse
     out = lay.to_tables(smooth)
     del smooth
@@ -494,7 +516,7 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
     sums = lay.fringe_sums(out)
     if n:
         half = student_t975(n - 1) / np.sqrt((n - 1) * n)
-        err = half * np.sqrt(m2_re) + 1j * half * np.sqrt(m2_im)
+        err = _half_widths(m2_re, m2_im, float(half))
         stated = phase_error(sums, err, "replicates")
     else:
         err = np.zeros(sums.shape, np.complex128)
@@ -532,6 +554,19 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
             "control_variate": what, "lobe_width_px": sig,
             "embedded_rule": gauss[1].rule(sim._lobe).describe() if len(gauss) > 1 else None}
     return out, err, stated, info
+
+
+def _half_widths(m2_re, m2_im, half: float) -> np.ndarray:
+    """``half * sqrt(m2_re) + 1j * half * sqrt(m2_im)`` in one compiled pass (the same
+    bytes; no whole-camera temporaries)."""
+    from ..kernels.synth import half_width_rows
+    from .results import in_blocks
+
+    out = np.empty(m2_re.shape, np.complex128)
+    re, im = np.ascontiguousarray(m2_re).reshape(-1), np.ascontiguousarray(m2_im).reshape(-1)
+    flat = out.reshape(-1)
+    in_blocks(flat.size, lambda p0, p1: half_width_rows(re, im, half, p0, p1, flat))
+    return out
 
 
 def table_fringe_sums(out, directions, widths, deltas, linear) -> np.ndarray:

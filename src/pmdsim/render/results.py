@@ -54,8 +54,6 @@ _COMPILED_MIN = 65_536
 
 
 def _phase_error_compiled(sums, sums_err, kind, convergence):
-    from concurrent.futures import ThreadPoolExecutor
-
     from ..kernels.synth import phase_error_embedded_rows, phase_error_rows
 
     mag = np.abs(sums)
@@ -77,12 +75,18 @@ def _phase_error_compiled(sums, sums_err, kind, convergence):
         args = (s, e, mag.reshape(lead, -1), np.abs(e), q, EMBEDDED_FLOOR,
                 CONVERGENCE_SAFETY, ROUNDOFF_PHASE)
         kernel, flat = phase_error_embedded_rows, out.reshape(lead, -1)
-    n = s.shape[-1]
-    step = max(1, -(-n // 16))
-    with ThreadPoolExecutor(2) as pool:  # the kernel releases the GIL
-        list(pool.map(lambda p0: kernel(*args, p0, min(p0 + step, n), flat),
-                      range(0, n, step)))
+    in_blocks(s.shape[-1], lambda p0, p1: kernel(*args, p0, p1, flat))
     return out
+
+
+def in_blocks(n: int, fn, workers: int = 2) -> None:
+    """``fn(p0, p1)`` over 16 blocks of ``range(n)`` on a pool of ``workers`` threads (for
+    compiled kernels that release the GIL and write disjoint blocks)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    step = max(1, -(-n // 16))
+    with ThreadPoolExecutor(workers) as pool:
+        list(pool.map(lambda p0: fn(p0, min(p0 + step, n)), range(0, n, step)))
 
 
 #: The smallest phase error stated (rad): the kernels' arithmetic (fast exp and sincos with
