@@ -92,19 +92,25 @@ def _coarse_width(extent: float) -> int:
 
 
 # ----------------------------------------------------------------------------- decoding
-def decode_fringes(fringes, monitor_resolution, decode_cfg, saturation_level=None) -> dict:
+def decode_fringes(fringes, monitor_resolution, decode_cfg, saturation_level=None,
+                   keep_amplitude: bool = True) -> dict:
     """Decode every direction of a :class:`~pmdsim.render.FringeResult`.
 
     Returns ``{direction: DecodeResult}``; frames are ``fringes.images[d]`` (n_widths, K,
-    H, W), ``extent_px`` the monitor width (x) or height (y).
+    H, W), ``extent_px`` the monitor width (x) or height (y). ``keep_amplitude=False``:
+    each result's ``amplitude`` and ``offset`` are None (the run's chain uses the
+    modulation B/A and stores neither: 63 MB less per decoding at 1.3 MP).
     """
+    from dataclasses import replace
+
     out = {}
     for di, d in enumerate(fringes.directions):
-        out[d] = dec.decode_sequence(
+        res = dec.decode_sequence(
             fringes.images[di], fringes.widths, fringes.shifts, extent_px(monitor_resolution, d),
             decode_cfg.method, min_relative_amplitude=decode_cfg.min_relative_amplitude,
             max_order_residual=decode_cfg.max_order_residual, dtype=np.float32,
             saturation_level=saturation_level)
+        out[d] = res if keep_amplitude else replace(res, amplitude=None, offset=None)
     return out
 
 
@@ -413,7 +419,8 @@ def decode_specular_reference(cfg, sim, geometry, progress=None):
     if sensor.enabled:
         fr = replace(fr, images=capture_dn(sensor, fr.images, 1))
     decoded = decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
-                             sensor.saturation_dn if sensor.enabled else None)
+                             sensor.saturation_dn if sensor.enabled else None,
+                             keep_amplitude=False)
     del fr
     return decoded, surface_to_monitor_mm(sim, geometry)
 

@@ -184,9 +184,10 @@ class DecodeResult:
     modulation : (n_widths, H, W) ndarray, 1
         ``B / A`` of each width (NaN where ``A <= 0``).
     amplitude : (n_widths, H, W) ndarray, intensity units
-        Fringe amplitude ``B`` of each width.
+        Fringe amplitude ``B`` of each width (None where the caller dropped it:
+        :func:`pmdsim.measure.chain.decode_fringes` with ``keep_amplitude=False``).
     offset : (n_widths, H, W) ndarray, intensity units
-        Offset ``A`` of each width.
+        Offset ``A`` of each width (None with ``amplitude``).
     order_residual : (H, W) ndarray of float64, 1
         Largest order residual of the unwrapping steps.
     flags : (H, W) ndarray of uint8

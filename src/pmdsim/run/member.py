@@ -197,7 +197,8 @@ def decode(m: Member) -> None:
         return
     sensor = m.sensor
     m.decoded = chain.decode_fringes(m.fringes, m.cfg.monitor.resolution, m.cfg.decode,
-                                     sensor.saturation_dn if sensor.enabled else None)
+                                     sensor.saturation_dn if sensor.enabled else None,
+                                     keep_amplitude=False)
 
 
 def compare(m: Member) -> None:

@@ -398,7 +398,8 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
     if sensor.enabled:  # as a run: what the camera writes (stream 0)
         fringes = replace(fringes, images=capture_dn(sensor, fringes.images, 0))
     decoded = chain.decode_fringes(fringes, cfg.monitor.resolution, cfg.decode,
-                                   sensor.saturation_dn if sensor.enabled else None)
+                                   sensor.saturation_dn if sensor.enabled else None,
+                                   keep_amplitude=False)
     from .coverage import off_monitor_mask  # as simulate: lobes off the monitor are not valid
 
     off = off_monitor_mask(fringes.f_total, fringes.f_hit, geometry.surface_mask,
