@@ -76,3 +76,34 @@ def test_a_run_works_with_one_blas_thread(monkeypatch, tmp_path):
         after = _blas_threads()
     assert seen == [{1}]
     assert after == {2}
+
+
+@pytest.mark.parametrize("env, want", [
+    ({}, "1"),                                                   # the run's limit
+    ({"PMDSIM_BLAS_THREADS": "3"}, "3"),                         # another limit
+    ({"PMDSIM_BLAS_THREADS": "0"}, None),                        # no limit: not set
+    ({"OPENBLAS_NUM_THREADS": "2"}, "2"),                        # the user's own
+    ({"PMDSIM_BLAS_THREADS": "two"}, None),                      # left to the run to report
+])
+def test_the_command_line_starts_openblas_with_the_limit(env, want):
+    """``import pmdsim.cli`` (a fresh interpreter, NumPy not yet imported) sets
+    ``OPENBLAS_NUM_THREADS`` to the run's BLAS limit unless the user set it, and NumPy's
+    OpenBLAS then starts with that many threads."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    code = ("import json, os, pmdsim.cli, numpy, threadpoolctl\n"
+            "numpy.ones((64, 3)) @ numpy.eye(3)\n"
+            "n = [d['num_threads'] for d in threadpoolctl.threadpool_info()"
+            " if d['user_api'] == 'blas' and 'numpy' in d['filepath']]\n"
+            "print(json.dumps([os.environ.get('OPENBLAS_NUM_THREADS'), n]))")
+    base = {k: v for k, v in os.environ.items()
+            if k not in ("OPENBLAS_NUM_THREADS", "PMDSIM_BLAS_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code], env={**base, **env}, check=True,
+                         capture_output=True, text=True).stdout
+    value, numbers = json.loads(out.strip().splitlines()[-1])
+    assert value == want
+    if want is not None:  # OpenBLAS starts at most one thread per core
+        assert numbers == [min(int(want), os.cpu_count())]

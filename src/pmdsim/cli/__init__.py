@@ -22,6 +22,10 @@ SIGTERM stop a run, remove its temporary folder and exit with 130 / 143.
 
 from __future__ import annotations
 
+from ..run.threads import blas_pool_at_start
+
+blas_pool_at_start()  # before anything imports NumPy
+
 from .common import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED, app
 from .simulate import simulate
 from .decode import decode
