@@ -54,15 +54,21 @@ _COMPILED_MIN = 65_536
 
 
 def _phase_error_compiled(sums, sums_err, kind, convergence):
+    """:func:`phase_error` of whole-camera complex128 arrays: the kernel over 16 pixel
+    blocks on two threads, each block taking NumPy's ``|S|`` (and ``|dS|``) of its own
+    pixels (no whole-camera temporaries)."""
     from ..kernels.synth import phase_error_embedded_rows, phase_error_rows
 
-    mag = np.abs(sums)
     out = np.empty(sums.shape)
     if kind == "replicates":
         s = np.ascontiguousarray(sums).reshape(-1)
         e = np.ascontiguousarray(sums_err).reshape(-1)
-        args = (s, e, mag.reshape(-1), ROUNDOFF_PHASE)
-        kernel, flat = phase_error_rows, out.reshape(-1)
+        flat = out.reshape(-1)
+
+        def block(p0, p1):
+            sb = s[p0:p1]
+            phase_error_rows(sb, e[p0:p1], np.abs(sb), ROUNDOFF_PHASE, 0, p1 - p0,
+                             flat[p0:p1])
     else:  # per fringe (the leading axes, each with its convergence factor) x pixel
         if convergence is None:
             q, lead = np.empty(0), 1
@@ -72,10 +78,14 @@ def _phase_error_compiled(sums, sums_err, kind, convergence):
             lead = q.size
         s = np.ascontiguousarray(sums).reshape(lead, -1)
         e = np.ascontiguousarray(sums_err).reshape(lead, -1)
-        args = (s, e, mag.reshape(lead, -1), np.abs(e), q, EMBEDDED_FLOOR,
-                CONVERGENCE_SAFETY, ROUNDOFF_PHASE)
-        kernel, flat = phase_error_embedded_rows, out.reshape(lead, -1)
-    in_blocks(s.shape[-1], lambda p0, p1: kernel(*args, p0, p1, flat))
+        flat = out.reshape(lead, -1)
+
+        def block(p0, p1):
+            sb, eb = s[:, p0:p1], e[:, p0:p1]
+            phase_error_embedded_rows(sb, eb, np.abs(sb), np.abs(eb), q, EMBEDDED_FLOOR,
+                                      CONVERGENCE_SAFETY, ROUNDOFF_PHASE, 0, p1 - p0,
+                                      flat[:, p0:p1])
+    in_blocks(s.shape[-1], block)
     return out
 
 
