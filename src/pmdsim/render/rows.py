@@ -270,10 +270,11 @@ def fuses(sim, passes, mode: int, ncols: int, finish) -> bool:
 def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
                       patterns=None):
     """The linear fringes of the rule ``passes[0]`` (finished into ``finish``'s
-    :class:`FringeFinish`) and their numerical error, with every embedded rule ``passes[1:]`` rendered in the same tile task: the
-    tile's geometry rows are traced and turned onto the lobe's axis once, the rule's rows
-    finished (:class:`FringeFinish`), each embedded rule's rows rendered into a buffer of
-    the worker thread and differenced in place, and the error of those rows computed
+    :class:`FringeFinish`) and their numerical error, with every embedded rule
+    ``passes[1:]`` rendered in the same tile task: the tile's geometry rows are traced
+    and turned onto the lobe's axis once, the rule's rows finished
+    (:class:`FringeFinish`), each embedded rule's rows rendered into a buffer of the
+    worker thread and differenced in place, and the error of those rows computed
     (:meth:`FringeFinish.errors`) while they are in cache. The same bytes as rendering the
     passes one after another (:meth:`pmdsim.render.Simulation._render`) and
     :func:`fringe_errors` over the whole differences, without the (H, W, ncols) arrays of

@@ -231,19 +231,19 @@ class Simulation:
         simple, n_sub = cam.is_simple_pinhole, cam.rays_per_pixel
 
         # In-process schedulers: the tiles write straight into one (H, W, ncols) array (no
-        # per-tile result arrays, no concatenation copy: half the render's peak memory).
-        full = (np.empty((cam.height, width, ncols))
-                if self.scheduler in ("threads", "synchronous") else None)
-        fin = (finish[3] if finish is not None and full is not None
+        # per-tile result arrays, no concatenation copy: half the render's peak memory);
+        # none where the tiles finish every row and nothing reads the raw sums (a token)
+        local_run = self.scheduler in ("threads", "synchronous")
+        fin = (finish[3] if finish is not None and local_run
                and (scene.sampling, mode, ncols) == finish[:3] else None)
+        token = np.empty((cam.height, width, 0)) if fin is not None and not raw and simple else None
+        full = token if token is not None else (
+            np.empty((cam.height, width, ncols)) if local_run else None)
 
         # In-process schedulers: each worker thread reuses its geometry buffers across tiles
         # (no fresh 200 bytes per pixel, page faults and zeroing per tile).
         local = threading.local() if full is not None else None
         tile_px = self.tile_rows * width
-        token = None
-        if fin is not None and not raw and simple:
-            full = token = np.empty((cam.height, width, 0))
 
         def tile(r0, r1):
             if simple:
