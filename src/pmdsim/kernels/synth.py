@@ -155,34 +155,31 @@ def phase_error_embedded_rows(sums, err, mag, emag, q, floor, safety, roundoff, 
 
 
 @jit
-def replicate_update_rows(t, h, box, hcols, tcols, r, mean_res, mean_s, m2_re, m2_im):
+def replicate_update_rows(t, h, hcols, tcols, r, mean_res, mean_s, m2_re, m2_im):
     """One rqmc replicate of the nearest monitor's control variate for one block of pixels
     on a linear display (:func:`pmdsim.render.rows.replicates_fused`): the residual
-    ``res = t - to_tables(h)`` (``box``: ``t``; the table columns ``tcols[f], tcols[f] + 1``
-    of fringe ``f`` take ``h``'s ``hcols[f], hcols[f] + 1``, the first two columns its first
-    two, the rest zero), its first two columns zeroed (f_total, f_hit: the rule's), the
-    running mean ``mean_res`` (P, C) of the residuals, and Welford's update of the fringe
-    sums ``S = res[tc] + i res[tc + 1]``: ``mean_s`` (F, P) complex, ``m2_re``/``m2_im``
-    (F, P), replicate ``r`` (0: the first). The same arithmetic in the same order as the
-    NumPy expressions it replaces (complex products and quotients written out as NumPy
-    evaluates them: the same bytes)."""
+    ``res = t - to_tables(h)`` (the table columns ``tcols[f], tcols[f] + 1`` of fringe
+    ``f`` take ``h``'s ``hcols[f], hcols[f] + 1``, the first two columns its first two,
+    the rest zero), its first two columns zeroed (f_total, f_hit: the rule's), the running
+    mean ``mean_res`` (P, C) of the residuals, and Welford's update of the fringe sums
+    ``S = res[tc] + i res[tc + 1]``: ``mean_s`` (F, P) complex, ``m2_re``/``m2_im`` (F, P),
+    replicate ``r`` (0: the first). The same arithmetic in the same order as the NumPy
+    expressions it replaces (complex sums and quotients written out as NumPy evaluates
+    them: the same bytes). (A linear display's box rule leaves no replicates.)"""
     n, ncols = t.shape
     nf = tcols.shape[0]
     den = float(r + 1)
     scl = 1.0 / (den + 0.0 * 0.0)  # NumPy's complex quotient by (r + 1) + 0i (Smith)
     res = np.empty(ncols)
     for p in range(n):
-        for c in range(ncols):
-            res[c] = t[p, c]
-        if not box:
-            for c in range(2):
-                res[c] = t[p, c] - h[p, c]
-            for c in range(2, ncols):
-                res[c] = t[p, c] - 0.0
-            for f in range(nf):
-                tc, hc = tcols[f], hcols[f]
-                res[tc] = t[p, tc] - h[p, hc]
-                res[tc + 1] = t[p, tc + 1] - h[p, hc + 1]
+        for c in range(2):
+            res[c] = t[p, c] - h[p, c]
+        for c in range(2, ncols):
+            res[c] = t[p, c] - 0.0
+        for f in range(nf):
+            tc, hc = tcols[f], hcols[f]
+            res[tc] = t[p, tc] - h[p, hc]
+            res[tc + 1] = t[p, tc + 1] - h[p, hc + 1]
         res[0] = 0.0
         res[1] = 0.0
         for c in range(ncols):

@@ -349,7 +349,8 @@ def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None)
     tile_px = sim.tile_rows * w
     # a linear display: the residual, its mean and the sums' Welford update in one
     # compiled pass per replicate (replicate_update_rows), the same bytes as the NumPy below
-    compiled = lay.linear
+    # (its box rule leaves no replicates)
+    compiled = lay.linear and not box
     tcols = np.array([f[2] for f in lay.fringes], np.int64)
     hcols = np.array([f[3] for f in lay.fringes], np.int64)
 
@@ -368,9 +369,9 @@ def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None)
         for r, (kt, kh) in enumerate(zip(tables, smooth)):
             t = kt(geo, rot, t_buf[:n])
             if compiled:
-                hh = t_buf[:0] if box else kh(geo, rot, h_buf[:n])
-                replicate_update_rows(t, hh, box, hcols, tcols, r, mr, ms.reshape(nd * nw, n),
-                                      q_re.reshape(nd * nw, n), q_im.reshape(nd * nw, n))
+                replicate_update_rows(t, kh(geo, rot, h_buf[:n]), hcols, tcols, r, mr,
+                                      ms.reshape(nd * nw, n), q_re.reshape(nd * nw, n),
+                                      q_im.reshape(nd * nw, n))
                 continue
             res = t if box else t - lay.to_tables(kh(geo, rot, h_buf[:n]))
             res[..., :kb.OUT_FIRST] = 0.0  # f_total, f_hit: the rule's
