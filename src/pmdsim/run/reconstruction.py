@@ -101,12 +101,15 @@ def add_numerical_error(stats: dict, err, moved) -> None:
 
 
 def reference_reconstruction(cfg, scene, decoded):
-    """(Reconstruction, SurfaceErrors) of the decoded specular reference, or None."""
+    """(Reconstruction, SurfaceErrors) of the decoded specular reference, or None. Its
+    errors come without Zernike tables: a run reports the reference's height error map and
+    statistics (the chain's floor), not its Zernike content."""
     if not wanted(cfg, decoded):
         return None
     u = np.where(decoded["x"].valid, decoded["x"].monitor_coord_px, np.nan)
     v = np.where(decoded["y"].valid, decoded["y"].monitor_coord_px, np.nan)
-    rec, err, _ = reconstruct_coords(cfg, scene, u, v, np.isfinite(u) & np.isfinite(v))
+    rec, err, _ = reconstruct_coords(cfg, scene, u, v, np.isfinite(u) & np.isfinite(v),
+                                     tables=False)
     return None if rec is None else (rec, err)
 
 
