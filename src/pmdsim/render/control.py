@@ -370,16 +370,12 @@ class _Layout:
         argument is the decoded phase)."""
         nd, nw = len(self.directions), len(self.widths)
         out = np.empty((nd, nw) + t.shape[:-1], np.complex128)
-        if self.linear:  # one compiled pass (the same bytes as the expression below)
+        if self.linear:  # one compiled pass: t[..., tc] + 1j t[..., tc + 1], NumPy's bytes
             return self.sums_of_columns(t, [f[2] for f in self.fringes], out)
         rot = np.exp(-1j * np.asarray(self.deltas))
         for di, wi, tc, _ in self.fringes:
-            if self.linear:
-                out[di, wi] = t[..., tc] + 1j * t[..., tc + 1]
-            else:
-                out[di, wi] = np.tensordot(t[..., tc:tc + self.per_t], rot, axes=([-1], [0]))
+            out[di, wi] = np.tensordot(t[..., tc:tc + self.per_t], rot, axes=([-1], [0]))
         return out
-
 
     def sums_of_columns(self, t: np.ndarray, cols, out=None) -> np.ndarray:
         """(nd, nw, H, W) complex ``t[..., c] + 1j t[..., c + 1]`` for the fringes' first
