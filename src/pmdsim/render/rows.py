@@ -150,9 +150,15 @@ class FringeFinish:
         when the tiles cannot finish)."""
         return {} if self.sampling is None else {"finish": (self.sampling, mode, ncols, self)}
 
-    def __call__(self, r0: int, r1: int, full: np.ndarray) -> None:
+    def __call__(self, r0: int, r1: int, full: np.ndarray, raw: np.ndarray | None = None
+                 ) -> None:
+        """Finish rows ``r0:r1`` of the render's result ``full`` (H, W, C), from ``raw``
+        ((r1 - r0) * W, C) where the tile kept its raw sums elsewhere (``full`` then an
+        empty token), and count them as finished for ``full`` (:meth:`complete`)."""
         w = self.shape[1]
-        self.rows(r0, r1, full.reshape(-1, full.shape[-1])[r0 * w:r1 * w])
+        if raw is None:
+            raw = full.reshape(-1, full.shape[-1])[r0 * w:r1 * w]
+        self.rows(r0, r1, raw)
         self.done.append((full, r1 - r0))
 
     def rows(self, r0: int, r1: int, raw: np.ndarray) -> None:
@@ -305,8 +311,7 @@ def render_rule_fused(sim, passes, mode: int, ncols: int, finish, progress=None,
         rot = np.zeros((0, 2))
         out = raw[0][: geo.shape[0]]
         kernels[0](geo, rot, out)
-        fin.rows(r0, r1, out)
-        fin.done.append((token, r1 - r0))
+        fin(r0, r1, token, out)
         diffs = []
         for kernel, buf in zip(kernels[1:], raw[1:]):
             c = buf[: out.shape[0]]

@@ -258,8 +258,7 @@ class Simulation:
                 if token is not None:  # the raw rows in the thread's buffer, finished there
                     out = local.buffers[2][: geo.shape[0]]
                     kernel(geo, rot, out)
-                    fin.rows(r0, r1, out)
-                    fin.done.append((token, r1 - r0))
+                    fin(r0, r1, token, out)
                     return None
                 if full is not None:
                     kernel(geo, rot, full[r0:r1].reshape(-1, ncols))
