@@ -68,7 +68,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels import bundle as kb
-from .rows import fuses_replicates, replicates_fused
+from .rows import fuses_replicates, replicates_fused, welford_update
 
 #: Fourier terms of the display response in the smooth part of a non-linear display (gamma,
 #: LUT, drive bits) on a narrow lobe (wide lobes: :data:`BOX_TERMS`): the fundamental only.
@@ -477,8 +477,6 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
         table_u, table_v = lay.residual_tables(table_u, table_v)
     # the residual, replicate by replicate (Welford on S): t - h at the same points, or
     # (box) the residual tables alone
-    mean_res = np.zeros_like(out)
-    mean_s = m2_re = m2_im = None
     fused = fuses_replicates(sim, reps)
     if fused:  # every replicate in each tile's task: the same bytes as the loop below
         k0, left = step[0], n_steps - step[0]
@@ -486,6 +484,13 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
             sim, reps, lay, box, table_u, table_v,
             None if progress is None else
             lambda done, total: progress(k0 * total + done * left, n_steps * total))
+    else:
+        mean_res = np.zeros_like(out)
+        mean_s = m2_re = m2_im = None
+        if reps:
+            fringes = (len(directions), len(widths)) + out.shape[:-1]
+            mean_s = np.empty(fringes, np.complex128)
+            m2_re, m2_im = np.zeros(fringes), np.zeros(fringes)
     for r, rep in enumerate(() if fused else reps):
         t = sim._render_set(rep, kb.MODE_TABLES, ncols_t, table_u=table_u, table_v=table_v,
                             progress=prog())
@@ -498,15 +503,7 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
             del h
         res[..., :kb.OUT_FIRST] = 0.0  # f_total, f_hit: the rule's
         del t
-        mean_res += (res - mean_res) / (r + 1)
-        s = lay.fringe_sums(res)
-        if mean_s is None:
-            mean_s, m2_re, m2_im = s.copy(), np.zeros(s.shape), np.zeros(s.shape)
-            continue
-        d = s - mean_s
-        mean_s += d / (r + 1)
-        m2_re += d.real * (s - mean_s).real
-        m2_im += d.imag * (s - mean_s).imag
+        welford_update(res, r, lay, mean_res, mean_s, m2_re, m2_im)
     n = len(reps)
     out += mean_res
     sums = lay.fringe_sums(out)

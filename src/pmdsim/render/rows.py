@@ -380,15 +380,25 @@ def replicates_fused(sim, reps, lay, box: bool, table_u, table_v, progress=None)
                 continue
             res = t if box else t - lay.to_tables(kh(geo, rot, h_buf[:n]))
             res[..., :kb.OUT_FIRST] = 0.0  # f_total, f_hit: the rule's
-            mr += (res - mr) / (r + 1)
-            s = lay.fringe_sums(res)
-            if r == 0:
-                ms[...] = s
-                continue
-            d = s - ms
-            ms += d / (r + 1)
-            q_re += d.real * (s - ms).real
-            q_im += d.imag * (s - ms).imag
+            welford_update(res, r, lay, mr, ms, q_re, q_im)
 
     sim._compute(tile, sim._tiles(), progress)
     return mean_res, mean_s, m2_re, m2_im
+
+
+def welford_update(res, r, lay, mean_res, mean_s, m2_re, m2_im) -> None:
+    """Replicate ``r`` (0: the first) of the control variate's residual ``res`` (..., C,
+    table layout) into the running mean ``mean_res`` (..., C) and the Welford statistics of
+    its fringe sums ``lay.fringe_sums(res)``: ``mean_s`` (nd, nw, ...) complex and the
+    sums of squares ``m2_re``/``m2_im`` of their real and imaginary parts, in place (the
+    tile task's rows and the whole-camera loop of :func:`pmdsim.render.control.
+    render_fringes_cv` alike)."""
+    mean_res += (res - mean_res) / (r + 1)
+    s = lay.fringe_sums(res)
+    if r == 0:
+        mean_s[...] = s
+        return
+    d = s - mean_s
+    mean_s += d / (r + 1)
+    m2_re += d.real * (s - mean_s).real
+    m2_im += d.imag * (s - mean_s).imag
