@@ -129,7 +129,7 @@ def phase_error_embedded_rows(sums, err, mag, emag, q, floor, safety, roundoff, 
     ``roundoff``, NaN where ``|S| = 0``; the same arithmetic in the same order as its NumPy
     expressions (strict IEEE), given ``mag = |sums|`` and ``emag = |err|`` as NumPy
     computes them, except ``Im(err conj S)``, which NumPy's SIMD complex product may round
-    through an FMA (a few ulp)."""
+    through an FMA (the statement then agrees to 1e-13 of itself)."""
     nan = math.nan
     for f in range(sums.shape[0]):
         fast = False
@@ -172,15 +172,13 @@ def replicate_update_rows(t, h, hcols, tcols, r, mean_res, mean_s, m2_re, m2_im)
     scl = 1.0 / (den + 0.0 * 0.0)  # NumPy's complex quotient by (r + 1) + 0i (Smith)
     res = np.empty(ncols)
     for p in range(n):
-        for c in range(2):
-            res[c] = t[p, c] - h[p, c]
-        for c in range(2, ncols):
-            res[c] = t[p, c] - 0.0
+        for c in range(2, ncols):  # t - 0.0: the table columns without a harmonic twin
+            res[c] = t[p, c]
         for f in range(nf):
             tc, hc = tcols[f], hcols[f]
             res[tc] = t[p, tc] - h[p, hc]
             res[tc + 1] = t[p, tc + 1] - h[p, hc + 1]
-        res[0] = 0.0
+        res[0] = 0.0  # f_total, f_hit: the rule's (the NumPy path zeroes t - h there)
         res[1] = 0.0
         for c in range(ncols):
             mean_res[p, c] += (res[c] - mean_res[p, c]) / den
