@@ -209,3 +209,33 @@ def test_rim_exclusion_with_unequal_spacing():
     assert res.excluded_rim == int(m.sum() - kept.sum())
     assert np.isnan(res.residual[m & ~kept]).all()
     assert "rim band 2 mm" in res.removed
+
+
+@pytest.mark.parametrize("block", [97, 1000, 4096])
+def test_zernike_tables_in_blocks_equal_a_direct_fit(block):
+    """The tables are fitted block by block (normal equations summed over blocks of points,
+    no full matrix): the same coefficients as one least-squares fit of all points, for
+    blocks that split the points unevenly (97: 11 blocks and a remainder), one block, and
+    a block larger than the points; two tables of different orders and lengths at once,
+    on an off-centre, unequally scaled set of points."""
+    from pmdsim.measure.form import zernike_tables
+
+    rng = np.random.default_rng(23)
+    u, v = rng.uniform(-0.9, 0.7, 1000), rng.uniform(-0.6, 0.95, 1000)
+    keep = np.hypot(u, v) <= 1.0
+    u, v = u[keep], v[keep]
+    b = np.sin(2.1 * u + 0.3) * np.cos(1.7 * v - 0.2) + 0.05 * rng.normal(size=u.size)
+    noll, fringe = zernike_tables(b, u, v, (("noll", 22), ("fringe", 37)), removed=(1, 4),
+                                  block=block)
+    for order, n, table in (("noll", 22, noll), ("fringe", 37, fringe)):
+        idx, a = zernike_columns(order, n, u, v)
+        direct = np.linalg.lstsq(a, b, rcond=None)[0]
+        assert [(row["index"], row["n"], row["m"]) for row in table] == idx
+        np.testing.assert_allclose([row["coefficient"] for row in table], direct,
+                                   rtol=0, atol=1e-11)
+    assert [row["index"] for row in noll if row["removed"]] == [1, 4]
+    # Fringe Z4 is (2, 0) = Noll Z4 (removed); Fringe Z1 piston = Noll Z1
+    assert [row["index"] for row in fringe if row["removed"]] == [1, 4]
+    # fewer points than terms: no table, the other still fitted
+    few, more = zernike_tables(b[:20], u[:20], v[:20], (("noll", 37), ("noll", 6)), block=block)
+    assert few == [] and len(more) == 6

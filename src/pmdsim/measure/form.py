@@ -40,6 +40,7 @@ __all__ = [
     "zernike_value",
     "zernike_columns",
     "zernike_table",
+    "zernike_tables",
     "rim_mask",
     "remove_form",
     "LINEAR_TERMS",
@@ -98,12 +99,7 @@ def zernike_columns(order: str, n_terms: int, u, v, basis=None) -> tuple[list, n
     ``order`` "noll" (normalised) or "fringe" (unnormalised) at unit-disc points (u, v).
     ``basis``: the :class:`_Basis` of (u, v) when the caller has one (its radial and
     angular factors are shared with other tables of the same points)."""
-    if order == "noll":
-        idx = [(j, *zernike_noll_index(j)) for j in range(1, n_terms + 1)]
-    elif order == "fringe":
-        idx = [(j, *fringe_index(j)) for j in range(1, n_terms + 1)]
-    else:
-        raise ValueError(f"order must be 'noll' or 'fringe', got {order!r}")
+    idx = _term_indices(order, n_terms)
     basis = _Basis(u, v) if basis is None else basis
     cols = np.empty((basis.rho.size, len(idx)))
     for k, (_, n, m) in enumerate(idx):
@@ -175,7 +171,7 @@ def disc_of(mask, x, y, centre=None, radius=None) -> tuple[tuple[float, float], 
 
 
 def zernike_table(residual, mask, x, y, *, order="noll", n_terms=37, centre=None, radius=None,
-                  removed=(), basis=None) -> list[dict]:
+                  removed=()) -> list[dict]:
     """Least-squares Zernike coefficients (in the unit of ``residual``) of ``residual`` over
     ``mask`` on the disc (:func:`disc_of`): one dict per term with ``index``, ``n``, ``m``,
     ``coefficient`` and ``removed`` (its (n, m) is among the Noll indices ``removed``)."""
@@ -183,15 +179,66 @@ def zernike_table(residual, mask, x, y, *, order="noll", n_terms=37, centre=None
     if m.sum() < n_terms:
         return []
     c, r = disc_of(m, x, y, centre, radius)
-    if basis is not None and basis[0].shape == m.shape and np.array_equal(basis[0], m) \
-            and basis[1] == (c, r):  # the caller's basis of these very points
-        idx, a = zernike_columns(order, n_terms, None, None, basis=basis[2])
-    else:
-        idx, a = zernike_columns(order, n_terms, (x[m] - c[0]) / r, (y[m] - c[1]) / r)
-    coef = _lstsq(a, np.asarray(residual, np.float64)[m])
+    return zernike_tables(np.asarray(residual, np.float64)[m], (x[m] - c[0]) / r,
+                          (y[m] - c[1]) / r, ((order, n_terms),), removed)[0]
+
+
+#: Points per block of :func:`zernike_tables` (37 columns of 16384 points: 4.6 MB).
+TABLE_BLOCK = 16384
+
+
+def _term_indices(order: str, n_terms: int) -> list:
+    if order == "noll":
+        return [(j, *zernike_noll_index(j)) for j in range(1, n_terms + 1)]
+    if order == "fringe":
+        return [(j, *fringe_index(j)) for j in range(1, n_terms + 1)]
+    raise ValueError(f"order must be 'noll' or 'fringe', got {order!r}")
+
+
+def zernike_tables(values, u, v, tables, removed=(), block: int = TABLE_BLOCK) -> list[list]:
+    """The Zernike tables ``tables`` (a sequence of ``(order, n_terms)``) of the point values
+    ``values`` at unit-disc points (u, v) (1-D): for each, the least-squares coefficients as
+    :func:`zernike_table` gives them.
+
+    One pass over the points in blocks of ``block``: each block's columns of every table
+    are built from one :class:`_Basis` of the block and added into that table's normal
+    equations (``A^T A``, ``A^T b``: n_terms^2 numbers), so no (points, n_terms) matrix
+    exists (on a 1.3 MP map two 37-term matrices were 0.77 GB). Solved as
+    :func:`pmdsim.measure.integrate._lstsq` solves (Cholesky of the normal matrix); where
+    that matrix is not positive definite (fewer distinct points than terms) the full
+    matrix is built and solved by ``lstsq``, as there. Fewer points than a table's terms:
+    that table is empty."""
+    import scipy.linalg
+
+    b = np.asarray(values, np.float64).ravel()
+    u = np.asarray(u, np.float64).ravel()
+    v = np.asarray(v, np.float64).ravel()
     gone = {zernike_noll_index(j) for j in removed}
-    return [{"index": j, "n": n, "m": mm, "coefficient": float(k), "removed": (n, mm) in gone}
-            for (j, n, mm), k in zip(idx, coef)]
+    specs = [(order, _term_indices(order, n_terms)) for order, n_terms in tables]
+    gram = [np.zeros((len(idx), len(idx))) for _, idx in specs]
+    rhs = [np.zeros(len(idx)) for _, idx in specs]
+    bufs = [np.empty((len(idx), min(block, b.size))) for _, idx in specs]  # rows: terms
+    for s0 in range(0, b.size, block):
+        s1 = min(s0 + block, b.size)
+        basis = _Basis(u[s0:s1], v[s0:s1])
+        for (order, idx), g, r, buf in zip(specs, gram, rhs, bufs):
+            a = buf[:, : s1 - s0]
+            for k, (_, n, mm) in enumerate(idx):
+                a[k] = basis.value(n, mm, normalized=order == "noll")
+            g += a @ a.T
+            r += a @ b[s0:s1]
+    out = []
+    for (order, idx), g, r in zip(specs, gram, rhs):
+        if b.size < len(idx):  # fewer points than terms: no table
+            out.append([])
+            continue
+        try:
+            coef = scipy.linalg.solve(g, r, assume_a="pos")
+        except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
+            coef = np.linalg.lstsq(zernike_columns(order, len(idx), u, v)[1], b, rcond=None)[0]
+        out.append([{"index": j, "n": n, "m": mm, "coefficient": float(k),
+                     "removed": (n, mm) in gone} for (j, n, mm), k in zip(idx, coef)])
+    return out
 
 
 # ------------------------------------------------------------------------ sphere
@@ -377,21 +424,18 @@ def remove_form(error, mask, x, y, spec: FormSpec, *, true_height=None, disc=(No
         xc, yc = xm.mean(), ym.mean()
         scale = max(np.abs(xm - xc).max(), np.abs(ym - yc).max(), 1e-300)
         cols += _term_columns(lin, (xm - xc) / scale, (ym - yc) / scale)
-    # one basis of the disc's points for the removal and both tables (their radial and
-    # angular factors computed once: the same numbers, bit for bit)
-    basis = _Basis((xm - c[0]) / rad, (ym - c[1]) / rad)
     if spec.zernike:
+        basis = _Basis((xm - c[0]) / rad, (ym - c[1]) / rad)
         cols += [basis.value(*zernike_noll_index(j)) for j in spec.zernike]
+        del basis
     if cols:
         a = np.stack(cols, axis=1)
         r = r - a @ _lstsq(a, r)
+        del a, cols
     out[m] = r
     if not tables:
         return FormResult(out, m, spec.describe(), sphere, [], [], int(m0.sum() - m.sum()))
-    removed = spec.removed_noll
-    shared = (m, (c, rad), basis)
-    noll = zernike_table(out, m, x, y, order="noll", n_terms=spec.n_zernike, centre=c, radius=rad,
-                         removed=removed, basis=shared)
-    fringe = zernike_table(out, m, x, y, order="fringe", n_terms=min(spec.n_zernike, 37), centre=c,
-                           radius=rad, removed=removed, basis=shared)
+    noll, fringe = zernike_tables(r, (xm - c[0]) / rad, (ym - c[1]) / rad,
+                                  (("noll", spec.n_zernike), ("fringe", min(spec.n_zernike, 37))),
+                                  spec.removed_noll)
     return FormResult(out, m, spec.describe(), sphere, noll, fringe, int(m0.sum() - m.sum()))
