@@ -122,16 +122,30 @@ def test_rays_traced_count_the_embedded_rules():
     2 x 12 and 1 x 8 embedded rules too (80 nodes per bundle; a 1 deg cone, where the
     azimuths follow the lobe with four per theta node); rqmc's replicates share n_rays;
     error_estimate = false renders the rule alone."""
+    from pmdsim.render import rows
     from pmdsim.run.member import _passes_share
 
     def share(**sampling):
-        return _passes_share(Simulation.from_config(make_config(
+        sim = Simulation.from_config(make_config(
             sampling={"n_rays": 48, "mode": "rule", "theta_max_deg": 1.0, **sampling},
-            monitor={"pixel_model": "continuous"})), True)
+            monitor={"pixel_model": "continuous"}))
+        return _passes_share(sim, True, sim.geometry().surface_mask)
 
     assert share() == pytest.approx((48 + 24 + 8) / 48)
     assert share(error_estimate=False) == 1.0
     assert share(mode="rqmc") == 1.0
+    # the second embedded rule on a grid of every 4th pixel (a camera of >= 16 grid
+    # pixels per grid pixel): its 8 nodes on the grid's share of the surface pixels
+    sim = Simulation.from_config(make_config(
+        sampling={"n_rays": 48, "mode": "rule", "theta_max_deg": 1.0},
+        monitor={"pixel_model": "continuous"}))
+    mask = sim.geometry().surface_mask
+    cam = sim.scene.camera
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(rows, "CONVERGENCE_GRID_PIXELS", cam.width * cam.height // 16)
+        grid = mask[::4, ::4].sum() / mask.sum()
+        assert 0.04 < grid < 0.09
+        assert _passes_share(sim, True, mask) == pytest.approx((48 + 24 + 8 * grid) / 48)
 
 
 def test_convergence_factor_follows_a_geometric_error():

@@ -44,9 +44,9 @@ from ..scene.brdf_variation import with_params
 from ..scene.quadrature import convergence_exponent
 from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, convergence_factor,  # noqa: F401
                       convergence_of_ratios, phase_error, value_error, worst_phase_error)
-from .rows import (FringeFinish, TileErrors, fringe_errors, fuses,  # noqa: F401
-                   local_scheduler, reduce_subrays, render_rule_fused, scene_geometry_rows,
-                   vision_geometry_rows)
+from .rows import (FringeFinish, TileErrors, convergence_stride, fringe_errors,  # noqa: F401
+                   fuses, keep_grid, local_scheduler, reduce_subrays, render_rule_fused,
+                   scene_geometry_rows, vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
@@ -229,6 +229,7 @@ class Simulation:
         samp, delta = scene.sampling, scene.brdf.is_delta
         width, cam = scene.camera.width, scene.camera
         simple, n_sub = cam.is_simple_pinhole, cam.rays_per_pixel
+        stride = 1 if delta else convergence_stride(samp, cam)  # the second embedded rule
 
         # In-process schedulers: the tiles write straight into one (H, W, ncols) array (no
         # per-tile result arrays, no concatenation copy: half the render's peak memory);
@@ -254,6 +255,7 @@ class Simulation:
                                          np.empty((tile_px if token is not None else 0, ncols)))
                     buffers = local.buffers[:2]
                 geo, _ = scene_geometry_rows(scene, r0, r1, buffers)
+                keep_grid(geo, r0, r1, width, stride)
                 rot = np.zeros((0, 2)) if delta else samp.rotations(r0, r1, width)
                 if token is not None:  # the raw rows in the thread's buffer, finished there
                     out = local.buffers[2][: geo.shape[0]]

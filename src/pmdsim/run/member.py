@@ -348,13 +348,19 @@ def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder
     return result(m), m.ds
 
 
-def _passes_share(sim, smooth: bool) -> float:
+def _passes_share(sim, smooth: bool, mask) -> float:
     """The rays of all the sample sets of one render call (:meth:`Simulation.plan`) per
-    ``n_rays``: 1 + about 0.81 for a rule with its embedded rules, else 1."""
+    ``n_rays`` and surface pixel (``mask``): 1 + about 0.56 for a rule with its embedded
+    rule, + 0.25 for the second embedded rule on every pixel (on a large camera only on a
+    grid of them: :func:`pmdsim.render.rows.convergence_stride`), else 1."""
+    from ..render.rows import convergence_stride, grid_share
+
     passes = sim.plan(smooth)
     if sim.scene.brdf.is_delta or passes[0].mode != "rule":
         return 1.0
-    return sum(p.rule(sim._lobe).n for p in passes) / max(sim.scene.rays_per_pixel, 1)
+    cam = sim.scene.camera
+    return sum(p.rule(sim._lobe).n * grid_share(mask, convergence_stride(p, cam))
+               for p in passes) / max(sim.scene.rays_per_pixel, 1)
 
 
 def result(m: Member) -> RunResult:
@@ -364,11 +370,12 @@ def result(m: Member) -> RunResult:
     # share n_rays; the other modes render one set)
     from ..render import control
 
+    mask = m.geometry.surface_mask
     fringe_share = (control.rays_share(sim, m.fringes.sampling["mode"])
                     if m.fringes is not None and control.applies(sim)
-                    else _passes_share(sim, sim.fringes_smooth()))
+                    else _passes_share(sim, sim.fringes_smooth(), mask))
     n_calls = ((m.cfg.patterns.fringes is not None) * fringe_share
-               + (bool(m.dots) + (m.inputs[2] is not None)) * _passes_share(sim, False))
+               + (bool(m.dots) + (m.inputs[2] is not None)) * _passes_share(sim, False, mask))
     rays = sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel
     surface_pixels = int(m.geometry.surface_mask.sum())
     return RunResult(
