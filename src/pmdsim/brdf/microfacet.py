@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry import dot3
+
 
 def sample_slopes(u1, u2, alpha_x: float, alpha_y: float):
     """Gaussian slopes (a, b) of unit-square points (u1 in (0, 1], u2 in [0, 1))."""
@@ -42,23 +44,17 @@ def slope_density(a, b, alpha_x: float, alpha_y: float):
     return np.exp(-((a / alpha_x) ** 2 + (b / alpha_y) ** 2)) / (np.pi * alpha_x * alpha_y)
 
 
-def _dot3(a, b) -> np.ndarray:
-    """a . b over the last axis (length 3), summed in the order of ``np.sum(a * b, -1)``
-    (the same numbers) without its slow reduction over a short axis."""
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
-
-
 def micronormal(a, b) -> np.ndarray:
     """Unit micro-normals (..., 3) of slopes (a, b)."""
     a, b = np.broadcast_arrays(np.asarray(a, np.float64), np.asarray(b, np.float64))
     m = np.stack([-a, -b, np.ones_like(a)], axis=-1)
-    return m / np.sqrt(_dot3(m, m))[..., None]
+    return m / np.sqrt(dot3(m, m))[..., None]
 
 
 def reflect(i_local, m) -> np.ndarray:
     """o = 2 (i.m) m - i."""
     i_local = np.asarray(i_local, np.float64)
-    return 2.0 * _dot3(i_local, m)[..., None] * m - i_local
+    return 2.0 * dot3(i_local, m)[..., None] * m - i_local
 
 
 def sample_reflection(u1, u2, i_local, alpha_x: float, alpha_y: float) -> np.ndarray:
@@ -70,7 +66,7 @@ def sample_reflection(u1, u2, i_local, alpha_x: float, alpha_y: float) -> np.nda
 def half_vector(i_local, o_local):
     """Normalised half vector h = (i + o) / |i + o| (..., 3)."""
     h = np.asarray(i_local, np.float64) + np.asarray(o_local, np.float64)
-    n = np.sqrt(_dot3(h, h))[..., None]
+    n = np.sqrt(dot3(h, h))[..., None]
     return np.divide(h, n, out=np.zeros_like(h), where=n > 0)
 
 
@@ -82,6 +78,6 @@ def reflection_pdf(i_local, o_local, alpha_x: float, alpha_y: float) -> np.ndarr
     h = half_vector(i_local, o_local)
     ok = (i_local[..., 2] > 0) & (o_local[..., 2] > 0)
     hz = np.where(ok, h[..., 2], 1.0)
-    ih = np.where(ok, _dot3(i_local, h), 1.0)
+    ih = np.where(ok, dot3(i_local, h), 1.0)
     p = slope_density(-h[..., 0] / hz, -h[..., 1] / hz, alpha_x, alpha_y) / (hz**3 * 4.0 * ih)
     return np.where(ok, p, 0.0)

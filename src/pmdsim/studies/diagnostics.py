@@ -45,7 +45,7 @@ from typing import Sequence
 import numpy as np
 
 from ..brdf import lobe_weight
-from ..geometry import dot, normalize
+from ..geometry import dot, dot3, normalize
 from ..scene.sampling import fibonacci_lattice
 
 CONE_ESTIMATORS = ("paper", "weighted_mean")
@@ -214,8 +214,7 @@ def lobe_energy(brdf, i_local: np.ndarray, theta_max: float | Sequence[float],
         o = brdf.sample(u1[None], u2[None], i)  # (c, M, 3)
         w = lobe_weight(brdf, np.broadcast_to(i, o.shape), o)  # (c, M)
         p = i * np.array([-1.0, -1.0, 1.0])
-        cos_p = o[..., 0] * p[..., 0] + o[..., 1] * p[..., 1] + o[..., 2] * p[..., 2]
-        ang = np.arccos(np.clip(cos_p, -1.0, 1.0))  # angle to P
+        ang = np.arccos(np.clip(dot3(o, p), -1.0, 1.0))  # angle to P
         total = w.sum(-1)
         albedo[idx] = total / n_samples
         for t, th in enumerate(tmax):
