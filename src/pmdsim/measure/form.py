@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from .integrate import _lstsq, _radial, _term_columns, zernike_noll_index
+from .integrate import _lstsq, _radial, _solve_normal, _term_columns, zernike_noll_index
 
 __all__ = [
     "FormSpec",
@@ -204,12 +204,10 @@ def zernike_tables(values, u, v, tables, removed=(), block: int = TABLE_BLOCK) -
     are built from one :class:`_Basis` of the block and added into that table's normal
     equations (``A^T A``, ``A^T b``: n_terms^2 numbers), so no (points, n_terms) matrix
     exists (on a 1.3 MP map two 37-term matrices were 0.77 GB). Solved as
-    :func:`pmdsim.measure.integrate._lstsq` solves (Cholesky of the normal matrix); where
-    that matrix is not positive definite (fewer distinct points than terms) the full
-    matrix is built and solved by ``lstsq``, as there. Fewer points than a table's terms:
-    that table is empty."""
-    import scipy.linalg
-
+    :func:`pmdsim.measure.integrate._lstsq` solves (:func:`~pmdsim.measure.integrate.
+    _solve_normal`: Cholesky of the normal matrix; where it is not positive definite, fewer
+    distinct points than terms, the full matrix is built and solved by ``lstsq``). Fewer
+    points than a table's terms: that table is empty."""
     b = np.asarray(values, np.float64).ravel()
     u = np.asarray(u, np.float64).ravel()
     v = np.asarray(v, np.float64).ravel()
@@ -232,10 +230,7 @@ def zernike_tables(values, u, v, tables, removed=(), block: int = TABLE_BLOCK) -
         if b.size < len(idx):  # fewer points than terms: no table
             out.append([])
             continue
-        try:
-            coef = scipy.linalg.solve(g, r, assume_a="pos")
-        except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
-            coef = np.linalg.lstsq(zernike_columns(order, len(idx), u, v)[1], b, rcond=None)[0]
+        coef = _solve_normal(g, r, lambda: (zernike_columns(order, len(idx), u, v)[1], b))
         out.append([{"index": j, "n": n, "m": mm, "coefficient": float(k),
                      "removed": (n, mm) in gone} for (j, n, mm), k in zip(idx, coef)])
     return out

@@ -68,12 +68,19 @@ def _lstsq(a, b):
     well conditioned (orthogonal bases, scaled coordinates), and LAPACK's QR/SVD drivers
     are needlessly slow on tall matrices with threaded BLAS. Falls back to lstsq when the
     normal matrix is not positive definite."""
+    return _solve_normal(a.T @ a, a.T @ b, lambda: (a, b))
+
+
+def _solve_normal(ata, atb, full):
+    """The least-squares solution from its normal equations ``ata x = atb`` (Cholesky);
+    where ``ata`` is not positive definite, ``lstsq`` of the full system ``full()`` ->
+    ``(a, b)``, built only then."""
     import scipy.linalg
 
-    ata = a.T @ a
     try:
-        return scipy.linalg.solve(ata, a.T @ b, assume_a="pos")
+        return scipy.linalg.solve(ata, atb, assume_a="pos")
     except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
+        a, b = full()
         return np.linalg.lstsq(a, b, rcond=None)[0]
 
 
