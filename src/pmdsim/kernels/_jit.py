@@ -8,10 +8,67 @@ compilation.
 
 from __future__ import annotations
 
-import numba
-from numba.core import cgutils, types
-from numba.core.imputils import impl_ret_borrowed
-from numba.extending import intrinsic
+import os
+import sys
+
+#: CPUs (LLVM's names) whose 512-bit vector instructions run the render's ray loops faster
+#: than two 256-bit ones: AVX-512 without the clock penalty of the first generation
+#: (Skylake-X, Cascade Lake), on which LLVM's default, 256-bit vectors, stays.
+WIDE_VECTOR_CPUS = frozenset({
+    "icelake-client", "icelake-server", "tigerlake", "rocketlake", "sapphirerapids",
+    "emeraldrapids", "graniterapids", "graniterapids-d", "diamondrapids", "znver4", "znver5"})
+
+
+def wide_vector_features() -> str | None:
+    """The Numba CPU feature string that lets LLVM vectorise with 512-bit registers (the
+    host's features plus ``-prefer-256-bit``), or None to keep Numba's default.
+
+    LLVM vectorises for 256-bit registers even where the CPU has AVX-512 (the
+    ``prefer-256-bit`` tuning of its Intel targets: the first AVX-512 CPUs lowered their
+    clock for 512-bit instructions). The render's ray loops are bound by arithmetic, and on
+    the CPUs of :data:`WIDE_VECTOR_CPUS` 512-bit vectors run them about 1.5 x faster
+    (docs/performance.md, "512-bit vectors"). None where the user chose the features
+    (``NUMBA_CPU_FEATURES``, ``NUMBA_CPU_NAME``, ``NUMBA_ENABLE_AVX``), where
+    ``PMDSIM_VECTOR_BITS=256`` asks for the default, or where the CPU is not one of those.
+    The same features apply to every kernel, so a run's numbers depend on the CPU and this
+    setting as they depend on the CPU already (reassociated sums round differently with
+    other vector widths; within a process, and in the processes it starts, which inherit
+    the setting, the bytes stay the same)."""
+    if os.environ.get("PMDSIM_VECTOR_BITS", "").strip() == "256" or any(
+            name in os.environ for name in
+            ("NUMBA_CPU_FEATURES", "NUMBA_CPU_NAME", "NUMBA_ENABLE_AVX")):
+        return None
+    import llvmlite.binding as ll
+
+    try:
+        features = ll.get_host_cpu_features()
+    except RuntimeError:  # the host's features are unknown: Numba's default
+        return None
+    if not features.get("avx512f") or ll.get_host_cpu_name() not in WIDE_VECTOR_CPUS:
+        return None
+    return features.flatten() + ",-prefer-256-bit"
+
+
+def _use_wide_vectors() -> None:
+    """Sets ``NUMBA_CPU_FEATURES`` to :func:`wide_vector_features` before Numba is imported
+    (Numba reads it when its first kernel compiles; processes started from this one inherit
+    it), and in Numba's configuration if Numba was imported already. Where Numba made its
+    code generator before pmdsim was imported (a kernel of another package), that keeps
+    the features it started with: pmdsim's kernels then compile (and cache) for those."""
+    features = wide_vector_features()
+    if features is not None:
+        os.environ["NUMBA_CPU_FEATURES"] = features
+        config = sys.modules.get("numba.core.config")
+        if config is not None:  # Numba imported already: its config read the variable then
+            config.CPU_FEATURES = features
+
+
+_use_wide_vectors()
+
+import numba  # noqa: E402  (after the CPU features are set)
+from numba.core import cgutils, types  # noqa: E402
+from numba.core.imputils import impl_ret_borrowed  # noqa: E402
+from numba.extending import intrinsic  # noqa: E402
 
 JIT_OPTIONS = dict(nogil=True, cache=True, error_model="numpy")
 FAST_OPTIONS = dict(JIT_OPTIONS, fastmath=True)
