@@ -18,7 +18,9 @@ speed drifts by 10-20 % over minutes, so only one run's ratios mean something):
   waited for: ``RUSAGE_CHILDREN``), and the run's own stage table (``pmdsim-run.json``);
   the aims are <= 5 s wall and <= 6 CPU-s;
 - **same results**: every array of the first round's ``run.zarr`` and
-  ``statistics.json`` (less timings and dates) compared between the trees;
+  ``statistics.json`` (less timings and dates) compared between the trees, byte for byte
+  (a float array that differs is named with its largest difference relative to its largest
+  value: a change of the kernels' vector width changes rounding only);
 - **sweep example** (``examples/sweep_roughness.toml``, one process, synchronous
   scheduler): CPU-seconds in all and inside ``Simulation.render_fringes`` (the points'
   fringes and the specular references); overhead = the CPU outside the renders / all CPU
@@ -97,6 +99,10 @@ diff = sorted(set(ka) ^ set(kb))
 for k in sorted(set(ka) & set(kb)):
     x, y = za[k][...], zb[k][...]
     if x.dtype != y.dtype or x.shape != y.shape or x.tobytes() != y.tobytes():
+        if x.shape == y.shape and x.dtype.kind in "fc" and y.dtype.kind in "fc":
+            scale = np.nanmax(np.abs(x)) if np.isfinite(x).any() else 0.0
+            d = np.nanmax(np.abs(x.astype(np.complex128) - y)) if scale else float("nan")
+            k = f"{k} ({d / scale:.1e} of its largest value)" if scale else k
         diff.append(k)
 def strip(d):
     if isinstance(d, dict):
