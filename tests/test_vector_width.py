@@ -98,9 +98,9 @@ def test_the_render_does_not_depend_on_the_vector_width(tmp_path):
         out = tmp_path / f"{bits}.npz"
         env = {k: v for k, v in os.environ.items()
                if k not in ("NUMBA_CPU_FEATURES", "PMDSIM_VECTOR_BITS")}
-        env.update(PYTHONPATH=SRC, NUMBA_CACHE_DIR=str(tmp_path / f"cache-{bits}"))
-        if bits == "256":
-            env["PMDSIM_VECTOR_BITS"] = "256"
+        env["PYTHONPATH"] = SRC
+        if bits == "256":  # its own cache: compiled for 256-bit vectors in the test
+            env.update(PMDSIM_VECTOR_BITS="256", NUMBA_CACHE_DIR=str(tmp_path / "cache-256"))
         code = _RENDER.format(tests=str(Path(__file__).parent), out=str(out))
         p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                            text=True, timeout=900)
