@@ -3,7 +3,8 @@
 ``fast`` kernels may reassociate floating-point sums (``fastmath``) so that LLVM can
 vectorise reductions; every such kernel is checked against a NumPy reference in the tests.
 Compiled code is cached on disk (``cache=True``) so a second process does not pay for JIT
-compilation.
+compilation. On AVX-512 CPUs that run 512-bit instructions at full speed the kernels are
+compiled for 512-bit vectors (:func:`wide_vector_features`), set before Numba loads.
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ def wide_vector_features() -> str | None:
     LLVM vectorises for 256-bit registers even where the CPU has AVX-512 (the
     ``prefer-256-bit`` tuning of its Intel targets: the first AVX-512 CPUs lowered their
     clock for 512-bit instructions). The render's ray loops are bound by arithmetic, and on
-    the CPUs of :data:`WIDE_VECTOR_CPUS` 512-bit vectors run them about 1.5 x faster
-    (docs/performance.md, "512-bit vectors"). None where the user chose the features
+    the CPUs of :data:`WIDE_VECTOR_CPUS` 512-bit vectors run them 1.4-1.6 x faster on one
+    core, less with every core at once (docs/performance.md, "512-bit vectors"). None where the user chose the features
     (``NUMBA_CPU_FEATURES``, ``NUMBA_CPU_NAME``, ``NUMBA_ENABLE_AVX``), where
     ``PMDSIM_VECTOR_BITS=256`` asks for the default, or where the CPU is not one of those.
     The same features apply to every kernel, so a run's numbers depend on the CPU and this
@@ -51,8 +52,9 @@ def wide_vector_features() -> str | None:
 
 def _use_wide_vectors() -> None:
     """Sets ``NUMBA_CPU_FEATURES`` to :func:`wide_vector_features` before Numba is imported
-    (Numba reads it when its first kernel compiles; processes started from this one inherit
-    it), and in Numba's configuration if Numba was imported already. Where Numba made its
+    (Numba's configuration reads it as Numba loads, and its code generator takes the
+    features from there when the first function is decorated; processes started from this
+    one inherit it), and in Numba's configuration if Numba was imported already. Where Numba made its
     code generator before pmdsim was imported (a kernel of another package), that keeps
     the features it started with: pmdsim's kernels then compile (and cache) for those."""
     features = wide_vector_features()
