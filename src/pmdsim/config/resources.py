@@ -13,8 +13,13 @@ from .run import RunConfig
 
 # ----------------------------------------------------------------------------- resources
 #: Scattered rays per CPU-second of a whole run (geometry, rendering, decoding, diagnostics,
-#: writing and figures): the Fig. 3 example took 45 CPU-s for 1.3e8 rays (the kernels alone
-#: trace tens of millions per CPU-second, ``benchmarks/bench_render.py``).
+#: writing and figures), counted as :func:`estimate_resources` counts them. Measured
+#: 2026-12-02 on the 2-core machine, Fig. 3 (1.3 MP) with 16, 100 and 256 rays per pixel:
+#: 2.1e6, 1.1e7 and 2.4e7 (19.5, 23.0 and 26.4 CPU-s): at few rays per pixel the per-pixel
+#: work (decoding, reconstruction, writing, figures), not the rays, sets the time, so a
+#: rate near the low end keeps the estimate from falling far short (0.7 x the CPU time at
+#: 16 rays, 3.5 x at 100, 8 x at 256; the kernels alone trace 1e8 per CPU-second,
+#: ``benchmarks/bench_render.py``).
 RAYS_PER_CPU_SECOND = 3.0e6
 #: Resident memory of the interpreter with NumPy, Numba, xarray and Dask loaded.
 BASE_MEMORY_BYTES = 400 * 2**20
