@@ -17,7 +17,8 @@ import sys
 #: (Skylake-X, Cascade Lake), on which LLVM's default, 256-bit vectors, stays.
 WIDE_VECTOR_CPUS = frozenset({
     "icelake-client", "icelake-server", "tigerlake", "rocketlake", "sapphirerapids",
-    "emeraldrapids", "graniterapids", "graniterapids-d", "diamondrapids", "znver4", "znver5"})
+    "emeraldrapids", "graniterapids", "graniterapids-d", "diamondrapids", "znver4",
+    "znver5"})
 
 
 def wide_vector_features() -> str | None:
@@ -28,13 +29,13 @@ def wide_vector_features() -> str | None:
     ``prefer-256-bit`` tuning of its Intel targets: the first AVX-512 CPUs lowered their
     clock for 512-bit instructions). The render's ray loops are bound by arithmetic, and on
     the CPUs of :data:`WIDE_VECTOR_CPUS` 512-bit vectors run them 1.4-1.6 x faster on one
-    core, less with every core at once (docs/performance.md, "512-bit vectors"). None where the user chose the features
-    (``NUMBA_CPU_FEATURES``, ``NUMBA_CPU_NAME``, ``NUMBA_ENABLE_AVX``), where
-    ``PMDSIM_VECTOR_BITS=256`` asks for the default, or where the CPU is not one of those.
-    The same features apply to every kernel, so a run's numbers depend on the CPU and this
-    setting as they depend on the CPU already (reassociated sums round differently with
-    other vector widths; within a process, and in the processes it starts, which inherit
-    the setting, the bytes stay the same)."""
+    core, less with every core at once (docs/performance.md, "512-bit vectors"). None where
+    the user chose the features (``NUMBA_CPU_FEATURES``, ``NUMBA_CPU_NAME``,
+    ``NUMBA_ENABLE_AVX``), where ``PMDSIM_VECTOR_BITS=256`` asks for the default, or where
+    the CPU is not one of those. The same features apply to every kernel, so a run's numbers
+    depend on the CPU and this setting as they depend on the CPU already (reassociated sums
+    round differently with other vector widths; within a process, and in the processes it
+    starts, which inherit the setting, the bytes stay the same)."""
     if os.environ.get("PMDSIM_VECTOR_BITS", "").strip() == "256" or any(
             name in os.environ for name in
             ("NUMBA_CPU_FEATURES", "NUMBA_CPU_NAME", "NUMBA_ENABLE_AVX")):
@@ -54,9 +55,10 @@ def _use_wide_vectors() -> None:
     """Sets ``NUMBA_CPU_FEATURES`` to :func:`wide_vector_features` before Numba is imported
     (Numba's configuration reads it as Numba loads, and its code generator takes the
     features from there when the first function is decorated; processes started from this
-    one inherit it), and in Numba's configuration if Numba was imported already. Where Numba made its
-    code generator before pmdsim was imported (a kernel of another package), that keeps
-    the features it started with: pmdsim's kernels then compile (and cache) for those."""
+    one inherit it), and in Numba's configuration if Numba was imported already. Where Numba
+    made its code generator before pmdsim was imported (a kernel of another package), that
+    keeps the features it started with: pmdsim's kernels then compile (and cache) for
+    those."""
     features = wide_vector_features()
     if features is not None:
         os.environ["NUMBA_CPU_FEATURES"] = features
