@@ -101,8 +101,9 @@ for k in sorted(set(ka) & set(kb)):
     if x.dtype != y.dtype or x.shape != y.shape or x.tobytes() != y.tobytes():
         if x.shape == y.shape and x.dtype.kind in "fc" and y.dtype.kind in "fc":
             scale = np.nanmax(np.abs(x)) if np.isfinite(x).any() else 0.0
-            d = np.nanmax(np.abs(x.astype(np.complex128) - y)) if scale else float("nan")
-            k = f"{k} ({d / scale:.1e} of its largest value)" if scale else k
+            if scale:
+                d = np.nanmax(np.abs(x.astype(np.complex128) - y))
+                k = f"{k} ({d / scale:.1e} of its largest value)"
         diff.append(k)
 def strip(d):
     if isinstance(d, dict):
