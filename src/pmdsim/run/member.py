@@ -377,7 +377,7 @@ def result(m: Member) -> RunResult:
     n_calls = ((m.cfg.patterns.fringes is not None) * fringe_share
                + (bool(m.dots) + (m.inputs[2] is not None)) * _passes_share(sim, False, mask))
     rays = sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel
-    surface_pixels = int(m.geometry.surface_mask.sum())
+    surface_pixels = int(mask.sum())
     return RunResult(
         outdir=m.folder, dataset_path=m.folder / DATASET_NAME,
         image_paths=tuple(m.image_paths), figure_paths=tuple(m.figure_paths),
