@@ -22,6 +22,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "pmdsim"
 LAYERS = {
     "kernels": 0,
     "_version": 1, "config": 1, "geometry": 1, "patterns": 1, "imagefile": 1, "topofile": 1,
+    "quantiles": 1,
     "brdf": 2,
     "scene": 3,
     "trace": 4,

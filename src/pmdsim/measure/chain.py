@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..quantiles import median
 from . import deviation as analysis
 from . import decode as dec
 
@@ -284,7 +285,7 @@ def _flag_counts(flags: np.ndarray, where: np.ndarray) -> dict:
 def _median(a) -> float | None:
     a = np.asarray(a, np.float64)
     a = a[np.isfinite(a)]
-    return float(np.median(a)) if a.size else None
+    return median(a, overwrite=True) if a.size else None
 
 
 def statistics(chain: ChainResult, name: str) -> dict:

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..quantiles import percentile
+
 
 def wrap(phase: np.ndarray) -> np.ndarray:
     """Wrap phases (rad) to (-pi, pi]."""
@@ -72,7 +74,7 @@ def deviation_stats(deviation: np.ndarray, valid: np.ndarray, considered: np.nda
         mean=float(d.mean()),
         rms=float(np.sqrt(np.mean(d**2))),
         std=float(d.std()),
-        p95=float(np.percentile(a, 95)),
+        p95=percentile(a, 95, overwrite=True),
         max=float(a.max()),
         n_valid=n,
         n_masked=max(n_cons - n, 0),

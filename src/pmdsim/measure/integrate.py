@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft
 
+from ..quantiles import percentile
 # the solvers moved to poisson; _OPERATORS and the DCT helpers are re-exported for the tests
 from .poisson import (  # noqa: F401
     _OPERATORS, _dct_eigenvalues, _dct_poisson, _neumann_tridiagonal_solve,
@@ -505,4 +506,4 @@ def height_stats(values, mask=None) -> HeightStats:
     if not m.any():
         return HeightStats(float("nan"), float("nan"), float("nan"), 0)
     d = v[m] - v[m].mean()
-    return HeightStats(float(np.sqrt(np.mean(d * d))), float(np.ptp(v[m])), float(np.percentile(np.abs(d), 95)), int(m.sum()))
+    return HeightStats(float(np.sqrt(np.mean(d * d))), float(np.ptp(v[m])), percentile(np.abs(d), 95, overwrite=True), int(m.sum()))

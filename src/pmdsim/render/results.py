@@ -8,6 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..quantiles import median, percentile
+
 
 def phase_error(sums: np.ndarray, sums_err: np.ndarray, kind: str | None,
                 convergence: np.ndarray | None = None) -> np.ndarray:
@@ -157,8 +159,8 @@ def convergence_of_ratios(ratio: np.ndarray, a1: np.ndarray, exponent: float) ->
         ok = np.isfinite(r) & np.isfinite(a)
         if not ok.any():
             continue
-        q = min(1.0, float(np.median(r[ok])) ** exponent)
-        if CONVERGENCE_SAFETY * q < 1.0 and float(np.median(a[ok])) <= ASYMPTOTIC_DIFFERENCE:
+        q = min(1.0, median(r[ok], overwrite=True) ** exponent)
+        if CONVERGENCE_SAFETY * q < 1.0 and median(a[ok], overwrite=True) <= ASYMPTOTIC_DIFFERENCE:
             out[idx] = q
     return out
 
@@ -183,7 +185,7 @@ def worst_phase_error(fr, min_modulation: float = 0.05) -> float | None:
         for wi in range(pe.shape[1]):
             a = pe[di, wi][np.isfinite(pe[di, wi]) & (mod[di, wi] >= min_modulation)]
             if a.size:
-                p = float(np.percentile(a, 95))
+                p = percentile(a, 95, overwrite=True)
                 worst = p if worst is None else max(worst, p)
     return worst
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from ..config import InputError, MissingInputError
 from ..measure import decode as dec
+from ..quantiles import median
 from . import files as pio
 
 DATASET_NAME = "decode.zarr"
@@ -169,7 +170,7 @@ def _stats(res: dec.DecodeResult, setup: DecodeSetup) -> dict:
     for m in res.modulation:
         a = np.asarray(m, np.float64)[valid]
         a = a[np.isfinite(a)]
-        med.append(float(np.median(a)) if a.size else None)
+        med.append(median(a, overwrite=True) if a.size else None)
     return {
         "pixels": n,
         "valid": int(valid.sum()),

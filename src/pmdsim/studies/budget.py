@@ -51,6 +51,7 @@ from ..measure.form import FormSpec, remove_form
 from ..measure.numerical import exceeds
 from ..measure.integrate import height_stats
 from ..measure.reconstruct import Reconstruction, reconstruct
+from ..quantiles import percentile
 from ..render import Simulation
 from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
@@ -391,7 +392,7 @@ def _about_zero(a) -> tuple[float, float]:
     f = np.abs(a[np.isfinite(a)])
     if not f.size:
         return float("nan"), float("nan")
-    return float(np.sqrt(np.mean(f * f))), float(np.percentile(f, 95))
+    return float(np.sqrt(np.mean(f * f))), percentile(f, 95, overwrite=True)
 
 
 def height_row(effect: str, label: str, part: str, err: HeightError, seconds: float = 0.0,

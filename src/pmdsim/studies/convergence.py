@@ -43,6 +43,7 @@ import numpy as np
 from ..config import InputError, RunConfig
 from ..measure.decode import phase_shift
 from ..measure.deviation import wrap
+from ..quantiles import percentile
 from ..render import Simulation
 from ..scene import Scene
 
@@ -103,7 +104,7 @@ def _stats(dev: np.ndarray, valid: np.ndarray):
     if d.size == 0:
         return float("nan"), float("nan"), float("nan")
     return (float(np.sqrt(np.mean(d * d))), float(np.mean(d)),
-            float(np.percentile(np.abs(d), 95)))
+            percentile(np.abs(d), 95, overwrite=True))
 
 
 @dataclass(frozen=True)

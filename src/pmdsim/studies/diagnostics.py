@@ -46,6 +46,7 @@ import numpy as np
 
 from ..brdf import lobe_weight
 from ..geometry import dot, dot3, normalize
+from ..quantiles import percentile
 from ..scene.sampling import fibonacci_lattice
 
 CONE_ESTIMATORS = ("paper", "weighted_mean")
@@ -537,7 +538,7 @@ class Diagnostics:
 def _pct(a, q):
     a = np.asarray(a, np.float64)
     a = a[np.isfinite(a)]
-    return float(np.percentile(a, q)) if a.size else float("nan")
+    return percentile(a, q, overwrite=True) if a.size else float("nan")
 
 
 def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[str] = ("x", "y"),

@@ -1,0 +1,76 @@
+"""Percentiles and medians of large samples: NumPy's numbers, in a fifth of the time.
+
+``np.percentile(a, q)`` (method ``"linear"``) partitions a copy of the sample at four
+indices at once (0, -1 and the two neighbours of the virtual index ``(n - 1) q / 100``),
+and ``np.median`` at three; NumPy's introselect takes 20-27 ms for that on the 1.3 M
+values of a Fig. 3 map, against 4 ms for one partition. The chain takes some 40 such
+statistics per run. :func:`percentile` and :func:`median` partition the sample once, in
+place, at the lower neighbour, take the upper one as the minimum of the part above it,
+and interpolate with NumPy's own formula (``_lerp``: ``a + (b - a) t``, or ``b - (b - a)
+(1 - t)`` for ``t >= 0.5``): the same order statistics and the same arithmetic, so the
+same bits as NumPy (``tests/test_quantiles.py`` compares them bit for bit).
+
+Only 1-D float64 samples take the fast path; anything else is handed to NumPy.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _sample(a, overwrite: bool) -> np.ndarray | None:
+    """``a`` as a 1-D float64 array the caller lets us reorder, or None for NumPy."""
+    arr = np.asarray(a)
+    if arr.dtype != np.float64:
+        return None
+    arr = arr.ravel()  # a view where it can be: reordered in place with overwrite
+    return arr if overwrite and arr.flags.writeable else arr.copy()
+
+
+def percentile(a, q: float, *, overwrite: bool = False) -> float:
+    """``np.percentile(a, q)`` (method ``"linear"``, over all values) as a float, the same
+    bits. ``overwrite``: ``a`` may be reordered (no copy). NaN where ``a`` holds a NaN;
+    ``a`` must not be empty."""
+    s = _sample(a, overwrite)
+    if s is None:
+        return float(np.percentile(a, q))
+    n = s.size
+    if n == 0:
+        raise ValueError("percentile of an empty sample")
+    if not 0 <= q <= 100:
+        raise ValueError(f"percentile: q must be within [0, 100], got {q}")
+    if np.isnan(s).any():
+        return math.nan
+    qf = np.true_divide(q, 100)  # as NumPy: q / 100 in float64, then the virtual index
+    virtual = (n - 1) * qf
+    if virtual >= n - 1:  # NumPy takes the last value for both neighbours
+        return float(s.max())
+    lo = int(np.floor(virtual))
+    gamma = virtual - np.float64(lo)
+    s.partition(lo)
+    a_lo = s[lo]
+    a_hi = s[lo + 1:].min()
+    diff = a_hi - a_lo
+    if gamma >= 0.5:
+        return float(a_hi - diff * (1 - gamma))
+    return float(a_lo + diff * gamma)
+
+
+def median(a, *, overwrite: bool = False) -> float:
+    """``np.median(a)`` (over all values) as a float, the same bits. ``overwrite``: ``a``
+    may be reordered (no copy). NaN where ``a`` holds a NaN; ``a`` must not be empty."""
+    s = _sample(a, overwrite)
+    if s is None:
+        return float(np.median(a))
+    n = s.size
+    if n == 0:
+        raise ValueError("median of an empty sample")
+    if np.isnan(s).any():
+        return math.nan
+    k = (n - 1) // 2
+    s.partition(k)
+    if n % 2:
+        return float(s[k])
+    return float((s[k] + s[k + 1:].min()) / 2.0)
