@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 import pytest
 
-from pmdsim.quantiles import median, percentile
+from pmdsim.quantiles import median, nanmedian, percentile
 
 SIZES = [*range(1, 40), 64, 101, 1000, 1001, 65536, 65537]
 QS = (0, 1, 5, 25, 33.3, 50, 75, 95, 99, 99.5, 100)
@@ -20,10 +21,12 @@ def _samples(rng, n):
     yield np.abs(rng.standard_cauchy(n))
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("n", SIZES)
-def test_same_bits_as_numpy(n):
+def test_same_bits_as_numpy(n, dtype):
     rng = np.random.default_rng(n)
     for a in _samples(rng, n):
+        a = a.astype(dtype)
         keep = a.copy()
         for q in QS:
             assert percentile(a, q) == float(np.percentile(keep, q)), (n, q)
@@ -53,7 +56,20 @@ def test_nan_empty_and_other_types():
         median(np.zeros(0))
     with pytest.raises(ValueError, match="within"):
         percentile(np.ones(3), 101)
-    f32 = np.random.default_rng(3).random(1001).astype(np.float32)  # NumPy's own path
-    assert percentile(f32, 95) == float(np.percentile(f32, 95))
-    ints = np.arange(10)
+    ints = np.arange(10)  # NumPy's own path
     assert median(ints) == 4.5 and percentile(ints, 95) == float(np.percentile(ints, 95))
+
+
+def test_nanmedian_same_bits_as_numpy():
+    rng = np.random.default_rng(11)
+    for n, dtype in itertools.product((1, 2, 3, 10, 101, 1000, 4097), (np.float64, np.float32)):
+        a = rng.normal(size=n).astype(dtype)
+        a[rng.random(n) < 0.3] = np.nan
+        if n > 3:
+            a[1], a[2] = np.inf, -np.inf  # infinities are values, as in NumPy
+        m = a.reshape(-1, 1) if n % 2 else a  # any shape: over all values
+        if np.isnan(a).all():
+            assert math.isnan(nanmedian(m))
+        else:
+            assert nanmedian(m) == float(np.nanmedian(m)), n
+    assert math.isnan(nanmedian(np.full(5, np.nan)))

@@ -10,7 +10,8 @@ and interpolate with NumPy's own formula (``_lerp``: ``a + (b - a) t``, or ``b -
 (1 - t)`` for ``t >= 0.5``): the same order statistics and the same arithmetic, so the
 same bits as NumPy (``tests/test_quantiles.py`` compares them bit for bit).
 
-Only 1-D float64 samples take the fast path; anything else is handed to NumPy.
+Only float32 and float64 samples take the fast path (taken over all their values, as NumPy
+without an ``axis``); anything else is handed to NumPy.
 """
 
 from __future__ import annotations
@@ -20,10 +21,14 @@ import math
 import numpy as np
 
 
+#: The types of the fast path (the arithmetic stays in the sample's type, as NumPy's).
+FLOATS = (np.float32, np.float64)
+
+
 def _sample(a, overwrite: bool) -> np.ndarray | None:
-    """``a`` as a 1-D float64 array the caller lets us reorder, or None for NumPy."""
+    """``a`` as a 1-D float32/float64 array the caller lets us reorder, or None for NumPy."""
     arr = np.asarray(a)
-    if arr.dtype != np.float64:
+    if arr.dtype not in FLOATS:
         return None
     arr = arr.ravel()  # a view where it can be: reordered in place with overwrite
     return arr if overwrite and arr.flags.writeable else arr.copy()
@@ -48,7 +53,7 @@ def percentile(a, q: float, *, overwrite: bool = False) -> float:
     if virtual >= n - 1:  # NumPy takes the last value for both neighbours
         return float(s.max())
     lo = int(np.floor(virtual))
-    gamma = virtual - np.float64(lo)
+    gamma = float(virtual - lo)  # a Python float (NumPy's for a Python q): the sample's type
     s.partition(lo)
     a_lo = s[lo]
     a_hi = s[lo + 1:].min()
@@ -73,4 +78,15 @@ def median(a, *, overwrite: bool = False) -> float:
     s.partition(k)
     if n % 2:
         return float(s[k])
-    return float((s[k] + s[k + 1:].min()) / 2.0)
+    return float((s[k] + s[k + 1:].min()) / s.dtype.type(2))  # NumPy's mean of the two
+
+
+def nanmedian(a) -> float:
+    """``np.nanmedian(a)`` (over all values) as a float, the same bits: the median of the
+    values that are not NaN (infinities count), NaN where all are (without NumPy's
+    warning)."""
+    arr = np.asarray(a)
+    if arr.dtype not in FLOATS:
+        return float(np.nanmedian(a))
+    kept = arr[~np.isnan(arr)]  # a copy: reordered in place
+    return median(kept, overwrite=True) if kept.size else math.nan

@@ -11,6 +11,7 @@ import numpy as np
 from matplotlib.colors import to_rgba
 from matplotlib.patches import Patch
 
+from ..quantiles import percentile as quantile_of
 from .scene import camera_axes as _image_axes  # noqa: F401  (the maps' axes)
 from .scene import imshow
 
@@ -99,7 +100,7 @@ def symmetric_limit(arrays, percentile: float = 99.5) -> float:
         a = np.abs(np.asarray(a, np.float64))
         a = a[np.isfinite(a)]
         if a.size:
-            vals.append(np.percentile(a, percentile))
+            vals.append(quantile_of(a, percentile, overwrite=True))
     lim = max(vals) if vals else 0.0
     return _nice(lim) if lim > 0 else 1e-6
 

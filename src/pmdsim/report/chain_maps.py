@@ -9,6 +9,7 @@ import numpy as np
 from matplotlib.colors import ListedColormap
 from matplotlib.patches import Patch
 
+from ..quantiles import nanmedian
 from .scene import _figure, _save, imshow
 from .chain_common import (
     CLASS_COLOURS, DEVIATIONS, DEV_CMAP, DIR_COLOURS, FLAG_COLOURS, VS_EXACT, VS_MIRROR,
@@ -133,7 +134,7 @@ def plot_modulation_ratio(ds, path, name: str | None = None) -> Path:
             ax = axes[i, j]
             im = imshow(ax, r, cmap="viridis", vmin=0.0, vmax=1.0, interpolation="nearest")
             ax.set_facecolor(CLASS_COLOURS["no valid reference"])
-            med = np.nanmedian(r) if np.isfinite(r).any() else np.nan
+            med = nanmedian(r) if np.isfinite(r).any() else np.nan
             below = int(np.count_nonzero(r < thr))
             ax.set_title(f"{name}: {d.upper()}, width {wd:g} monitor px\nmedian ratio {med:.3f}; "
                          f"{below:,} px < {thr:g}", fontsize=8)
@@ -220,7 +221,7 @@ def plot_decoded(ds, folder) -> list[Path]:
         m = ds["modulation"].sel(width=wd).values
         im = imshow(ax, m, cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
         ax.set_title(f"{d} modulation B/A, width {wd:g} px\nmedian "
-                     f"{_g(np.nanmedian(m) if np.isfinite(m).any() else np.nan)}", fontsize=8)
+                     f"{_g(nanmedian(m) if np.isfinite(m).any() else np.nan)}", fontsize=8)
         _image_axes(ax)
     fig.colorbar(im, ax=list(axes), shrink=0.85, extend="max").set_label("modulation B/A (1)",
                                                                        fontsize=8)

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.ticker import FixedLocator, MaxNLocator
 
+from ..quantiles import nanmedian
 from .scene import _axes_at, _figure, _fixed_figure, _save, imshow
 from .chain_common import (
     CLASS_COLOURS, DEV_CMAP, DIR_COLOURS, OVERVIEW_DPI, VS_EXACT, VS_MIRROR, _dirs, _g,
@@ -62,7 +63,7 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
         last["m"] = (ax, im)
         ax.set_facecolor(CLASS_COLOURS["no valid reference"])
         ax.set_title(f"{name}: {d.upper()} modulation ratio (width {fine:g} px)\nmedian "
-                     f"{_g(np.nanmedian(r) if np.isfinite(r).any() else np.nan)}", fontsize=9)
+                     f"{_g(nanmedian(r) if np.isfinite(r).any() else np.nan)}", fontsize=9)
         _image_axes(ax)
         cols = ((maps[i], "vs mirror (= exact point)" if same else VS_MIRROR, "coord_px", lim),
                 (slope[i], "3-D", "slope_urad", slim) if same else

@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 
+from ..quantiles import percentile
 from .scene import _axes_at, _fixed_figure
 from .text import value_pm as _pm
 
@@ -16,7 +17,7 @@ CMAP = "RdBu_r"
 
 def _limit(a):
     f = np.abs(a[np.isfinite(a)])
-    return float(np.percentile(f, 99.5)) if f.size else 1.0
+    return percentile(f, 99.5, overwrite=True) if f.size else 1.0
 
 
 def plot_surface_errors(ds, name: str = "", description: str = ""):

@@ -24,6 +24,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 from matplotlib.ticker import MaxNLocator
 
+from ..quantiles import nanmedian
 from ..trace import trace_primary
 
 DPI = 130
@@ -353,7 +354,7 @@ def plot_fringe_images(ds, path: str | Path, width: float | None = None, shift: 
     im = None
     for ax, d, img in zip(axes, dirs, imgs):
         im = imshow(ax, img, cmap="gray", vmin=0.0, vmax=vmax, interpolation="nearest")
-        mod = np.nanmedian(_modulation(ds, d, width))
+        mod = nanmedian(_modulation(ds, d, width))
         ax.set_title(f"{d.upper()} fringes, width {width:g} monitor px, shift {delta:.2f} rad\n"
                      f"median modulation {mod:.2f}", fontsize=10)
         camera_axes(ax, 10)
@@ -377,7 +378,7 @@ def plot_modulation(ds, path: str | Path) -> Path:
             mod = _modulation(ds, d, wd)
             ax = axes[i, j]
             im = imshow(ax, mod, cmap="viridis", vmin=0.0, vmax=1.0, interpolation="nearest")
-            ax.set_title(f"{d.upper()}, width {wd:g} px: median {np.nanmedian(mod):.3f}",
+            ax.set_title(f"{d.upper()}, width {wd:g} px: median {nanmedian(mod):.3f}",
                          fontsize=9)
             camera_axes(ax)
     fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="modulation B/A")
@@ -408,7 +409,7 @@ def plot_variant_fringes(datasets: dict, path: str | Path, descriptions: dict | 
         for j, (d, img) in enumerate(zip(dirs, imgs)):
             ax = axes[i, j]
             im = imshow(ax, img, cmap="gray", vmin=0.0, vmax=vmax, interpolation="nearest")
-            mod = np.nanmedian(_modulation(ds, d, width))
+            mod = nanmedian(_modulation(ds, d, width))
             ax.set_title(f"{name}: {d.upper()} fringes, width {width:g} px\n"
                          f"median modulation {mod:.2f}", fontsize=9)
             camera_axes(ax)
