@@ -39,7 +39,7 @@ from . import files as pio
 from .dataset import (CONFIG_NAME, DATASET_NAME, assign_to_dataset, build_dataset,
                       dot_dataset_variables)
 from .diagnostics import diagnose_run
-from .figures import FigureSchedule, import_in_background
+from .figures import FigureSchedule, dataset_imported, import_in_background
 from .result import RunResult, _Steps, draw_safely
 from .writing import DatasetWriter
 
@@ -153,6 +153,7 @@ def describe_error(sampling: dict | None) -> str:
 def dataset(m: Member) -> None:
     """The run's dataset from the rendered arrays (the writer starts on it after this
     step), and the image files, written by a thread while the chain runs."""
+    dataset_imported()  # xarray, imported while the render ran
     cfg, out, sensor = m.cfg, m.cfg.output, m.sensor
     _, image_files, _, _ = m.inputs
     stacks = [a for a in (None if m.fringes is None else m.fringes.images, m.dot_images,
@@ -325,8 +326,9 @@ def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder
             ThreadPoolExecutor(1, thread_name_prefix="pmdsim-images"))
         m.writer = DatasetWriter(folder / DATASET_NAME)
         stack.callback(m.writer.close)
+        # xarray (and matplotlib with figures), while the render runs without the GIL
+        import_in_background(figures=plan.figures)
         if plan.figures:
-            import_in_background()  # matplotlib, while the render runs without the GIL
             m.figures = FigureSchedule(
                 cfg.output.figure_set, reference is not None and cfg.patterns.fringes is not None,
                 folder / "figures", cfg.name, description(cfg), sim, cfg.output.figure_workers,
