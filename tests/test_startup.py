@@ -38,19 +38,22 @@ def test_cli_help_imports_no_heavy_package():
     assert _imported(code) == []
 
 
-def test_a_run_without_figures_never_imports_matplotlib(tmp_path):
+def _small_run(tmp_path) -> str:
+    """Python source that runs the tests' small configuration into ``tmp_path/run``
+    without figures (its result: ``res``)."""
     from conftest import base_dict
 
     cfg = tmp_path / "cfg.json"
     cfg.write_text(json.dumps(base_dict()))
-    code = (
-        "import json\n"
-        "from pmdsim.config import parse_config\n"
-        "from pmdsim.run import run_simulation\n"
-        f"cfg = parse_config(json.loads(open({str(cfg)!r}).read()))\n"
-        f"res = run_simulation(cfg, {str(tmp_path / 'run')!r}, figures=False)\n"
-        "assert res.figure_paths == ()\n")
-    imported = _imported(code)
+    return ("import json\n"
+            "from pmdsim.config import parse_config\n"
+            "from pmdsim.run import run_simulation\n"
+            f"cfg = parse_config(json.loads(open({str(cfg)!r}).read()))\n"
+            f"res = run_simulation(cfg, {str(tmp_path / 'run')!r}, figures=False)\n")
+
+
+def test_a_run_without_figures_never_imports_matplotlib(tmp_path):
+    imported = _imported(_small_run(tmp_path) + "assert res.figure_paths == ()\n")
     assert "numba" in imported and "xarray" in imported  # it did run
     assert "matplotlib" not in imported
 
@@ -58,23 +61,14 @@ def test_a_run_without_figures_never_imports_matplotlib(tmp_path):
 def test_a_run_imports_xarray_in_its_background_thread(tmp_path):
     """The dataset's modules are imported by the run's import thread while the render runs,
     never by the run's own thread on its critical path (the dataset step waits for them)."""
-    from conftest import base_dict
-
-    cfg = tmp_path / "cfg.json"
-    cfg.write_text(json.dumps(base_dict()))
-    code = (
-        "import json, sys, threading\n"
-        "first = {}\n"
-        "class Probe:\n"
-        "    def find_spec(self, name, path=None, target=None):\n"
-        "        if name in ('xarray', 'zarr') and name not in first:\n"
-        "            first[name] = threading.current_thread().name\n"
-        "        return None\n"
-        "sys.meta_path.insert(0, Probe())\n"
-        "from pmdsim.config import parse_config\n"
-        "from pmdsim.run import run_simulation\n"
-        f"cfg = parse_config(json.loads(open({str(cfg)!r}).read()))\n"
-        f"run_simulation(cfg, {str(tmp_path / 'run')!r}, figures=False)\n"
-        "assert first == {'xarray': 'pmdsim-imports', 'zarr': 'pmdsim-imports'}, first\n")
-    imported = _imported(code)
+    probe = ("import sys, threading\n"
+             "first = {}\n"
+             "class Probe:\n"
+             "    def find_spec(self, name, path=None, target=None):\n"
+             "        if name in ('xarray', 'zarr') and name not in first:\n"
+             "            first[name] = threading.current_thread().name\n"
+             "        return None\n"
+             "sys.meta_path.insert(0, Probe())\n")
+    check = "assert first == {'xarray': 'pmdsim-imports', 'zarr': 'pmdsim-imports'}, first\n"
+    imported = _imported(probe + _small_run(tmp_path) + check)
     assert "xarray" in imported and "matplotlib" not in imported
