@@ -29,6 +29,7 @@ import threading
 from pathlib import Path
 
 from .dataset import DATASET_NAME
+from .imports import imports_done
 
 #: Every per-run figure: name -> (file, needs) with needs "fringes" (fringe images in the
 #: dataset), "chain" (the measurement chain's variables), "reconstruction" (slope and
@@ -203,51 +204,6 @@ def can_fork() -> bool:
     return sys.platform.startswith("linux")
 
 
-_IMPORTS: threading.Thread | None = None
-_DATASET_IMPORTED = threading.Event()
-
-
-def import_in_background(figures: bool = True) -> None:
-    """Import, in one thread while the run renders (its kernels release the GIL), what the
-    run imports after the render: xarray and zarr's codecs for the dataset (0.7 CPU-s that
-    the dataset step otherwise spent on the run's critical path, on one core, right after
-    the render), then, with ``figures``, matplotlib and the figure modules, so that neither
-    the run nor the drawing processes wait for them. One thread, so that no module is
-    imported by two threads at once; the dataset step waits for its part alone
-    (:func:`dataset_imported`). Started once per process: the first run decides whether
-    the figure modules are among them (a later run imports them where it draws)."""
-    global _IMPORTS
-    if _IMPORTS is None:
-        def work():
-            try:
-                import zarr.codecs  # noqa: F401
-
-                from . import lazy  # noqa: F401  (xarray)
-            except Exception:  # noqa: BLE001 - the dataset step imports them and reports it
-                pass
-            finally:
-                _DATASET_IMPORTED.set()
-            if figures:
-                from ..report import chain, reconstruction, scene  # noqa: F401
-                import mpl_toolkits.mplot3d  # noqa: F401
-
-        _IMPORTS = threading.Thread(target=work, name="pmdsim-imports", daemon=True)
-        _IMPORTS.start()
-
-
-def dataset_imported() -> None:
-    """Wait for the background import of the dataset's modules (:func:`import_in_background`;
-    at once where none was started): the dataset step must not import them while that
-    thread does."""
-    if _IMPORTS is not None:
-        _DATASET_IMPORTED.wait()
-
-
-def _imported() -> None:
-    if _IMPORTS is not None:
-        _IMPORTS.join()
-
-
 @contextlib.contextmanager
 def _signals_deferred():
     """SIGINT and SIGTERM held back while the block runs, then delivered.
@@ -322,7 +278,7 @@ class Drawing:
         if can_fork() if fork is None else fork:
             import multiprocessing as mp
 
-            _imported()  # fork after the imports, never in the middle of one
+            imports_done()  # fork after the imports, never in the middle of one
             ctx = mp.get_context("fork")
             self.conn, send = ctx.Pipe(duplex=False)
             self.proc = ctx.Process(target=_draw_in_child, name="pmdsim-figures",
@@ -477,5 +433,5 @@ class FigureSchedule:
 
 
 __all__ = ["FIGURES", "figure_names", "draw_figures", "draw_one", "default_workers",
-           "Drawing", "start_drawings", "can_fork", "import_in_background", "dataset_imported",
+           "Drawing", "start_drawings", "can_fork",
            "planned_names", "FigureSchedule"]

@@ -39,7 +39,8 @@ from . import files as pio
 from .dataset import (CONFIG_NAME, DATASET_NAME, assign_to_dataset, build_dataset,
                       dot_dataset_variables)
 from .diagnostics import diagnose_run
-from .figures import FigureSchedule, dataset_imported, import_in_background
+from .figures import FigureSchedule
+from .imports import dataset_imported, import_in_background
 from .result import RunResult, _Steps, draw_safely
 from .writing import DatasetWriter
 
