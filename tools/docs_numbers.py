@@ -131,6 +131,17 @@ def _fig3_simulation():
     return Simulation.from_config(_fig3_config())
 
 
+def fig3_rays() -> tuple:
+    """docs/performance.md: the rays a Fig. 3 run traces per surface pixel (every pass of its
+    rule) and in all, in millions, as the run counts them (``RunResult.rays_traced``)."""
+    from pmdsim.run.member import _passes_share
+
+    sim = _fig3_simulation()
+    mask = sim.geometry().surface_mask
+    per_pixel = sim.scene.rays_per_pixel * _passes_share(sim, sim.fringes_smooth(), mask)
+    return (per_pixel, per_pixel * int(mask.sum()) / 1e6)
+
+
 def fig3_specular_span() -> tuple:
     """docs/fig3-geometry.md: the monitor range (u, v) the principal rays of Fig. 3 reach."""
     import numpy as np
@@ -272,6 +283,9 @@ CHECKS = [
     Check("fig3-specular-span", "docs/fig3-geometry.md",
           r"The specular points span u = " + NUMBER + r" \.\.\. " + NUMBER + r" and v = "
           + NUMBER + r" \.\.\. " + NUMBER, fig3_specular_span, why="geometry, full camera"),
+    Check("fig3-rays", "docs/performance.md",
+          r"the rays a Fig\. 3 run traces \(" + NUMBER + r" per surface pixel, " + NUMBER
+          + r" M\s+in all", fig3_rays, why="the rule's passes, full camera"),
     Check("fig3-pixel-bundle", "docs/fig3-geometry.md",
           r"P lands at \(u, v\) = \(" + NUMBER + r", " + NUMBER + r"\); " + NUMBER
           + r" of its " + NUMBER + r" rays hit the\s+monitor, " + NUMBER
