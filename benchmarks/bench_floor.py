@@ -64,8 +64,10 @@ import pmdsim.cli, pmdsim.run, pmdsim.render, pmdsim.measure.chain
 import dask.threaded, xarray, zarr
 c1 = time.process_time()
 from pmdsim.kernels import bundle as kb
-geo = np.zeros((1, kb.G_SIZE))
-kb.render_tile(geo, np.zeros(8), np.zeros(1), np.zeros(1), np.zeros((0, 2)), 0, 0.01, True,
+geo = np.zeros((1, kb.G_SIZE))  # one pixel off the surface: the kernel loads, traces nothing
+brdf = np.zeros(kb.B_SIZE)
+brdf[kb.B_MODEL] = kb.MODEL_WARD
+kb.render_tile(geo, brdf, np.zeros(1), np.zeros(1), np.zeros((0, 2)), 0, 0.01, True,
                np.array([2, 2]), kb.MODE_HARMONIC, np.zeros((0, 1)), np.zeros((0, 1)),
                np.ones(1), np.ones(1), np.zeros((0, 1, 1), np.float32), np.zeros((0, 4)),
                np.empty((1, 6)), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0)))
@@ -105,8 +107,8 @@ print(json.dumps(dict(spent, cpu=cpu)))
 
 
 def kernel_ns(rounds: int) -> dict:
-    """Nanoseconds per node of ``render_tile``, one thread, best of ``rounds``: keys
-    ``(n_rays, "fringes" | "phase 1")``; and the nodes of each rule."""
+    """Nanoseconds per node of ``render_tile``, one thread, best of ``rounds``, as
+    ``({(n_rays, "fringes" | "phase 1"): ns}, {n_rays: nodes of its rule})``."""
     import tomllib
 
     import numpy as np
