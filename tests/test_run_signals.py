@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -46,10 +47,23 @@ def _write_config(folder: Path, changes: dict | None = None, slow: bool = True) 
 
 
 def _start(cfg: Path, out: Path, *extra: str) -> subprocess.Popen:
+    """``pmdsim simulate`` in a subprocess, with SIGINT's default action even where this
+    process ignores SIGINT: a test run started in the background of a non-interactive
+    shell (POSIX gives such jobs SIGINT ignored, and an ignored signal stays ignored across
+    ``exec``, so the run would rightly ignore the test's SIGINT). A handled signal is reset
+    to its default by ``exec``, so a handler is set for the moment of the start."""
     env = dict(os.environ, PYTHONPATH=SRC)
-    return subprocess.Popen([sys.executable, "-m", "pmdsim.cli", "simulate", str(cfg), "-o",
-                             str(out), *extra], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    ignored = (signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+               and threading.current_thread() is threading.main_thread())
+    if ignored:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return subprocess.Popen([sys.executable, "-m", "pmdsim.cli", "simulate", str(cfg),
+                                 "-o", str(out), *extra], env=env, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+    finally:
+        if ignored:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _wait_for(proc: subprocess.Popen, path_fn, timeout: float = 300.0) -> Path | None:
