@@ -106,9 +106,10 @@ print(json.dumps(dict(spent, cpu=cpu)))
 """
 
 
-def kernel_ns(rounds: int) -> dict:
-    """Nanoseconds per node of ``render_tile``, one thread, best of ``rounds``, as
-    ``({(n_rays, "fringes" | "phase 1"): ns}, {n_rays: nodes of its rule})``."""
+def kernel_ns(rounds: int) -> tuple[dict, dict]:
+    """Nanoseconds per node of the bundle kernel (the run's own, ``Simulation._kernel``),
+    one thread, best of ``rounds``, as ``({(n_rays, "fringes" | "phase 1"): ns},
+    {n_rays: nodes of its rule})``."""
     import tomllib
 
     import numpy as np
@@ -123,31 +124,24 @@ def kernel_ns(rounds: int) -> dict:
     for n_rays in (256, 100):
         raw.setdefault("sampling", {})["n_rays"] = n_rays
         cfg = parse_config(raw)
-        sc = Simulation.from_config(cfg).scene
-        samp, brdf = sc.sampling, sc.brdf.kernel_params()
+        sim = Simulation.from_config(cfg)
+        sc = sim.scene
         geo, _ = scene_geometry_rows(sc, 500, 516)
         if not np.all(geo[:, kb.G_VALID] == 1.0):
             raise SystemExit("rows 500-515 of the Fig. 3 camera are no longer all on the surface")
-        samp.orient(geo, brdf)
-        u1, u2 = samp.unit_points()
-        w = samp.ray_weights(False)
-        nodes[n_rays] = len(w)
+        sc.sampling.orient(geo, sc.brdf.kernel_params())  # once: orient is not idempotent
+        nodes[n_rays] = len(sc.sampling.ray_weights(False))
         k = 2 * np.pi / np.asarray(cfg.patterns.fringes.widths_px, np.float64)
-        mshape = np.array(sc.monitor.shape, dtype=np.int64)
-        e1, none = np.zeros((0, 1)), np.zeros((0, 0))
         for name, ku in (("fringes", k), ("phase 1", np.zeros(0))):
-            out = np.empty((geo.shape[0], 2 + 4 * ku.size))
+            ncols = kb.OUT_FIRST + 4 * ku.size  # the same widths in X and in Y
+            kernel = sim._kernel(sc, kb.MODE_HARMONIC, ncols, k_u=ku, k_v=ku, orient=False)
+            out, rot = np.empty((geo.shape[0], ncols)), np.zeros((0, 2))
 
-            def call(ku=ku, out=out, geo=geo, u1=u1, u2=u2, w=w, samp=samp, brdf=brdf,
-                     mshape=mshape):
-                kb.render_tile(geo, brdf, u1, u2, np.zeros((0, 2)), samp.scheme_id,
-                               samp.theta_max, samp.include_principal, mshape,
-                               kb.MODE_HARMONIC, e1, e1, ku, ku,
-                               np.zeros((0, 1, 1), np.float32), np.zeros((0, 4)), out,
-                               none, none, none, w_ray=w)
+            def call(kernel=kernel, geo=geo, rot=rot, out=out):
+                kernel(geo, rot, out)
 
             call()
-            cases[n_rays, name] = (call, geo.shape[0] * len(w))
+            cases[n_rays, name] = (call, geo.shape[0] * nodes[n_rays])
     best = dict.fromkeys(cases, float("inf"))
     for _ in range(rounds):
         for key, (call, _) in cases.items():
