@@ -88,11 +88,9 @@ def simulate(
         check_free(output)
     except OutputBusy as err:
         _fail(str(err))
-    from ..config import load_config
-
     console = _console()
     with _guard():
-        from ..config import with_target_error
+        from ..config import load_config, with_target_error
 
         cfg = with_target_error(load_config(config), target_error_mrad)  # field-named errors
         from ..report.text import warning_text
