@@ -441,6 +441,9 @@ def from_config(cfg, incidence_deg: float = 0.0):
     if use == "geometric":
         return SlopeDensityBRDF(slope_table(h, dx, dy, cfg.bins), cfg.rho_s,
                                 cfg.shadowing == "smith", name="topography")
+    eps = rr.permittivity(cfg.refractive_index)
+    rr.check_validity(sq, lam, math.radians(inc), eps, cfg.rho_s,
+                      sigma_field=f"brdf.regime = 'smooth' with brdf.file {cfg.file}")
     fx, fy, s = periodogram(h, dx, dy, "hann")
     if cfg.psd == "k_correlation":
         try:
@@ -450,7 +453,7 @@ def from_config(cfg, incidence_deg: float = 0.0):
                               "'tabulated' (the measured periodogram)") from None
     else:
         psd = TabulatedPSD(fx, fy, s)
-    exact = rr.RayleighRice(psd, sq, lam, rr.permittivity(cfg.refractive_index), cfg.rho_s)
+    exact = rr.RayleighRice(psd, sq, lam, eps, cfg.rho_s)
     model = rr.specular_halo(exact, math.radians(inc), bins=cfg.halo_bins)
     return rr.SpecularHaloBRDF(model.exact, model.halo, model.specular_reflectance, model.theta0,
                                model.table_share, name="topography")
