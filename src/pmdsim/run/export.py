@@ -157,7 +157,11 @@ def _check_store(store: Path, names: list[str]) -> dict:
         if k not in have and (k in listed or k == "height_error_nm"):
             raise InputError(f"{store / k}: the variable {k!r} of the run's reconstruction is "
                              f"missing; {_AGAIN}")
-    check_arrays(store, root, names=have)
+    for k in ("surface_x", "surface_y"):
+        if not (store / k / "zarr.json").is_file():
+            raise InputError(f"{store / k}: the reconstruction grid's coordinate {k!r} is "
+                             f"missing; {_AGAIN}")
+    check_arrays(store, root, names=[*have, "surface_x", "surface_y"])
     chunks = {k: {p.relative_to(store / k) for p in (store / k).rglob("*")
                   if p.is_file() and p.name != "zarr.json"} for k in have}
     ref = chunks["height_error_nm"]
@@ -294,8 +298,8 @@ def export_run(run: str | Path, fmt: str, output: str | Path | None = None,
     try:
         ds = load_run(run)
         x, y, maps = surface_maps(ds)
-    except InputError:
-        raise
+    except InputError as err:
+        raise InputError(f"{store}: {err}") from None
     except Exception as err:  # noqa: BLE001 - xarray/zarr: name the store
         raise InputError(f"{store}: cannot be read ({type(err).__name__}: {err}); {_AGAIN}") from None
     for k, a in maps.items():
@@ -303,9 +307,12 @@ def export_run(run: str | Path, fmt: str, output: str | Path | None = None,
             raise InputError(f"{store / k}: {k!r} has no measured node (every value is NaN): "
                              "nothing to export; the run's reconstruction is empty or its chunks "
                              "were lost: run pmdsim simulate again")
-    if x.size < 1 or y.size < 1 or not (np.isfinite(x).all() and np.isfinite(y).all()):
-        raise InputError(f"{store}: the reconstruction grid (surface_x, surface_y) is empty or "
-                         f"not finite; {_AGAIN}")
+    for name, c in (("surface_x", x), ("surface_y", y)):
+        steps = np.diff(c)
+        if (c.size < 1 or not np.isfinite(c).all() or (steps.size and not (
+                np.all(steps > 0) and np.ptp(steps) <= 1e-6 * abs(steps[0])))):
+            raise InputError(f"{store / name}: the reconstruction grid's {name} is empty, not "
+                             f"finite or not evenly spaced; {_AGAIN}")
     name = _one_line(ds.attrs.get("title", str(run)))
     created = _created(ds, store)
     desc = {k: _one_line(ds[k].attrs.get("description", QUANTITIES[k][3])) for k in maps}
