@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_export import _maps
 from typer.testing import CliRunner
 
 from pmdsim.cli import app
-from test_export import _maps
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -10,10 +10,10 @@ import tomllib
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
-
 from conftest import base_dict, merge
 from test_budget import _write_toml
+from typer.testing import CliRunner
+
 from pmdsim.cli import app
 
 ROOT = Path(__file__).resolve().parents[1]

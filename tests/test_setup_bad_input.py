@@ -11,10 +11,10 @@ import tomllib
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
-
 from conftest import base_dict, merge
 from test_budget import _write_toml
+from typer.testing import CliRunner
+
 from pmdsim.cli import app
 from pmdsim.config import ConfigError, parse_config
 
@@ -87,5 +87,5 @@ def test_camera_units_are_accepted_or_refused_by_the_field_of_view(pitch_mm, foc
 
 
 def test_a_180_degree_field_of_view_is_refused(tmp_path):
-    res, out = _invoke(tmp_path, "simulate", {"camera": {"focal_length_px": 0.001}})
+    res, _ = _invoke(tmp_path, "simulate", {"camera": {"focal_length_px": 0.001}})
     assert res.exit_code == 2 and "field of view is 180 deg" in res.output, res.output

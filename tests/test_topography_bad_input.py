@@ -11,10 +11,10 @@ import math
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
-
 from conftest import base_dict, merge
 from test_budget import _write_toml
+from typer.testing import CliRunner
+
 from pmdsim.brdf import topography as tp
 from pmdsim.cli import app
 
