@@ -79,7 +79,9 @@ def test_camera_units_are_accepted_or_refused_by_the_field_of_view(pitch_mm, foc
     d = merge(base_dict(), {"camera": {"resolution": [1280, 1024], "focal_length_px": None,
                                        "pixel_pitch_mm": pitch_mm, "focal_length_mm": focal_mm}})
     fov = 2 * math.degrees(math.atan(math.hypot(1280, 1024) * pitch_mm / (2 * focal_mm)))
-    if fov <= 150:
+    from pmdsim.config.camera import MAX_FIELD_OF_VIEW_DEG
+
+    if fov <= MAX_FIELD_OF_VIEW_DEG:
         assert parse_config(d).camera.pixel_pitch_mm == pitch_mm
     else:
         with pytest.raises(ConfigError, match=r"camera: the camera's field of view is .* deg"):

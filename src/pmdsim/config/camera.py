@@ -12,8 +12,10 @@ from .base import (Coord, Float, Int, Length, PositiveFloat, ResolutionAxis, Vec
     _nonzero_vector, _unit)
 
 
-#: The widest diagonal field of view of a pinhole camera that is accepted (deg).
-MAX_FIELD_OF_VIEW_DEG = 150.0
+#: The widest diagonal field of view of a pinhole camera that is accepted (deg): beyond it
+#: the image plane is ~25 focal lengths across, a unit slip (38.4 um of pitch as 38.4 mm
+#: gives 179.8 deg on Fig. 3's camera), not a lens (a rectilinear lens stops near 130 deg).
+MAX_FIELD_OF_VIEW_DEG = 175.0
 
 
 class CameraConfig(_Model):
