@@ -52,7 +52,7 @@ def test_vision_rays_are_parallel_to_the_axis(extra):
     # every origin on the entrance plane through position_mm, normal to the axis
     assert np.max(np.abs((o - cam.position) @ cam.rotation[:, 2])) < 1e-12
     # the traced rows see the camera along -axis (to_camera in the compiled geometry rows)
-    o1, d1 = cam.chief_rays(rows, cols)
+    _, d1 = cam.chief_rays(rows, cols)
     assert np.max(_angle(d1, cam.rotation[:, 2])) < 1e-12
 
 
@@ -231,3 +231,111 @@ def test_magnification_needs_projection_telecentric():
     d["camera"]["magnification"] = 0.5
     with pytest.raises(ConfigError, match="projection"):
         parse_config(d)
+
+
+def test_reconstruction_through_a_telecentric_camera_returns_the_sphere():
+    """The noise-free specular chain (exact monitor hits of the principal rays) through a
+    telecentric camera: the monocular reconstruction, with the viewpoint at infinity,
+    returns the configured sphere from a wrong nominal radius (800 mm for 700 mm)."""
+    from pmdsim import trace
+    from pmdsim.measure.reconstruct import reconstruct
+    from pmdsim.scene.surfaces import surface_from_config
+
+    ap = {"shape": "circular", "radius_mm": 30.0}
+    # 3.5 px per mm on the part; a pinhole of the same footprint reaches 3.8 nm / 10 urad RMS
+    d = _telecentric(resolution=[240, 200], magnification=PITCH * 3.5,
+                     principal_point_px=[119.3, 99.6])
+    d["surface"] = {"type": "sphere", "radius_mm": R_SPHERE, "aperture": ap}
+    cfg = parse_config(d)
+    scene = Scene.from_config(cfg)
+    hits = trace.trace_primary(scene)
+    u, v, _ = trace.specular_monitor_coords(scene, hits)
+    nominal = surface_from_config(parse_config(merge(d, {"surface": {"radius_mm": 800.0}})).surface)
+    rec = reconstruct(u, v, scene.camera, scene.monitor, nominal, spacing_mm=1.0)
+    truth = scene.surface
+    x, y = np.meshgrid(rec.x_mm, rec.y_mm)
+    z, gx, gy, _ = truth.sag(x, y)
+    m = rec.mask
+    assert m.sum() > 400
+    e = rec.height_mm[m] - z[m]
+    e -= e.mean()
+    assert rec.converged
+    # RMS over the aperture (measured 0.24 nm, 0.008 / 0.66 urad): heights to 1 nm (after
+    # piston), slopes to 1 urad; the pinhole of tests/test_reconstruct.py needs 2.3x finer pixels
+    assert np.sqrt(np.mean(e ** 2)) < 1e-6
+    assert np.sqrt(np.mean((rec.slope_x[m] - gx[m]) ** 2)) < 1e-6
+    assert np.sqrt(np.mean((rec.slope_y[m] - gy[m]) ** 2)) < 1e-6
+
+
+def _small_example():
+    """examples/telecentric_micro.toml on a 60 x 48 px camera (the same field on the part)."""
+    from pathlib import Path
+
+    from pmdsim import load_config
+    from pmdsim.studies.convergence import reduced_config
+
+    cfg = load_config(Path(__file__).parents[1] / "examples" / "telecentric_micro.toml")
+    small = reduced_config(cfg, (60, 48))
+    assert small.camera.projection == "telecentric"
+    assert small.camera.pixel_pitch_mm / small.camera.magnification == pytest.approx(
+        cfg.camera.pixel_pitch_mm / cfg.camera.magnification * 500 / 60)
+    d = small.model_dump()
+    d["sampling"].update(n_rays=16, target_error_mrad=None)
+    return type(small).model_validate(d)
+
+
+def test_example_runs_end_to_end(tmp_path):
+    """The telecentric example, simulate and budget, on a reduced camera: a run folder with
+    statistics and the reconstruction, and a budget with its rows."""
+    import json
+
+    from pmdsim import run_simulation
+    from pmdsim.studies.budget import budget
+
+    cfg = _small_example()
+    run_simulation(cfg, tmp_path / "run", overwrite=True)
+    stats = json.loads((tmp_path / "run" / "statistics.json").read_text())
+    rec = stats["reconstruction"]
+    assert rec["converged"] and rec["grid_points"] > 100
+    # the kinematic lobe's slope error is hundreds of urad, far above the chain's floor
+    assert 20.0 < rec["slope_error_x_urad"]["rms"] < 2000.0
+    res = budget(cfg)
+    effects = {r["effect"] for r in res.rows}
+    # the numerical aperture's blur is a row of its own, beside the surface and calibration
+    assert {"defocus", "surface", "all_system"} <= effects
+    assert {r["effect"] for r in res.height_rows} >= {"camera_position_mm", "calibration_total"}
+
+
+@pytest.mark.parametrize("na", [0.01, 0.02])
+def test_depth_of_field_blur_is_the_disk_mtf(na):
+    """Flat mirror, telecentric camera focused on it (the default focus), monitor d = 200 mm
+    along the reflected axis: the monitor is seen through a blur disk of diameter
+    b = 2 d tan(asin NA) (direction sines uniform in the disk of radius NA; the tangent's
+    non-uniformity is O(NA^2)), so the centre pixel's fringe modulation is
+    2 J1(pi b / p) / (pi b / p) for period p."""
+    from scipy.special import j1
+
+    th = np.radians(20.0)
+    d_mon = 200.0
+    cfg = parse_config({
+        "camera": {"projection": "telecentric", "resolution": [5, 5], "pixel_pitch_mm": 0.005,
+                   "magnification": 0.5, "numerical_aperture": na, "aperture_samples": 4096,
+                   "position_mm": [-100 * np.sin(th), 0.0, 100 * np.cos(th)],
+                   "look_at_mm": [0, 0, 0]},
+        "monitor": {"resolution": [2000, 2000], "pixel_pitch_mm": 0.02,
+                    "centre_mm": [d_mon * np.sin(th), 0.0, d_mon * np.cos(th)],
+                    "look_at_mm": [0, 0, 0], "pixel_model": "continuous"},
+        "surface": {"size_mm": [100.0, 100.0]},
+        "brdf": {"model": "mirror"},
+    })
+    sim = Simulation.from_config(cfg)
+    assert sim.scene.camera.focus_distance_mm == pytest.approx(100.0, rel=1e-9)
+    b = 2 * d_mon * na / np.sqrt(1 - na * na)
+    periods_mm = (6.0, 12.0)
+    res = sim.render_fringes([p / 0.02 for p in periods_mm], ("x", "y"), 4)
+    for wi, p in enumerate(periods_mm):
+        x = np.pi * b / p
+        expect = abs(2 * j1(x) / x)  # the modulation; past the first zero the phase flips
+        for di in range(2):
+            mod = abs(res.sums[di, wi, 2, 2]) / res.f_hit[2, 2]
+            assert mod == pytest.approx(expect, rel=0.01), (na, p, di)

@@ -176,10 +176,9 @@ class CameraConfig(_Model):
 
     def _check_telecentric(self) -> None:
         """A telecentric camera has a scale in px per mm, no focal length and no thin lens."""
-        for name, why in (("focal_length_mm", "a telecentric lens has no projection centre: give "
-                           "magnification and pixel_pitch_mm"),
-                          ("focal_length_px", "give magnification and pixel_pitch_mm (or "
-                           "camera_matrix with fx, fy in px per mm on the part)"),
+        scale = "give magnification and pixel_pitch_mm"
+        for name, why in (("focal_length_mm", f"a telecentric lens has no projection centre: {scale}"),
+                          ("focal_length_px", f"{scale} (or camera_matrix in px per mm)"),
                           ("f_number", "its aperture is the object-side numerical_aperture")):
             if getattr(self, name) is not None:
                 raise ValueError(f"{name} is not used by projection = \"telecentric\": {why}")
