@@ -149,7 +149,7 @@ def estimate_resources(cfg: "RunConfig") -> ResourceEstimate:
     cam = cfg.camera
     # vision rays per pixel (sub-pixels x thin-lens aperture samples): every one carries a
     # bundle of scattered rays
-    vision = cam.subpixels ** 2 * (cam.aperture_samples if cam.f_number is not None else 1)
+    vision = cam.vision_rays_per_pixel
     # the vision-ray geometry of the whole camera (25 float64 per vision ray and the
     # specular monitor coordinates), the masks and the dataset's copies of the maps
     parts = {"camera.resolution": n_px * (25 * 8 + 16 + 64)}
@@ -181,7 +181,7 @@ def estimate_resources(cfg: "RunConfig") -> ResourceEstimate:
 
 def _vision_field(cam) -> str:
     """The camera setting that multiplies the vision rays per pixel most."""
-    lens = cam.aperture_samples if cam.f_number is not None else 1
+    lens = cam.aperture_samples if cam.has_aperture else 1
     return "camera.aperture_samples" if lens >= cam.subpixels ** 2 else "camera.subpixels"
 
 
@@ -280,7 +280,7 @@ def check_resources(cfg: "RunConfig", available_bytes: int | None = None,
     limit = cfg.compute.max_cpu_hours if max_cpu_hours is None else max_cpu_hours
     if est.cpu_seconds > limit * 3600:
         cam = cfg.camera
-        vision = cam.subpixels ** 2 * (cam.aperture_samples if cam.f_number is not None else 1)
+        vision = cam.vision_rays_per_pixel
         field = ("sampling.n_rays" if cfg.sampling.n_rays > 1 and cfg.sampling.n_rays >= vision
                  else _vision_field(cam) if vision > 1 else "camera.resolution")
         raise ConfigError(

@@ -102,10 +102,13 @@ def _monitor_point(u, v, centre, e_u, e_v, pitch, u_mid, v_mid):
 @jit(inline="always")
 def _bisector(px, py, pz, camera_position, mx, my, mz):
     """Sum of the unit directions from (px, py, pz) to the camera and to the monitor point
-    (mx, my, mz): the reflecting normal, not normalised."""
-    ax = camera_position[0] - px
-    ay = camera_position[1] - py
-    az = camera_position[2] - pz
+    (mx, my, mz): the reflecting normal, not normalised. ``camera_position``: the camera
+    centre (3,), or homogeneous (4,) ``(c, w)``: the direction to the camera is
+    ``c - w p`` (w = 0: a telecentric camera's axis direction, the same at every point)."""
+    w = camera_position[3] if camera_position.shape[0] > 3 else 1.0
+    ax = camera_position[0] - w * px
+    ay = camera_position[1] - w * py
+    az = camera_position[2] - w * pz
     bx = mx - px
     by = my - py
     bz = mz - pz

@@ -126,7 +126,8 @@ def surface_to_monitor_mm(sim, geometry) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class SlopeGeometry:
     """What the 3-D slope conversion needs: the surface point of every pixel (H, W, 3) mm,
-    the camera centre (3,) and the monitor (``pixel_to_world``)."""
+    the camera centre (3,) or homogeneous viewpoint (4,) (:attr:`pmdsim.scene.Camera.
+    viewpoint`: a telecentric camera's is at infinity) and the monitor (``pixel_to_world``)."""
 
     points_mm: np.ndarray
     camera_position: np.ndarray

@@ -93,8 +93,11 @@ def prior_frame(surface) -> PriorFrame:
 
 def bisector_normals(points, camera_position, monitor_points):
     """Unit normals (..., 3): bisector of the directions from ``points`` to the camera and
-    to the monitor points (the law of reflection)."""
-    a = np.asarray(camera_position, np.float64) - points
+    to the monitor points (the law of reflection). ``camera_position``: the camera centre
+    (3,) or a homogeneous (4,) viewpoint ``(c, w)`` (w = 0: a telecentric camera, the
+    direction ``c`` to it at every point; :attr:`pmdsim.scene.Camera.viewpoint`)."""
+    cp = np.asarray(camera_position, np.float64)
+    a = cp[:3] - cp[3] * points if cp.shape[-1] == 4 else cp - points
     b = np.asarray(monitor_points, np.float64) - points
     n = a / np.linalg.norm(a, axis=-1, keepdims=True) + b / np.linalg.norm(b, axis=-1, keepdims=True)
     return n / np.linalg.norm(n, axis=-1, keepdims=True)
@@ -235,7 +238,8 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     ----------
     u, v : (H, W) ndarray, monitor px
         Decoded monitor coordinates of every camera pixel (NaN = not decoded).
-    camera : object with ``position`` (3,) mm and ``project(points) -> (..., 2)`` (col, row)
+    camera : object with ``position`` (3,) mm (or a homogeneous ``viewpoint`` (4,), which
+        wins) and ``project(points) -> (..., 2)`` (col, row)
     monitor : object with ``pixel_to_world(u, v) -> (..., 3)`` mm
     prior : the nominal surface (:func:`prior_frame` input) or a :class:`PriorFrame`
     valid : (H, W) bool ndarray, optional — pixels to use (default: finite u and v)
@@ -276,7 +280,8 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     nominal = np.asarray(pf.sag(x, y), np.float64)
     mask = np.asarray(pf.in_aperture(x, y), bool) & np.isfinite(nominal)
     cu, cv = _spline_maps(u, v, ok_pix)
-    cam_pos = np.asarray(camera.position, np.float64)
+    # homogeneous viewpoint (a telecentric camera's is at infinity), else the centre
+    cam_pos = np.asarray(getattr(camera, "viewpoint", camera.position), np.float64)
 
     if anchor == "centre":
         ax, ay = pf.aperture_centre

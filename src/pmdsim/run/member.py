@@ -213,7 +213,7 @@ def compare(m: Member) -> None:
     m.measured = chain.compare(
         m.decoded, reference.decoded, geometry, reference.distance_mm,
         cfg.monitor.pixel_pitch_mm, cfg.decode, len(m.fringes.shifts),
-        slope_geometry=chain.SlopeGeometry(geometry.points, m.sim.scene.camera.position,
+        slope_geometry=chain.SlopeGeometry(geometry.points, m.sim.scene.camera.viewpoint,
                                            m.sim.scene.monitor),
         off_monitor=m.off_monitor, phase_error=m.phase_error)
     m.decoded = None

@@ -84,7 +84,7 @@ def _copy_fields(section: str, fields: tuple[str, ...]):
 
 
 _RESPONSE = ("gamma", "response_lut", "bit_depth", "precompensate_gamma", "black_level", "white_level")
-_LENS = ("f_number", "focus_distance_mm", "aperture_samples", "aperture_seed")
+_LENS = ("f_number", "numerical_aperture", "focus_distance_mm", "aperture_samples", "aperture_seed")
 
 EFFECTS: tuple[Effect, ...] = (
     Effect("monitor_pixels", "monitor pixel grid (flat square emitters)",
@@ -92,7 +92,7 @@ EFFECTS: tuple[Effect, ...] = (
     Effect("footprint", "pixel footprint (sub-pixel rays)",
            lambda c: c.camera.subpixels > 1, _copy_fields("camera", ("subpixels",))),
     Effect("defocus", "lens aperture (monitor out of focus)",
-           lambda c: c.camera.f_number is not None, _copy_fields("camera", _LENS)),
+           lambda c: c.camera.has_aperture, _copy_fields("camera", _LENS)),
     Effect("display_response", "display response (gamma/LUT, drive bits, black level)",
            lambda c: (c.monitor.gamma != 1.0 or c.monitor.response_lut is not None
                       or c.monitor.bit_depth is not None or c.monitor.black_level != 0.0),
@@ -118,7 +118,7 @@ def ideal_config(cfg: RunConfig) -> RunConfig:
     glass, bow or falloff, noise-free sensor; surface, BRDF, sampling and patterns kept."""
     d = cfg.model_dump()
     cam = d["camera"]
-    cam.update(subpixels=1, f_number=None, focus_distance_mm=None)
+    cam.update(subpixels=1, f_number=None, numerical_aperture=None, focus_distance_mm=None)
     mon = d["monitor"]
     mon.update(pixel_model="continuous", gamma=1.0, response_lut=None, bit_depth=None,
                precompensate_gamma=False, black_level=0.0, white_level=1.0,
@@ -223,7 +223,7 @@ def ground_truth(cfg: RunConfig, truth: str = "centre") -> Truth:
         coord = {"x": u, "y": v}
     return Truth(coord, dist, float(cfg.monitor.pixel_pitch_mm),
                  float(min(cfg.patterns.fringes.widths_px)), geo,
-                 SlopeGeometry(geo.points, sim.scene.camera.position, sim.scene.monitor))
+                 SlopeGeometry(geo.points, sim.scene.camera.viewpoint, sim.scene.monitor))
 
 
 def _unit_maps(direction: str, dev_px: np.ndarray, truth: Truth) -> dict:

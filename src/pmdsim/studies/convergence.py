@@ -73,8 +73,12 @@ def reduced_config(cfg: RunConfig, camera_size: tuple[int, int] = (160, 128)) ->
     nw, nh = max(1, round(w * s)), max(1, round(h * s))
     sx, sy = nw / w, nh / h
     cam = cfg.camera
-    upd = {"resolution": (nw, nh), "focal_length_px": cam.focal_px * sx,
-           "focal_length_mm": None, "pixel_pitch_mm": None}
+    if cam.projection == "telecentric" and cam.camera_matrix is None:
+        # the same field on the part: larger pixels at the same magnification
+        upd = {"resolution": (nw, nh), "pixel_pitch_mm": cam.pixel_pitch_mm / sx}
+    else:
+        upd = {"resolution": (nw, nh), "focal_length_px": cam.focal_px * sx,
+               "focal_length_mm": None, "pixel_pitch_mm": None}
     if cam.principal_point_px is not None:
         cx, cy = cam.principal_point_px
         upd["principal_point_px"] = ((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5)

@@ -132,8 +132,7 @@ def incidence(scene, rows: np.ndarray, cols: np.ndarray):
     rows = np.asarray(rows)
     cols = np.asarray(cols)
     cam = scene.camera
-    dirs = cam.ray_directions(rows, cols)
-    origins = np.broadcast_to(cam.position, dirs.shape)
+    origins, dirs = cam.chief_rays(rows, cols)
     _, point, normal, hit = scene.surface.intersect(origins, dirs)
     normal = normalize(normal)
     i = -dirs
