@@ -29,9 +29,10 @@ LAYERS = {
     "render": 5,
     "measure": 6,
     "studies": 7,
-    "report": 8,
-    "run": 9,
-    "cli": 10, "__init__": 10, "__main__": 10,
+    "store": 8,
+    "report": 9,
+    "run": 10,
+    "cli": 11, "__init__": 11, "__main__": 11,
 }
 
 
@@ -109,7 +110,8 @@ def test_every_import_points_down_the_data_flow():
     ("pmdsim.measure.chain", "from ..report import chain as plot_chain\n"),
     ("pmdsim.measure.chain", "def f():\n    from .. import run\n"),
     ("pmdsim.studies.diagnostics", "import pmdsim.cli\n"),
-    ("pmdsim.report.text", "from pmdsim.run.dataset import load_run\n"),
+    ("pmdsim.report.text", "from pmdsim.run.simulate import run_simulation\n"),
+    ("pmdsim.store.schema", "from ..report import chain\n"),
     ("pmdsim.scene.camera", "from ..trace import trace_primary\n"),
     ("pmdsim.newthing", "import numpy\n"),
 ])

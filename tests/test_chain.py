@@ -360,7 +360,7 @@ def test_statistics_json_values_follow_from_the_stored_maps(variant_run):
     keys and units, so a mrad/rad slip or a sample std passed)."""
     import naive_stats as ns
 
-    from pmdsim.run.dataset import KEEP_BITS
+    from pmdsim.store.writer import KEEP_BITS
 
     # the statistics are of the float64 maps; the run stores them with KEEP_BITS significant
     # bits (docs/outputs.md), so they agree to that relative precision

@@ -1,5 +1,5 @@
 """Claiming an output folder (a lock another process sees at once), stale temporary folders
-of dead processes, SIGTERM turned into a clean-up (:mod:`pmdsim.run.claim`)."""
+of dead processes, SIGTERM turned into a clean-up (:mod:`pmdsim.store.folder_lock`)."""
 
 from __future__ import annotations
 
@@ -13,14 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from pmdsim.run.claim import (
-    OutputBusy,
-    Terminated,
-    claim_output,
-    lock_path,
-    remove_stale,
-    signals_as_interrupt,
-)
+from pmdsim.store.folder_lock import (OutputBusy, Terminated, claim_output, lock_path,
+                                      remove_stale, signals_as_interrupt)
 
 SRC = str(Path(__file__).parent.parent / "src")
 
@@ -29,7 +23,7 @@ def _holder(target: Path) -> subprocess.Popen:
     """A process that claims ``target`` and waits until killed; returns once it holds it."""
     code = textwrap.dedent(f"""
         import sys, time
-        from pmdsim.run.claim import claim_output
+        from pmdsim.store.folder_lock import claim_output
         with claim_output({str(target)!r}):
             print("held", flush=True)
             time.sleep(60)

@@ -70,7 +70,8 @@ def test_bundles_off_the_monitor_are_flagged_counted_and_never_valid(tmp_path):
     are in ``lobe_off_monitor``, counted in the statistics and not valid; their share, from
     f_hit / f_total of an independent render, exceeds the bound, the others' does not."""
     from pmdsim.render import Simulation
-    from pmdsim.run import load_run, run_simulation
+    from pmdsim.run import run_simulation
+    from pmdsim.store.schema import load_run
 
     cfg = make_config(monitor={"centre_mm": [60.0, 85.2, 181.3]},
                       patterns={"fringes": {"widths_px": [25.0, 200.0]}})

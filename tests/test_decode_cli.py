@@ -75,7 +75,7 @@ def test_from_run_round_trips_the_simulation(run, tmp_path, direction):
 def test_explicit_options_equal_from_run_and_png_input(run, tmp_path):
     import xarray as xr
 
-    from pmdsim.run.files import read_image, write_image
+    from pmdsim.store.images import read_image, write_image
 
     a, b = tmp_path / "a", tmp_path / "b"
     result, text = invoke("decode", *frames(run), "--from-run", run, "-o", a, "--no-figures")

@@ -233,9 +233,9 @@ def test_chain_dataset_variables_carry_the_same_numbers():
     """The dataset's mm map, slope map and statistics table hold the values recomputed from
     the inputs (guards against a table built from the wrong quantity or statistic order)."""
     c, coord, ref_coord, exact, distance, pitch, res = _chain_case()
-    from pmdsim.run.dataset import dataset_variables
+    from pmdsim.store.schema import dataset_variables
 
-    # the chain's variables are lazily indexed stacks (run/lazy.py): read them as arrays
+    # the chain's variables are lazily indexed stacks (store/lazy_arrays.py): read them as arrays
     v = {k: (val[0], np.asarray(val[1])) for k, val in dataset_variables(res).items()}
     ok = res.directions["x"].deviation.valid
     mm = v["coord_deviation_mm"][1][0]

@@ -1,4 +1,4 @@
-"""The run dataset's lazily read variables (pmdsim.run.lazy): the same values as the
+"""The run dataset's lazily read variables (pmdsim.store.lazy_arrays): the same values as the
 stacked, converted arrays they stand for, written byte for byte as the arrays themselves,
 and a run's dataset code never imports dask.array."""
 
@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import xarray as xr
 
-from pmdsim.run.dataset import _stored, storage_form
-from pmdsim.run.lazy import converted, lazy_array, lazy_stack
+from pmdsim.store.writer import _stored, storage_form
+from pmdsim.store.lazy_arrays import converted, lazy_array, lazy_stack
 
 
 def _parts(seed=3):
@@ -67,8 +67,8 @@ def test_dataset_written_without_dask_array(tmp_path):
     fresh interpreter that never imports dask.array; the store reads back the values."""
     code = f"""
 import sys, numpy as np, xarray as xr
-from pmdsim.run.lazy import lazy_stack, xarray_without_dask_import
-from pmdsim.run.dataset import write_dataset
+from pmdsim.store.lazy_arrays import lazy_stack, xarray_without_dask_import
+from pmdsim.store.writer import write_dataset
 xarray_without_dask_import()
 a = np.arange(35.0).reshape(5, 7); b = -a[::-1] / 3
 ds = xr.Dataset({{"phase_deviation": (("direction", "row", "col"), lazy_stack([a, b])),
@@ -87,7 +87,7 @@ print("ok")
 def test_written_in_groups_byte_for_byte_as_at_once(tmp_path, monkeypatch):
     """The writer stores a part's variables a group at a time (memory: xarray reads all
     variables of one call first): every file of the store is the same as one call's."""
-    from pmdsim.run import writing
+    from pmdsim.store import writer as writing
 
     a, b = _parts()
     ds = xr.Dataset({
@@ -105,7 +105,6 @@ def test_written_in_groups_byte_for_byte_as_at_once(tmp_path, monkeypatch):
 def test_a_large_variable_is_written_chunk_by_chunk_with_the_same_bytes(tmp_path, monkeypatch):
     """A camera-image variable above LARGE_BYTES goes through Dask one image at a time (a
     5 MP run's fringe images): the same files as from one converted copy."""
-    from pmdsim.run import writing
 
     a, b = _parts()
     ds = xr.Dataset({
@@ -117,7 +116,7 @@ def test_a_large_variable_is_written_chunk_by_chunk_with_the_same_bytes(tmp_path
 
 def _assert_same_files(ds, tmp_path, monkeypatch, setting: str, *limits) -> None:
     """Write ``ds`` once per value of ``writing.<setting>``: every file byte for byte alike."""
-    from pmdsim.run import writing
+    from pmdsim.store import writer as writing
 
     stores = []
     for i, limit in enumerate(limits):

@@ -372,7 +372,7 @@ def test_result_json_is_strict():
     """NaN and infinities become null, NumPy scalars plain numbers, nested anywhere."""
     import json
 
-    from pmdsim.run.files import json_safe
+    from pmdsim.store.tables import json_safe
 
     data = {"a": float("nan"), "b": [np.float32(1.5), np.inf, {"c": -np.inf}],
             "d": np.int64(3), "e": np.bool_(True), "f": (1, "x")}

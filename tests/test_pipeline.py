@@ -12,11 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pmdsim.run import files as pio
 from pmdsim import run as pipeline
-from pmdsim.run.dataset import KEEP_BITS, keep_bits
+from pmdsim.store.writer import KEEP_BITS, keep_bits
 from pmdsim.config import RunConfig, parse_config
 from pmdsim.render import Simulation
+from pmdsim.store.folder import MANIFEST, is_run_dir
+from pmdsim.store.images import read_image
 
 S25, C25 = math.sin(math.radians(25)), math.cos(math.radians(25))
 
@@ -105,7 +106,7 @@ def _siblings(path: Path) -> list[Path]:
 def test_run_folder_contents(full_run):
     result, _ = full_run
     out = result.outdir
-    manifest = json.loads((out / pio.MANIFEST).read_text())
+    manifest = json.loads((out / MANIFEST).read_text())
     assert (out / "run.zarr").is_dir() and (out / "config.json").is_file()
     fringe_files = sorted(p.name for p in (out / "fringes").iterdir())
     assert len(fringe_files) == 2 * 2 * 4
@@ -158,7 +159,7 @@ def test_dataset_matches_simulation(full_run, full_cfg):
     np.testing.assert_array_equal(ds["surface_mask"].values, geo.surface_mask)
     np.testing.assert_array_equal(ds["monitor_mask"].values, geo.monitor_mask)
     # stored as docs/outputs.md says: exact specular points in full float32, camera values
-    # and weight sums in float32 with KEEP_BITS significant bits (pmdsim.run.dataset)
+    # and weight sums in float32 with KEEP_BITS significant bits (pmdsim.store.schema)
     np.testing.assert_array_equal(ds["specular_u"].values, geo.specular_u.astype(np.float32))
     np.testing.assert_array_equal(ds["specular_v"].values, geo.specular_v.astype(np.float32))
     fr = sim.render_fringes((8, 32), ("x", "y"), 4)
@@ -183,9 +184,9 @@ def test_config_round_trips_and_rerun_is_identical(full_run, full_cfg, tmp_path)
                  "images", "specular_u"):
         np.testing.assert_array_equal(ds2[name].values, ds[name].values, err_msg=name)
     assert again.exposure == result.exposure
-    for rel in json.loads((result.outdir / pio.MANIFEST).read_text())["images"]:
-        np.testing.assert_array_equal(pio.read_image(again.outdir / rel),
-                                      pio.read_image(result.outdir / rel), err_msg=rel)
+    for rel in json.loads((result.outdir / MANIFEST).read_text())["images"]:
+        np.testing.assert_array_equal(read_image(again.outdir / rel),
+                                      read_image(result.outdir / rel), err_msg=rel)
 
 
 def test_tiffs_are_uint16_with_documented_scaling(full_run):
@@ -196,14 +197,14 @@ def test_tiffs_are_uint16_with_documented_scaling(full_run):
     peak = max(np.nanmax(v) for v in values.values())
     # the dataset keeps KEEP_BITS significant bits of the values the files were scaled from
     assert result.exposure == pytest.approx(0.95 * 65535 / peak, rel=2.0 ** -KEEP_BITS)
-    tif = pio.read_image(result.outdir / "fringes" / "y_w032_k1.tif")
+    tif = read_image(result.outdir / "fringes" / "y_w032_k1.tif")
     assert tif.dtype == np.uint16 and tif.shape == (40, 48)
     ref = values["fringes"][1, 1, 1].astype(np.float64) * result.exposure
     expected = np.where(np.isnan(ref), 0, np.rint(ref)).astype(np.uint16)
     # within one count: the stored value is the file's value to 2**-17 relative
     diff = np.abs(tif.astype(np.int64) - expected.astype(np.int64))
     assert diff.max() <= 1 and np.mean(diff == 0) > 0.9
-    brightest = max(pio.read_image(p).max() for p in result.image_paths)
+    brightest = max(read_image(p).max() for p in result.image_paths)
     assert brightest == round(0.95 * 65535)
 
 
@@ -213,9 +214,9 @@ def test_png_8bit_output(tmp_path):
     result = pipeline.run_simulation(parse_config(d), tmp_path / "png")
     names = sorted(p.name for p in result.image_paths)
     assert names[0] == "x_w008_k0.png" and len(names) == 16
-    img = pio.read_image(result.image_paths[0])
+    img = read_image(result.image_paths[0])
     assert img.dtype == np.uint8 and img.shape == (40, 48)
-    assert max(pio.read_image(p).max() for p in result.image_paths) == round(0.95 * 255)
+    assert max(read_image(p).max() for p in result.image_paths) == round(0.95 * 255)
     ds = pipeline.load_run(result.outdir)
     ref = ds["fringes"].values[0, 0, 0].astype(np.float64) * result.exposure
     np.testing.assert_array_equal(img, np.where(np.isnan(ref), 0, np.rint(ref)))
@@ -237,7 +238,7 @@ def test_failing_overwrite_keeps_the_old_run(tmp_path, monkeypatch):
     cfg = parse_config(tiny_config_dict())
     out = tmp_path / "run"
     pipeline.run_simulation(cfg, out)
-    before = (out / pio.MANIFEST).read_text()
+    before = (out / MANIFEST).read_text()
 
     def boom(*args, **kwargs):
         raise RuntimeError("dataset failed")
@@ -247,7 +248,7 @@ def test_failing_overwrite_keeps_the_old_run(tmp_path, monkeypatch):
     monkeypatch.setattr(member, "build_dataset", boom)
     with pytest.raises(RuntimeError):
         pipeline.run_simulation(cfg, out, overwrite=True)
-    assert (out / pio.MANIFEST).read_text() == before
+    assert (out / MANIFEST).read_text() == before
     assert _siblings(out) == []
 
 
@@ -269,7 +270,7 @@ def test_existing_output_is_not_clobbered(tmp_path):
         pipeline.run_simulation(cfg, out)
     assert (out / "marker").exists()
     second = pipeline.run_simulation(cfg, out, overwrite=True)
-    assert not (out / "marker").exists() and pio.is_run_dir(out)
+    assert not (out / "marker").exists() and is_run_dir(out)
     assert second.exposure == first.exposure
     assert _siblings(out) == []
 
@@ -289,7 +290,7 @@ def test_variants_become_sub_runs(tmp_path):
     assert [r.config.name for r in result.variants] == ["mirror", "wide"]
     assert result.dataset_path is None and (out / "figures" / "fringes_variants.png").is_file()
     for name in ("mirror", "wide"):
-        assert pio.is_run_dir(out / name) and (out / name / "fringes" / "x_w008_k0.tif").is_file()
+        assert is_run_dir(out / name) and (out / name / "fringes" / "x_w008_k0.tif").is_file()
     assert result.rays_traced == result.surface_pixels * (1 + 10)
 
     combined = pipeline.load_run(out)
@@ -361,7 +362,7 @@ def test_cli_simulate_tiny(tmp_path):
     out = tmp_path / "out"
     result, text = _invoke(["simulate", str(cfg), "-o", str(out), "--no-figures"])
     assert result.exit_code == 0, text
-    assert pio.is_run_dir(out) and not (out / "figures").exists()
+    assert is_run_dir(out) and not (out / "figures").exists()
     assert "rays per pixel" in text and "run folder" in text
     # A second run without --overwrite is refused with exit code 2, the run stays.
     result, text = _invoke(["simulate", str(cfg), "-o", str(out), "--no-figures"])
@@ -424,7 +425,7 @@ def test_cli_simulate_prints_diagnostics_warnings(tmp_path):
     assert codes["phase_error"]["setting"] == "sampling.n_rays"
     summary = (out / "summary.txt").read_text()
     assert "pmdsim run diagnostics" in summary and "[setting: sampling.theta_max_deg = 4]" in summary
-    manifest = json.loads((out / pio.MANIFEST).read_text())
+    manifest = json.loads((out / MANIFEST).read_text())
     assert len(manifest["warnings"]) == len(stats["warnings"])
 
     ds = pipeline.load_run(out)
@@ -474,7 +475,7 @@ def test_cli_simulate_no_diagnostics(tmp_path):
     assert "warning:" not in text and "lobe energy" not in text
     assert not (out / "statistics.json").exists()  # nothing decoded, no diagnostics
     assert not [v for v in pipeline.load_run(out).data_vars if str(v).startswith("diag_")]
-    assert json.loads((out / pio.MANIFEST).read_text())["warnings"] == []
+    assert json.loads((out / MANIFEST).read_text())["warnings"] == []
 
 
 def test_diagnostics_of_variants(tmp_path):
@@ -503,5 +504,5 @@ def test_diagnostics_of_variants(tmp_path):
     assert np.isnan(ds["diag_energy_fraction"].sel(variant="radiometric").values).all()
     paper = ds["diag_energy_fraction"].sel(variant="paper").values
     assert 0.3 < np.nanmedian(paper) < 0.45
-    manifest = json.loads((result.outdir / pio.MANIFEST).read_text())
+    manifest = json.loads((result.outdir / MANIFEST).read_text())
     assert manifest["warnings"]["mirror"] == [] and manifest["warnings"]["paper"]

@@ -160,7 +160,8 @@ def test_run_writes_surface_errors(tmp_path):
     from pathlib import Path
 
     from pmdsim.config import load_config
-    from pmdsim.run import load_run, run_simulation
+    from pmdsim.run import run_simulation
+    from pmdsim.store.schema import load_run
 
     cfg = load_config(Path(__file__).parents[1] / "examples" / "turned_sphere.toml")
     d = cfg.model_dump()
@@ -369,7 +370,8 @@ def test_run_states_the_reconstructions_numerical_error(tmp_path):
 
     from pmdsim.config import load_config
     from pmdsim.render import Simulation
-    from pmdsim.run import load_run, run_simulation
+    from pmdsim.run import run_simulation
+    from pmdsim.store.schema import load_run
     from pmdsim.run.reconstruction import reconstruct_coords
 
     cfg = load_config(Path(__file__).parents[1] / "examples" / "turned_sphere.toml")

@@ -67,8 +67,8 @@ def _same_store(p, q):
 def test_dataset_written_in_parts_is_the_dataset_written_at_once(tmp_path):
     import xarray as xr
 
-    from pmdsim.run.dataset import write_dataset
-    from pmdsim.run.writing import DatasetWriter
+    from pmdsim.store.writer import write_dataset
+    from pmdsim.store.writer import DatasetWriter
 
     rng = np.random.default_rng(7)
     first = _dataset(rng)
@@ -87,7 +87,7 @@ def test_dataset_written_in_parts_is_the_dataset_written_at_once(tmp_path):
 
 
 def test_a_failed_part_is_raised_by_finish(tmp_path):
-    from pmdsim.run.writing import DatasetWriter
+    from pmdsim.store.writer import DatasetWriter
 
     rng = np.random.default_rng(1)
     (tmp_path / "taken.zarr").mkdir()  # the store exists: creating it fails
@@ -161,7 +161,7 @@ def test_a_fork_inside_paused_never_copies_a_held_dask_lock(tmp_path, monkeypatc
 
     import dask.tokenize as dt
 
-    from pmdsim.run import writing
+    from pmdsim.store import writer as writing
 
     started = threading.Event()
 

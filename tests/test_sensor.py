@@ -11,6 +11,7 @@ from pmdsim.config import ConfigError, SensorConfig, parse_config
 from pmdsim.scene.sensor import Sensor
 
 from conftest import base_dict
+from pmdsim.store.images import read_image
 
 
 def _sensor(**kw) -> Sensor:
@@ -105,7 +106,6 @@ def test_simulate_writes_what_the_camera_would(tmp_path):
     """With [sensor] on, the run's fringe images are the sensor's digital numbers: integers,
     12-bit range, written unscaled into 16-bit TIFFs; the chain still decodes."""
     from pmdsim import run as pipeline
-    from pmdsim.run import files as pio
 
     from test_pipeline import tiny_config_dict
 
@@ -119,7 +119,7 @@ def test_simulate_writes_what_the_camera_would(tmp_path):
     assert np.all(finite == np.rint(finite)) and finite.max() <= 4095
     assert finite.max() == pytest.approx(0.8 * 4095, rel=0.05)
     assert res.exposure == 1.0
-    tif = pio.read_image(res.outdir / "fringes" / "x_w008_k0.tif")
+    tif = read_image(res.outdir / "fringes" / "x_w008_k0.tif")
     np.testing.assert_array_equal(tif, np.where(np.isnan(f[0, 0, 0]), 0, f[0, 0, 0]))
     stats = json.loads((res.outdir / "statistics.json").read_text())
     assert stats  # decoded and compared

@@ -13,7 +13,7 @@ import pytest
 
 from conftest import base_dict, merge
 from pmdsim.config import parse_config
-from pmdsim.run.dataset import FULL_PRECISION, KEEP_BITS, keep_bits
+from pmdsim.store.writer import FULL_PRECISION, KEEP_BITS, keep_bits
 
 DOCS = Path(__file__).parent.parent / "docs" / "outputs.md"
 
@@ -106,7 +106,8 @@ def test_chain_variables_reference_the_chain_and_are_stored_rounded(tmp_path):
     same numbers as rounding the stacked arrays at once."""
     import xarray as xr
 
-    from pmdsim.run.dataset import dataset_variables, write_dataset
+    from pmdsim.store.schema import dataset_variables
+    from pmdsim.store.writer import write_dataset
     from test_deviation_independent import _chain_case
 
     res = _chain_case()[-1]

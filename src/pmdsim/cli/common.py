@@ -37,7 +37,7 @@ def _bad_input() -> tuple[type[BaseException], ...]:
 def _guard():
     """Bad input -> one red line, exit 2; SIGINT/SIGTERM -> a note, exit 130/143 (the run's
     temporary folder is already removed); anything else propagates (traceback, exit 1)."""
-    from ..run.claim import Terminated
+    from ..store.folder_lock import Terminated
 
     try:
         yield

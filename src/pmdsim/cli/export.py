@@ -21,7 +21,7 @@ def export(
     """Export the reconstructed surface's maps (height error, slope errors X/Y and the
     reconstructed height) for surface-metrology software (docs/reconstruction.md)."""
     from ..config import InputError
-    from ..run.export import export_run
+    from ..store.export import export_run
 
     console = _console()
     try:

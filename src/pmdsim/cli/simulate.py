@@ -82,7 +82,7 @@ def simulate(
     reference (statistics.json, summary.txt, deviation figures), and check the sampling
     (diagnostics: warnings, each naming the setting that fixes it; bounds in the
     configuration's diagnostics section)."""
-    from ..run.claim import OutputBusy, check_free
+    from ..store.folder_lock import OutputBusy, check_free
 
     try:  # a run already writing there: fail before the heavy imports (pydantic, NumPy)
         check_free(output)
@@ -102,7 +102,7 @@ def simulate(
                 **cfg.sampling.model_dump(), "target_error_mrad": target_error_mrad}})
         from ..report.text import warning_text
         from ..run import run_simulation
-        from ..run.files import check_output_dir
+        from ..store.folder import check_output_dir
 
         check_output_dir(output, overwrite)
     # the objects of the imports so far (modules, classes, the configuration) live as long
@@ -153,7 +153,7 @@ def simulate(
                   f"figures {result.timings['figures']:.2f} s)")
     table.add_row("run folder", str(result.outdir))
     if result.sizes:
-        from ..run.files import size_text
+        from ..store.folder import size_text
 
         table.add_row("size", size_text(result.sizes).removeprefix("run folder: "))
     if result.variants:

@@ -45,7 +45,7 @@ def converge(
     settings (lobe energy outside theta_max, phase standard error, effective sample size)."""
     import math
 
-    from ..config import ConfigError, load_config
+    from ..config import load_config
     from ..run.convergence import run_convergence
     from ..studies.convergence import DEFAULT_N, DEFAULT_THETA_DEG
 
@@ -178,7 +178,7 @@ def sweep(
     random design over any configuration fields) into one Zarr store with a dimension per
     swept field; resumes an interrupted sweep with only its unfinished points. See
     docs/sweeps.md."""
-    from ..run.claim import OutputBusy, check_free
+    from ..store.folder_lock import OutputBusy, check_free
 
     try:  # a sweep already writing there: fail before the heavy imports and the planning
         check_free(output)

@@ -19,7 +19,7 @@ own colours with their counts (never hidden):
 - :func:`plot_decoded`: maps of a decoded image set (``pmdsim decode``).
 
 All functions draw on Agg :class:`~matplotlib.figure.Figure` objects (no pyplot) and take
-in-memory xarray Datasets with the variables of :func:`pmdsim.run.dataset.assign_to_dataset`.
+in-memory xarray Datasets with the variables of :func:`pmdsim.store.schema.assign_to_dataset`.
 """
 
 from __future__ import annotations

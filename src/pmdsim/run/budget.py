@@ -3,7 +3,7 @@
 OUT/budget.csv (per effect and fringe direction), heights.csv (per effect: slope errors
 X/Y and height error after the removal, the calibration rows among them), zernike.csv (the
 Noll and Fringe tables of every height row, after removal), budget.json (all rows, the
-settings, the configuration) and budget.png; the folder is created atomically (:func:`pmdsim.run.files.atomic_run_dir`, marker ``pmdsim-budget.json``).
+settings, the configuration) and budget.png; the folder is created atomically (:func:`pmdsim.store.folder.atomic_run_dir`, marker ``pmdsim-budget.json``).
 """
 
 from __future__ import annotations
@@ -18,8 +18,9 @@ from ..config import RunConfig, check_resources
 from ..scene import resolve_roi
 from ..studies.budget import HEIGHT_COLUMNS, TABLE_COLUMNS, budget
 from ..studies.valid_pixels import check_rows
-from . import files as pio
 from .threads import single_blas
+from ..store.folder import atomic_run_dir, check_output_dir
+from ..store.tables import write_json
 
 MARKER = "pmdsim-budget.json"
 
@@ -62,7 +63,7 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     final = Path(outdir).absolute()
     cfg = resolve_roi(physical_estimator(cfg))  # the rendering integral unless cfg names one  # camera.roi = "auto": the window that sees the part
     check_resources(cfg)  # the budget's largest run, before anything is computed
-    pio.check_output_dir(final, overwrite, MARKER)
+    check_output_dir(final, overwrite, MARKER)
     from ..scene import Scene
     from ..scene.sanity import check_physics
 
@@ -71,13 +72,13 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     rows = result.rows
     notes = check_rows(rows, cfg.diagnostics.allow_no_valid_pixels, "budget",
                        lambda r: f"{r['effect']} {r['direction']}")  # 0 valid: not a result
-    with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
+    with atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
         _csv(tmp / "budget.csv", rows, TABLE_COLUMNS)
         if result.height_rows:
             _csv(tmp / "heights.csv", result.height_rows, HEIGHT_COLUMNS)
             _csv(tmp / "zernike.csv", zernike_rows(result.height_rows),
                  ("effect", "part", "order", "index", "n", "m", "coefficient", "removed"))
-        pio.write_json(tmp / "budget.json", {
+        write_json(tmp / "budget.json", {
             "name": cfg.name, "truth": truth, "settings": result.settings,
             "units": "every statistic X has its numerical error X_err (null: not stated)",
             "rows": rows, "height_rows": result.height_rows,

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..config import RunConfig
 from ..render import Geometry, Simulation
-from .files import json_safe
+from ..store.tables import json_safe
 
 
 #: Quadrature points per grid pixel for the lobe-energy fraction of a run (``diagnose``'s

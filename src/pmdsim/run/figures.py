@@ -28,7 +28,7 @@ import sys
 import threading
 from pathlib import Path
 
-from .dataset import DATASET_NAME
+from ..store.schema import DATASET_NAME, load_run
 from .imports import imports_done
 
 #: Every per-run figure: name -> (file, needs) with needs "fringes" (fringe images in the
@@ -132,16 +132,7 @@ def _draw_here(ds, names, folder: Path, run_name: str, description: str, sim,
 def _draw_from_folder(run_folder: str, name: str, folder: str, run_name: str,
                       description: str) -> str:
     """Worker process job: open the run's dataset and draw one figure."""
-    return str(draw_one(open_dataset(run_folder), name, Path(folder), run_name, description))
-
-
-def open_dataset(run_folder):
-    """The run's dataset, each variable read once on first use and kept (a figure reads
-    only what it draws)."""
-    import xarray as xr
-
-    return xr.open_dataset(Path(run_folder) / DATASET_NAME, engine="zarr", chunks=None,
-                           cache=True, consolidated=False)
+    return str(draw_one(load_run(Path(run_folder) / DATASET_NAME, dask=False), name, Path(folder), run_name, description))
 
 
 def default_workers(n_figures: int) -> int:
@@ -177,7 +168,7 @@ def draw_figures(run_folder: str | Path, names, run_name: str, description: str 
     workers = default_workers(len(names)) if workers is None else workers
     if workers <= 1 or len(names) <= 1:
         if ds is None:
-            ds = open_dataset(run_folder)
+            ds = load_run(Path(run_folder) / DATASET_NAME, dask=False)
         drawn = _draw_here(ds, names, folder, run_name, description, sim, failed)
         return [drawn[n] for n in names if n in drawn]
     import multiprocessing as mp

@@ -3,7 +3,7 @@
 OUT/fit.json (every number, ``success`` and ``reason``), fit.txt (the table), fit.png
 (modulation against width) and the marker ``pmdsim-fit.json``. The folder is checked before
 anything is read or computed (an existing file or folder is refused unless ``overwrite``
-and it is a fit folder) and created atomically (:func:`pmdsim.run.files.atomic_run_dir`).
+and it is a fit folder) and created atomically (:func:`pmdsim.store.folder.atomic_run_dir`).
 A fit that *failed* (:attr:`pmdsim.studies.fit.FitResult.success` false: not converged,
 an alpha at its bound, or a reduced chi-square above ``max_chi2``) is written all the same,
 marked failed in fit.json, fit.txt and the figure's title; the caller decides the exit code.
@@ -21,8 +21,9 @@ from ..config import ConfigError, InputError, RunConfig
 from ..studies.fit import (MAX_CHI2, MAX_RAYS, FitResult, NoiseModel, check_fit_resources,
                            fit_fringe_images, format_fit)
 from ..scene.sanity import check_physics
-from . import files as pio
 from .threads import single_blas
+from ..store.folder import atomic_run_dir, check_output_dir
+from ..store.tables import write_json
 
 MARKER = "pmdsim-fit.json"
 
@@ -44,7 +45,7 @@ def check_fit_output(outdir, overwrite: bool = False) -> Path:
     if final.exists() and not final.is_dir():
         raise FileExistsError(f"output {final} is an existing file, not a folder: name a new "
                               "folder for fit.json, fit.txt and fit.png")
-    pio.check_output_dir(final, overwrite, MARKER)
+    check_output_dir(final, overwrite, MARKER)
     return final
 
 
@@ -97,8 +98,8 @@ def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwri
     if saturated:
         text += f"\n{saturated} saturated values left out"
     fig = None
-    with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
-        pio.write_json(tmp / "fit.json", res.as_dict() | {
+    with atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
+        write_json(tmp / "fit.json", res.as_dict() | {
             "model_name": cfg.brdf.model, "frame": cfg.anisotropy.frame,
             "saturated_values": saturated})
         (tmp / "fit.txt").write_text(text + "\n")

@@ -30,7 +30,6 @@ def import_in_background(figures: bool = True) -> None:
             try:
                 import zarr.codecs  # noqa: F401
 
-                from . import lazy  # noqa: F401  (xarray)
             except Exception:  # noqa: BLE001 - the dataset step imports them and reports it
                 pass
             finally:

@@ -14,7 +14,7 @@
 ``draw``         wait for the figures (the dots' figures of a standalone run drawn here)
 
 After every step the dataset is offered to the two things that run behind the steps: the
-dataset writer (:class:`pmdsim.run.writing.DatasetWriter`, which writes into ``run.zarr``
+dataset writer (:class:`pmdsim.store.writer.DatasetWriter`, which writes into ``run.zarr``
 whatever the store does not hold yet) and the figure schedule
 (:class:`pmdsim.run.figures.FigureSchedule`, which starts every figure whose data exist).
 Nothing waits for them until ``write`` and ``draw``; the run ends when the last ends.
@@ -35,14 +35,15 @@ from ..render import Geometry, Simulation
 from ..report.text import description, summary_text_of
 from ..scene.sensor import Sensor, capture_dn
 from ..studies import coverage
-from . import files as pio
-from .dataset import (CONFIG_NAME, DATASET_NAME, assign_to_dataset, build_dataset,
-                      dot_dataset_variables)
+from ..store.schema import (CONFIG_NAME, DATASET_NAME, assign_to_dataset, build_dataset,
+                            dot_dataset_variables)
 from .diagnostics import diagnose_run
 from .figures import FigureSchedule
 from .imports import dataset_imported, import_in_background
 from .result import RunResult, _Steps, draw_safely
-from .writing import DatasetWriter
+from ..store.writer import DatasetWriter
+from ..store.images import exposure_factor, write_images
+from ..store.tables import write_dot_csv, write_json
 
 
 @dataclass(eq=False)
@@ -159,7 +160,7 @@ def dataset(m: Member) -> None:
     _, image_files, _, _ = m.inputs
     stacks = [a for a in (None if m.fringes is None else m.fringes.images, m.dot_images,
                           m.images) if a is not None]
-    m.exposure = (pio.exposure_factor(stacks, out.bit_depth) if not sensor.enabled
+    m.exposure = (exposure_factor(stacks, out.bit_depth) if not sensor.enabled
                   else 2.0 ** min(0, out.bit_depth - sensor.bit_depth))
     ds = build_dataset(cfg, m.geometry, m.fringes, m.dots, m.dot_images, image_files,
                        m.images, m.exposure, m.sim.scene.rays_per_pixel)
@@ -188,7 +189,7 @@ def dataset(m: Member) -> None:
                             **({} if pe is None else {"sums_err": None, "stated_phase_error": pe}))
     if out.write_images:  # zlib and NumPy release the GIL
         m.images_written = m.images_writer.submit(
-            pio.write_images, m.folder, cfg, m.fringes, m.dots, m.dot_images, image_files,
+            write_images, m.folder, cfg, m.fringes, m.dots, m.dot_images, image_files,
             m.images, m.exposure, workers=1)
     m.steps.advance()
 
@@ -250,7 +251,7 @@ def dots(m: Member) -> None:
         return
     m.dot_table = chain.dot_table(m.dot_images, m.dots, m.cfg.name)
     m.ds = m.ds.assign(dot_dataset_variables(m.dot_table))
-    pio.write_dot_csv(m.folder / "dots.csv", m.dot_table)
+    write_dot_csv(m.folder / "dots.csv", m.dot_table)
 
 
 def diagnose(m: Member) -> None:
@@ -274,7 +275,7 @@ def write(m: Member) -> None:
     m.writer.finish(m.ds)
     (m.folder / CONFIG_NAME).write_text(m.cfg.model_dump_json(indent=2) + "\n")
     if m.statistics:
-        pio.write_json(m.folder / "statistics.json", m.statistics)
+        write_json(m.folder / "statistics.json", m.statistics)
         (m.folder / "summary.txt").write_text(summary_text_of(m.statistics))
     m.image_paths = m.images_written.result() if m.images_written is not None else []
     m.steps.advance()

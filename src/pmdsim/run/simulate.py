@@ -3,7 +3,7 @@
 :func:`run_simulation` builds the :class:`~pmdsim.render.Simulation` of a
 :class:`~pmdsim.config.RunConfig`, traces the vision rays (:meth:`Simulation.geometry`),
 renders every configured pattern (all fringe widths, directions and shifts in one pass;
-dots; monitor images) and writes, atomically (see :func:`pmdsim.run.files.atomic_run_dir`)::
+dots; monitor images) and writes, atomically (see :func:`pmdsim.store.folder.atomic_run_dir`)::
 
     <outdir>/
       pmdsim-run.json            manifest: files, exposure, timings (written last)
@@ -62,13 +62,13 @@ from ..studies import coverage
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
 from ..scene import resolve_roi
-from . import files as pio
-from .manifest import write_run_manifest, write_variants_manifest
+from ..store.manifest import write_run_manifest, write_variants_manifest
 from .member import run_member
 from .reference import chain_mode, specular_reference
 from .result import ProgressFn, RunResult, _Steps
 from .threads import single_blas
 from .variants import run_variants
+from ..store.folder import atomic_run_dir, folder_sizes, size_text
 
 #: Names a variant cannot have: they are files or folders of the run folder itself
 #: (validated by the config already; kept here for configs built around the validators).
@@ -156,7 +156,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
     plan = plan_run(cfg, progress, figures, decode, diagnostics)
     if client is not None:
         on_cluster(plan, client)
-    with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp, _current(client):
+    with atomic_run_dir(outdir, overwrite=overwrite) as tmp, _current(client):
         t = time.perf_counter()
         # The vision rays and the ideal specular reference do not depend on what a variant
         # may change (BRDF, anisotropy frame, sampling): one of each for all.
@@ -190,12 +190,12 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         timings = dict(result.timings, total=time.perf_counter() - t_start)
         result = replace(result, timings=timings)
         # the folder's size, measured now that everything but the manifest is written
-        sizes = pio.folder_sizes(tmp)
+        sizes = folder_sizes(tmp)
         result = replace(result, sizes=sizes)
         summary = tmp / "summary.txt"
         if summary.is_file():
             with open(summary, "a") as fh:
-                fh.write("\n" + pio.size_text(sizes) + "\n")
+                fh.write("\n" + size_text(sizes) + "\n")
         if cfg.variants:
             write_variants_manifest(tmp, cfg, result)
         else:

@@ -201,11 +201,11 @@ def done_mask(store: str | Path) -> np.ndarray:
 @contextlib.contextmanager
 def claim_sweep(outdir: str | Path):
     """Hold the sweep folder ``outdir`` for the ``with`` block, as ``simulate`` holds its
-    run folder (:func:`pmdsim.run.claim.claim_output`: a lock on ``<outdir>.lock``, released
+    run folder (:func:`pmdsim.store.folder_lock.claim_output`: a lock on ``<outdir>.lock``, released
     by the operating system however the process ends). A second sweep on the same folder
-    fails at once with :class:`~pmdsim.run.claim.OutputBusy`; under the claim, temporary
+    fails at once with :class:`~pmdsim.store.folder_lock.OutputBusy`; under the claim, temporary
     stores (``.sweep.zarr.tmp-<pid>``) of processes that no longer exist are removed."""
-    from .claim import claim_output
+    from ..store.folder_lock import claim_output
 
     outdir = Path(outdir)
     with claim_output(outdir) as lock:
@@ -216,7 +216,7 @@ def claim_sweep(outdir: str | Path):
 def remove_stale_stores(outdir: str | Path) -> list[Path]:
     """Remove the ``.sweep.zarr.tmp-<pid>`` folders in ``outdir`` of processes that no
     longer run (or of this one); returns them."""
-    from .claim import _pid_alive, remove_tree
+    from ..store.folder_lock import _pid_alive, remove_tree
 
     outdir = Path(outdir)
     removed = []
@@ -479,7 +479,7 @@ def _read_store(path: Path):
     about a CPU-second of a sweep's process)."""
     import xarray as xr
 
-    from .lazy import xarray_without_dask_import
+    from ..store.lazy_arrays import xarray_without_dask_import
 
     xarray_without_dask_import()
     return xr.open_zarr(path, consolidated=False, chunks=None)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..brdf.turning import TextureParameters, format_texture, texture_parameters
 from ..report.texture import plot_texture
-from .files import write_json
+from ..store.tables import write_json
 
 
 @dataclass(frozen=True)

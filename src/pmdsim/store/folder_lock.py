@@ -1,7 +1,7 @@
 """Claiming an output folder, and leaving nothing behind when a run is interrupted.
 
 A run writes ``<out>.tmp-<pid>`` and renames it to ``<out>`` when complete
-(:func:`pmdsim.run.files.atomic_run_dir`). This module makes that safe between processes
+(:func:`pmdsim.store.folder.atomic_run_dir`). This module makes that safe between processes
 and against signals:
 
 * :func:`claim_output` takes an exclusive lock on ``<out>.lock`` (``fcntl.flock``; the

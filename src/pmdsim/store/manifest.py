@@ -6,13 +6,14 @@ import datetime as _dt
 from pathlib import Path
 
 from ..config import RunConfig
-from . import files as pio
-from .dataset import CONFIG_NAME, DATASET_NAME, _version
+from .folder import MANIFEST
+from .schema import CONFIG_NAME, DATASET_NAME, _version
+from .tables import write_json
 
 
 def write_run_manifest(folder: Path, cfg: RunConfig, result, timings: dict) -> None:
     rel = lambda ps: [str(Path(p).relative_to(folder)) for p in ps]  # noqa: E731
-    pio.write_manifest(folder, {
+    write_manifest(folder, {
         "format": "pmdsim-run/1",
         "name": cfg.name,
         "pmdsim_version": _version(),
@@ -41,7 +42,7 @@ def write_variants_manifest(folder: Path, cfg: RunConfig, top) -> None:
     """The manifest of the top level of a run with variants (written after the variants')."""
     figure_paths = [p for p in top.figure_paths if Path(p).parent == folder / "figures"]
     names = [r.config.name for r in top.variants]
-    pio.write_manifest(folder, {
+    write_manifest(folder, {
         "format": "pmdsim-run/1",
         "name": cfg.name,
         "pmdsim_version": _version(),
@@ -55,3 +56,8 @@ def write_variants_manifest(folder: Path, cfg: RunConfig, top) -> None:
         "timings_s": {k: round(v, 4) for k, v in top.timings.items()},
         "sizes_bytes": dict(top.sizes),
     })
+
+
+def write_manifest(folder: str | Path, content: dict) -> Path:
+    """Write the run manifest (JSON) into ``folder``; call it last."""
+    return write_json(Path(folder) / MANIFEST, content)

@@ -93,7 +93,7 @@ def export_run(run: str | Path, fmt: str, output: str | Path | None = None,
                overwrite: bool = False) -> list[Path]:
     """Write the surface maps of the run folder ``run`` (a member folder with
     ``run.zarr``) as ``fmt`` into ``output`` (default ``RUN/export``); returns the files."""
-    from .dataset import DATASET_NAME, load_run
+    from .schema import DATASET_NAME, load_run
 
     if fmt not in FORMATS:
         raise InputError(f"--format: expected one of {', '.join(FORMATS)}, got {fmt!r}")

@@ -4,7 +4,6 @@ rendered and measured arrays, and loading it back (:func:`load_run`)."""
 from __future__ import annotations
 
 import datetime as _dt
-import functools
 import json
 import platform
 from pathlib import Path
@@ -13,9 +12,10 @@ import numpy as np
 
 from .. import patterns as pat
 from ..config import RunConfig
-from ..measure.chain import QUANTITIES, STATISTICS, ChainResult, DOT_THRESHOLD_FRACTION, direction_quantity_stats
+from ..measure.chain import (QUANTITIES, STATISTICS, ChainResult, DOT_THRESHOLD_FRACTION,
+                             direction_quantity_stats)
 from ..render import FringeResult, Geometry
-from . import files as pio
+from .folder import MANIFEST
 
 
 DATASET_NAME = "run.zarr"
@@ -40,7 +40,7 @@ def build_dataset(cfg: RunConfig, geometry: Geometry, fringes: FringeResult | No
     """The run's xarray Dataset (in memory): see the module docstring for its contents."""
     import xarray as xr
 
-    from .lazy import xarray_without_dask_import
+    from .lazy_arrays import xarray_without_dask_import
 
     xarray_without_dask_import()  # xarray would import dask.array for each variable
 
@@ -126,114 +126,9 @@ def build_dataset(cfg: RunConfig, geometry: Geometry, fringes: FringeResult | No
     return ds
 
 
-
-#: Significant mantissa bits kept (of float32's 23) for the stored camera values, sums,
-#: deviations, modulations, phases within a period and flags' companions: relative
-#: precision 2**-17 = 7.6e-6, finer than a 16-bit camera (1.5e-5 of full scale) and far
-#: below any deviation the chain reports; the zeroed low bits make the data compress ~2x.
-KEEP_BITS = 16
-#: Variables stored with full float32 precision (absolute coordinates and phases: their
-#: absolute precision matters, ~1e-4 monitor px at 2000 px).
-FULL_PRECISION = frozenset({
-    "absolute_phase", "reference_absolute_phase", "monitor_coord_px", "monitor_coord_mm",
-    "reference_monitor_coord_px", "reference_monitor_coord_mm", "specular_u", "specular_v",
-    "surface_to_monitor_mm",
-})
-
-
-def keep_bits(values: np.ndarray, bits: int = KEEP_BITS) -> np.ndarray:
-    """float32 ``values`` rounded (to nearest, ties to even) to ``bits`` significant
-    mantissa bits; NaN and inf unchanged. The relative rounding error is <= 2**-(bits+1).
-    Returns a new array (``values`` is never changed)."""
-    from ..kernels.bits import round_mantissa
-
-    a = np.array(values, dtype=np.float32, order="C", copy=True)
-    drop = 23 - bits
-    if drop > 0 and a.size:
-        round_mantissa(a.reshape(-1).view(np.uint32), drop)  # in place, one pass
-    return a
-
-
-#: Compressor of the camera-image variables: Blosc LZ4 with bit shuffling. On the Fig. 3
-#: run it encodes 512 MB of float32 in 0.5 CPU-s to 72 MB; zstd level 5 (the earlier
-#: choice) makes 50 MB but takes 3.7 CPU-s, zstd level 1 70 MB in 1.0 s. Noisy floats
-#: hardly compress further: the cheap codec is the right trade for a run folder.
-CODEC = dict(cname="lz4", clevel=5, shuffle="bitshuffle")
-
-
-def _image_like(var) -> bool:
-    return var.ndim >= 2 and var.dims[-2:] == ("row", "col")
-
-
-def _encoding(ds) -> dict:
-    """Storage of every (..., row, col) variable: one chunk per camera image, float32,
-    Blosc (:data:`CODEC`, Zarr v3's standard ``blosc`` codec)."""
-    from zarr.codecs import BloscCodec
-
-    enc = {}
-    for name, var in ds.data_vars.items():
-        if _image_like(var):
-            shape = var.shape
-            e = {"chunks": (1,) * (len(shape) - 2) + tuple(shape[-2:]),
-                 "compressors": (BloscCodec(**CODEC),)}
-            if var.dtype == np.float64:
-                e["dtype"] = "float32"
-            enc[name] = e
-    return enc
-
-
-def _stored(name: str, block: np.ndarray) -> np.ndarray:
-    """One chunk as stored: float32, :data:`KEEP_BITS` significant bits unless ``name`` is
-    in :data:`FULL_PRECISION`; other dtypes unchanged."""
-    if block.dtype.kind != "f":
-        return block
-    if name in FULL_PRECISION:
-        return block.astype(np.float32, copy=False)
-    return keep_bits(block)
-
-
-def storage_form(ds, lazy: bool = False):
-    """``ds`` as the run folder stores it: image-like float variables (camera rows x
-    columns) in float32 with :data:`KEEP_BITS` significant bits, except
-    :data:`FULL_PRECISION` (float32, all bits); everything else unchanged (a shallow copy).
-
-    With ``lazy`` the image-like variables are converted when read
-    (:func:`pmdsim.run.lazy.converted`): writing them holds a rounded copy of one variable
-    at a time instead of one of the whole dataset."""
-    from . import lazy
-
-    new = {}
-    for name, var in ds.data_vars.items():
-        if not _image_like(var):
-            continue
-        if lazy:
-            arr = lazy.converted(var.variable._data, functools.partial(_stored, name))
-            new[name] = var.copy(data=arr)
-        elif var.dtype.kind == "f":
-            new[name] = var.copy(data=_stored(name, np.asarray(var.values)))
-    return ds.assign(new)  # one merge (a merge per variable costs ~10 ms each)
-
-
-def write_dataset(ds, path: str | Path) -> Path:
-    """Write a run dataset to ``path`` (Zarr v3, chunked and compressed, consolidated
-    metadata so that a plain ``xarray.open_zarr(path)`` opens it without a warning);
-    see :func:`storage_form` for the precision.
-
-    The camera-image variables are rounded and compressed one image at a time on Dask's
-    threaded scheduler (NumPy and Blosc release the GIL), whatever scheduler is active
-    (a ``dask.distributed`` client would ship the run's arrays to its workers). A run
-    writes its dataset in parts while it computes (:class:`pmdsim.run.writing.DatasetWriter`),
-    with the same bytes."""
-    from .writing import _write_part, finish_store
-
-    path = Path(path)
-    _write_part(ds, path, create=True)
-    finish_store(path, dict(ds.attrs))
-    return path
-
-
-def load_run(path: str | Path, variant: str | None = None):
-    """Open the dataset of a run (lazily, Dask-backed).
+def load_run(path: str | Path, variant: str | None = None, *, dask: bool = True):
+    """Open the dataset of a run (lazily, Dask-backed; with ``dask=False`` each variable
+    is read with NumPy once, on first use, and kept: what a figure needs).
 
     ``path`` is a run folder or its ``run.zarr``. For a run with variants, ``variant``
     selects one (the same as opening ``<path>/<variant>``); without it the variants are
@@ -253,16 +148,19 @@ def load_run(path: str | Path, variant: str | None = None):
             raise FileNotFoundError(f"no pmdsim run dataset at {path}")
         import xarray as xr
 
+        if not dask:
+            return xr.open_dataset(path, engine="zarr", chunks=None, cache=True,
+                                   consolidated=False)
         return xr.open_zarr(path, consolidated=False)
-    manifest = path / pio.MANIFEST
+    manifest = path / MANIFEST
     if not manifest.is_file():
-        raise FileNotFoundError(f"no pmdsim run at {path} (no {DATASET_NAME}, no {pio.MANIFEST})")
+        raise FileNotFoundError(f"no pmdsim run at {path} (no {DATASET_NAME}, no {MANIFEST})")
     names = json.loads(manifest.read_text()).get("variants", [])
     if not names:
         raise FileNotFoundError(f"no pmdsim run dataset in {path}")
     import xarray as xr
 
-    parts = [load_run(path / n) for n in names]
+    parts = [load_run(path / n, dask=dask) for n in names]
     # The geometry and the specular reference are the same for every variant.
     shared = {"surface_mask", "monitor_mask", "specular_u", "specular_v", "surface_to_monitor_mm"}
     shared |= {v for v in parts[0].data_vars if str(v).startswith("reference_")}
@@ -296,7 +194,7 @@ def dataset_variables(chain: ChainResult) -> dict:
     dcs = [chain.directions[d] for d in dirs]
     pitch = chain.pitch_mm
 
-    from .lazy import lazy_stack
+    from .lazy_arrays import lazy_stack
 
     def per(fn, dtype=None, scale=None):
         # stacked lazily over the chain's own arrays (no Dask): no second copy of the

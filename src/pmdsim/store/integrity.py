@@ -19,7 +19,7 @@ import json
 from pathlib import Path
 
 from ..config import InputError, RunConfig
-from .dataset import DATASET_NAME
+from .schema import DATASET_NAME
 
 _AGAIN = "the run folder is damaged: run pmdsim simulate again (or restore it)"
 
@@ -96,7 +96,7 @@ def check_arrays(store: Path, root_meta: dict) -> None:
 def open_run_checked(folder: str | Path, *, chunks: bool = True):
     """(dataset, configuration) of a run (or variant) folder after the checks of the module
     docstring (``chunks=False`` skips decoding every chunk)."""
-    from .figures import open_dataset
+    from .schema import load_run
 
     folder = Path(folder)
     store = folder / DATASET_NAME
@@ -105,7 +105,7 @@ def open_run_checked(folder: str | Path, *, chunks: bool = True):
     if chunks:
         check_arrays(store, root)
     try:
-        ds = open_dataset(folder)
+        ds = load_run(store, dask=False)
     except Exception as err:  # noqa: BLE001 - xarray/zarr: name the store
         raise InputError(f"{store}: cannot be opened ({type(err).__name__}: {err}); "
                          f"{_AGAIN}") from None
