@@ -258,6 +258,7 @@ def test_study_checks_the_configured_settings_by_default():
     as diagnose + check called directly (the base lobe in a 1 deg cone: energy fraction).
     Guards against the configured phase method being ignored (it was, before issue 9)."""
     from pmdsim.studies import diagnostics as dg
+    from pmdsim.studies.diagnostic_warnings import check
 
     cfg = make_config(sampling={"n_rays": 16, "theta_max_deg": 1.0},
                       diagnostics={"grid": [4, 3], "phase_method": "delta"})
@@ -266,7 +267,7 @@ def test_study_checks_the_configured_settings_by_default():
     small = reduced_config(cfg, (16, 12))
     sim = Simulation(Scene.from_config(small))
     diag = dg.diagnose(sim, (50.0,), ("x", "y"), grid=(4, 3), phase_method="delta")
-    expected = dg.check(diag, bounds=small.diagnostics)
+    expected = check(diag, bounds=small.diagnostics)
     assert [w.code for w in res.warnings] == [w.code for w in expected]
     assert "energy_fraction" in [w.code for w in res.warnings]
     assert res.diagnostics["energy"] == pytest.approx(diag.summary["energy"])

@@ -7,6 +7,7 @@ import pytest
 
 import naive_decode as naive
 from pmdsim.measure import decode as dec
+from pmdsim.measure.images import load_image_stack
 from pmdsim.kernels import decode as kd
 
 EXTENT = 1920
@@ -447,32 +448,32 @@ def test_load_image_stack_tiff_and_png(tmp_path):
     tifffile.imwrite(tmp_path / "a.tif", a)
     tifffile.imwrite(tmp_path / "b.tiff", b)
     Image.fromarray(c).save(tmp_path / "c.png")
-    stack = dec.load_image_stack([tmp_path / "a.tif", str(tmp_path / "b.tiff")])
+    stack = load_image_stack([tmp_path / "a.tif", str(tmp_path / "b.tiff")])
     assert stack.shape == (3, 6, 9) and stack.dtype == np.float64
     np.testing.assert_array_equal(stack, np.concatenate([a[None], b]).astype(float))
-    png = dec.load_image_stack([tmp_path / "c.png"])
+    png = load_image_stack([tmp_path / "c.png"])
     assert png.shape == (1, 6, 9)
     np.testing.assert_array_equal(png[0], c.astype(float))
     # frames of one sequence come from one camera setting: 16-bit TIFFs and an 8-bit PNG mixed
     with pytest.raises(ValueError, match="c.png.*uint8.*uint16"):
-        dec.load_image_stack([tmp_path / "a.tif", tmp_path / "c.png"])
+        load_image_stack([tmp_path / "a.tif", tmp_path / "c.png"])
 
     with pytest.raises(FileNotFoundError, match="missing.tif"):
-        dec.load_image_stack([tmp_path / "a.tif", tmp_path / "missing.tif"])
+        load_image_stack([tmp_path / "a.tif", tmp_path / "missing.tif"])
     tifffile.imwrite(tmp_path / "small.tif", a[:5])
     with pytest.raises(ValueError, match="small.tif"):
-        dec.load_image_stack([tmp_path / "a.tif", tmp_path / "small.tif"])
+        load_image_stack([tmp_path / "a.tif", tmp_path / "small.tif"])
     Image.fromarray(np.zeros((6, 9, 3), np.uint8)).save(tmp_path / "rgb.png")
     with pytest.raises(ValueError, match="rgb.png.*single-channel"):
-        dec.load_image_stack([tmp_path / "rgb.png"])
+        load_image_stack([tmp_path / "rgb.png"])
     (tmp_path / "x.bmp").write_bytes(b"BM")
     with pytest.raises(ValueError, match="x.bmp"):
-        dec.load_image_stack([tmp_path / "x.bmp"])
+        load_image_stack([tmp_path / "x.bmp"])
     (tmp_path / "broken.tif").write_bytes(b"not a tiff")
     with pytest.raises(ValueError, match="broken.tif"):
-        dec.load_image_stack([tmp_path / "broken.tif"])
+        load_image_stack([tmp_path / "broken.tif"])
     with pytest.raises(ValueError, match="paths"):
-        dec.load_image_stack([])
+        load_image_stack([])
 
 
 # --------------------------------------------------------------------------- kernels vs NumPy

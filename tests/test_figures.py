@@ -14,6 +14,8 @@ from pmdsim.cli import app
 from pmdsim.config import parse_config
 from pmdsim.report.scene import MAX_IMAGE_PX, imshow
 from test_pipeline import tiny_config_dict
+from pmdsim.report.chain_maps import plot_deviation, plot_histograms
+from pmdsim.report.overview import plot_overview, plot_variant_deviation
 
 
 def _pixels(draw) -> np.ndarray:
@@ -98,12 +100,13 @@ def test_forked_drawing_draws_the_same_picture_as_in_process(decoded_run, tmp_pa
 def test_a_figure_that_fails_in_a_drawing_process_is_a_note(tmp_path, monkeypatch):
     """A figure that cannot be drawn (here: the overview raises) is a note of the run; the
     other figures and all the data are written."""
-    from pmdsim.report import chain as plot_chain
 
     def boom(*args, **kwargs):
         raise ValueError("no overview today")
 
-    monkeypatch.setattr(plot_chain, "plot_overview", boom)
+    from pmdsim.report import overview
+
+    monkeypatch.setattr(overview, "plot_overview", boom)
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
     d["output"] = {"figures": True, "write_images": True}
     d["reconstruct"] = {"enabled": False}
@@ -229,7 +232,6 @@ def recorded(monkeypatch):
 
 
 def test_every_run_figure_has_labelled_axes(decoded_run, tmp_path, recorded):
-    from pmdsim.report import chain as plot_chain
     from pmdsim.report.scene import plot_variant_fringes
     from pmdsim.run.figures import FIGURES, _simulation, draw_one
 
@@ -238,7 +240,7 @@ def test_every_run_figure_has_labelled_axes(decoded_run, tmp_path, recorded):
     for name in FIGURES:  # every figure a run draws (pmdsim report --all)
         draw_one(ds, name, tmp_path, "tiny", "a tiny run", sim=sim)
     both = {"a": ds, "b": ds}  # the variants' comparison figures
-    plot_chain.plot_variant_deviation(both, tmp_path / "deviation_variants.png")
+    plot_variant_deviation(both, tmp_path / "deviation_variants.png")
     plot_variant_fringes(both, tmp_path / "fringes_variants.png")
     expected = {f for f, _ in FIGURES.values()} | {"deviation_variants.png",
                                                    "fringes_variants.png"}
@@ -319,7 +321,6 @@ def test_deviation_figures_print_value_pm_numerical_error(decoded_run, tmp_path,
     import json
     import re
 
-    from pmdsim.report import chain as plot_chain
 
     ds = pipeline.load_run(decoded_run.outdir).load()
     st = json.loads(ds.attrs["statistics_json"])
@@ -344,10 +345,10 @@ def test_deviation_figures_print_value_pm_numerical_error(decoded_run, tmp_path,
         save(self, fname, *args, **kwargs)
 
     monkeypatch.setattr(Figure, "savefig", savefig)
-    plot_chain.plot_overview(ds, tmp_path / "overview.png")
-    plot_chain.plot_deviation(ds, tmp_path / "deviation.png")
-    plot_chain.plot_histograms(ds, tmp_path / "histograms.png")
-    plot_chain.plot_variant_deviation({"a": ds}, tmp_path / "deviation_variants.png")
+    plot_overview(ds, tmp_path / "overview.png")
+    plot_deviation(ds, tmp_path / "deviation.png")
+    plot_histograms(ds, tmp_path / "histograms.png")
+    plot_variant_deviation({"a": ds}, tmp_path / "deviation_variants.png")
     assert set(texts) == {"overview.png", "deviation.png", "histograms.png", "deviation_variants.png"}
     printed = 0
     for name, found in texts.items():

@@ -137,9 +137,9 @@ def test_southwell_rhs_kernel_matches_numpy_reference(order):
 def test_southwell_reuses_the_operator_of_a_mask():
     """Calls with the same mask share one factorisation / hierarchy (and still answer each
     call's own slopes exactly); a different mask gets its own."""
-    from pmdsim.measure import integrate
+    from pmdsim.measure import poisson
 
-    integrate.clear_operator_cache()
+    poisson.clear_operator_cache()
     x, y = grid_coordinates((41, 45), H)
     circle = masks(x, y)["circle"]
     annulus = masks(x, y)["annulus"]
@@ -150,10 +150,10 @@ def test_southwell_reuses_the_operator_of_a_mask():
             guess = truth + 1e-6 * x if solver != "direct" else None  # a warm start
             z = southwell(sx, sy, H, circle, solver=solver, x0=guess)
             assert np.nanmax(np.abs(z - truth)) < 1e-9 * np.nanmax(np.abs(truth))
-        assert len(integrate._OPERATORS) == min(k + 1, 2)
+        assert len(poisson._OPERATORS) == min(k + 1, 2)
     southwell(sx, sy, H, annulus, solver="direct")
-    assert len(integrate._OPERATORS) == 2  # the latest two are kept
-    integrate.clear_operator_cache()
+    assert len(poisson._OPERATORS) == 2  # the latest two are kept
+    poisson.clear_operator_cache()
 
 
 # Documented edge error of Frankot-Chellappa on the mirror-extended field (docs/reconstruction.md):
@@ -265,7 +265,7 @@ def test_dct_solve_with_a_tridiagonal_axis():
     path: it agrees with the 2-D DCT solve and integrates a quadratic exactly."""
     import scipy.fft
 
-    from pmdsim.measure.integrate import _dct_eigenvalues, _dct_poisson, _neumann_tridiagonal_solve
+    from pmdsim.measure.poisson import _dct_eigenvalues, _dct_poisson, _neumann_tridiagonal_solve
 
     rng = np.random.default_rng(2)
     rhs = rng.standard_normal((263, 307))

@@ -335,7 +335,7 @@ def test_target_error_raises_the_order_until_met():
     info = fr.sampling
     assert info["target_met"] and info["n_rays"] > 16
     assert info["achieved_p95_mrad"] <= 2.0
-    from pmdsim.render.simulation import worst_phase_error
+    from pmdsim.render.results import worst_phase_error
 
     assert worst_phase_error(fr) * 1e3 == pytest.approx(info["achieved_p95_mrad"])
     # the order before the last did not meet it (the doubling stopped at the first that did)

@@ -15,7 +15,7 @@ import pytest
 from scipy import integrate
 
 from pmdsim.brdf import rayleigh_rice as rr
-from pmdsim.brdf.topography import KCorrelation
+from pmdsim.brdf.psd import KCorrelation
 
 LAM = 545e-6  # mm
 ALUMINIUM = (0.96, 6.69)  # n, k at 545 nm

@@ -9,9 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from pmdsim.brdf import topography as tp
 from pmdsim.config import ConfigError, InputError
 from pmdsim.topofile import read_topography
+from pmdsim.brdf.psd import (KCorrelation, fit_k_correlation, periodogram, synthesize,
+                             window_fraction)
+from pmdsim.brdf.topography import analyse, regime, slope_table, to_local
 
 x3pio = pytest.importorskip("x3pio")
 
@@ -150,51 +152,51 @@ def test_slope_density_recovers_gaussian_alphas_per_axis():
     def gauss_psd(fx, fy):
         return sigma**2 * math.pi * lx * ly * np.exp(-(math.pi * lx * fx) ** 2 - (math.pi * ly * fy) ** 2)
 
-    h = tp.synthesize(gauss_psd, (768, 1024), dx, dy, seed=3)
-    a = tp.analyse(h, dx, dy)
+    h = synthesize(gauss_psd, (768, 1024), dx, dy, seed=3)
+    a = analyse(h, dx, dy)
     ax, ay = 2 * sigma / lx, 2 * sigma / ly
     assert a.alpha_tangential == pytest.approx(ax, rel=0.02)
     assert a.alpha_radial == pytest.approx(ay, rel=0.02)
-    table = tp.slope_table(h, dx, dy, bins=128)
+    table = slope_table(h, dx, dy, bins=128)
     assert table.equivalent_alphas[0] == pytest.approx(ax, rel=0.02)
     assert table.equivalent_alphas[1] == pytest.approx(ay, rel=0.02)
     # the map with its radial axis along x is the transposed one
-    ht, dxt, dyt = tp.to_local(h, dx, dy, "x")
-    assert tp.analyse(ht, dxt, dyt).alpha_radial == pytest.approx(ax, rel=0.02)
+    ht, dxt, dyt = to_local(h, dx, dy, "x")
+    assert analyse(ht, dxt, dyt).alpha_radial == pytest.approx(ax, rel=0.02)
 
 
 def test_k_correlation_parameters_recovered_within_5_percent():
     """Whittle fit of an anisotropic K-correlation surface (bx != by, dx != dy): every
     parameter within 5 % and within 4 of its own standard errors."""
     dx, dy = 0.5e-3, 0.3e-3
-    kc = tp.KCorrelation(3e-6, 2 * math.pi * 1.5 * dx, 2 * math.pi * 1.2 * dy, 2.4)
-    h = tp.synthesize(kc, (384, 512), dx, dy, seed=11)
-    fx, fy, s = tp.periodogram(h, dx, dy, "none")
+    kc = KCorrelation(3e-6, 2 * math.pi * 1.5 * dx, 2 * math.pi * 1.2 * dy, 2.4)
+    h = synthesize(kc, (384, 512), dx, dy, seed=11)
+    fx, fy, s = periodogram(h, dx, dy, "none")
     assert s.sum() * (fx[1] - fx[0]) * (fy[1] - fy[0]) == pytest.approx(h.var(), rel=1e-10)
-    fit = tp.fit_k_correlation(fx, fy, s)
+    fit = fit_k_correlation(fx, fy, s)
     got = np.array([fit.model.sigma, fit.model.bx, fit.model.by, fit.model.c])
     want = np.array([kc.sigma, kc.bx, kc.by, kc.c])
     rel = got / want - 1
     assert np.all(np.abs(rel) < 0.05), rel
     assert np.all(np.abs(rel) < 4 * np.array(fit.rel_err)), (rel, fit.rel_err)
     # the Hann-windowed periodogram (for measured maps) agrees within its standard errors
-    fxh, fyh, sh = tp.periodogram(h, dx, dy, "hann")
-    fh = tp.fit_k_correlation(fxh, fyh, sh, effective_fraction=tp.window_fraction("hann"))
+    fxh, fyh, sh = periodogram(h, dx, dy, "hann")
+    fh = fit_k_correlation(fxh, fyh, sh, effective_fraction=window_fraction("hann"))
     relh = np.array([fh.model.sigma, fh.model.bx, fh.model.by, fh.model.c]) / want - 1
     assert np.all(np.abs(relh) < 4 * np.array(fh.rel_err)), (relh, fh.rel_err)
 
 
 def test_regime_follows_the_rayleigh_parameter():
-    assert tp.regime(0.07)[0] == "smooth" and tp.regime(0.07)[2] == "rayleigh_rice"
-    assert tp.regime(0.9)[0] == "intermediate" and tp.regime(0.9)[2] == "rayleigh_rice"
-    assert tp.regime(1.2)[2] == "slope_density"
-    assert tp.regime(3.0)[0] == "geometric"
+    assert regime(0.07)[0] == "smooth" and regime(0.07)[2] == "rayleigh_rice"
+    assert regime(0.9)[0] == "intermediate" and regime(0.9)[2] == "rayleigh_rice"
+    assert regime(1.2)[2] == "slope_density"
+    assert regime(3.0)[0] == "geometric"
 
 
 def _smooth_x3p(path, sigma=3e-6):
     """A smooth K-correlation patch (dx != dy, lx != ly) written by x3pio."""
-    kc = tp.KCorrelation(sigma, 2 * math.pi * 6e-3, 2 * math.pi * 2e-3, 2.3)
-    h = tp.synthesize(kc, (96, 128), 0.8e-3, 0.5e-3, seed=5)
+    kc = KCorrelation(sigma, 2 * math.pi * 6e-3, 2 * math.pi * 2e-3, 2.3)
+    h = synthesize(kc, (96, 128), 0.8e-3, 0.5e-3, seed=5)
     x3pio.write(path, h * 1e-3, x_scale=0.8e-6, y_scale=0.5e-6)
     return h
 
@@ -218,7 +220,7 @@ def test_topography_model_picks_halo_or_slope_density_by_the_rayleigh_parameter(
     rough = TopographyConfig(file=str(tmp_path / "r.x3p"), level="none")
     b = brdf_from_config(rough)
     assert isinstance(b, SlopeDensityBRDF)
-    a = tp.analyse(h * 100, 0.8e-3, 0.5e-3)
+    a = analyse(h * 100, 0.8e-3, 0.5e-3)
     ax, ay = equivalent_alphas(rough)
     assert ax == pytest.approx(a.alpha_tangential, rel=0.03) and ay == pytest.approx(a.alpha_radial, rel=0.03)
     assert ax < ay  # lx > ly: steeper radially

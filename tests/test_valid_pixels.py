@@ -128,7 +128,8 @@ def test_budget_and_converge_rows_without_valid_pixels_are_refused(tmp_path, mon
     import pmdsim.run.convergence as rc
 
     if command == "budget":
-        from pmdsim.studies.budget import TABLE_COLUMNS, Budget
+        from pmdsim.studies.budget_error import TABLE_COLUMNS
+        from pmdsim.studies.budget import Budget
 
         def fake(cfg, progress=None, truth="centre"):
             row = dict.fromkeys(TABLE_COLUMNS, 1.0) | {"part": "system", "label": "ideal"}

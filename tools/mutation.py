@@ -70,7 +70,7 @@ TARGETS = {
             "test_full_map_is_bilinear_and_fills_missing_nodes",
             "test_diagnose_and_check_name_the_fixing_setting",
             "test_check_reports_washed_out_fringes", "test_mirror_has_nothing_to_diagnose"))],
-    "studies/diagnostic_checks.py": [
+    "studies/diagnostic_warnings.py": [
         "tests/test_diagnostics_independent.py", "tests/test_warnings_true.py",
         "tests/test_converge.py::test_diagnose_and_check_name_the_fixing_setting",
         "tests/test_converge.py::test_check_reports_washed_out_fringes"],
@@ -96,17 +96,17 @@ EQUIVALENT: dict[str, str] = {
         "the min() never binds",
     "studies/diagnostics.py:incidence:Gt->GtE:dot(i, normal) > 0#0":
         "exactly grazing vision rays (i.n = 0 to the last bit) do not occur",
-    "studies/diagnostic_checks.py:check:float 1.0->2.0:1.0#1":
+    "studies/diagnostic_warnings.py:check:float 1.0->2.0:1.0#1":
         "worst starts at -1 or -2: below every standard error (>= 0) either way",
-    "studies/diagnostic_checks.py:check:float 1.0->2.0:1.0#2":
+    "studies/diagnostic_warnings.py:check:float 1.0->2.0:1.0#2":
         "'else 1.0' runs only with rays None and phase_se set, which diagnose never makes "
         "(rays is None only for the mirror, whose phase_se is None)",
-    "studies/diagnostic_checks.py:check:float 0.0->1.0:0.0#0":
+    "studies/diagnostic_warnings.py:check:float 0.0->1.0:0.0#0":
         "the floor's 'else 0.0' runs when no judged pixel has an ESS, and then no fringe has a "
         "modulation either (each is skipped as NaN), so the floor is never compared",
-    "studies/diagnostic_checks.py:check:float 0.25->0.5:0.25#0":
+    "studies/diagnostic_warnings.py:check:float 0.25->0.5:0.25#0":
         "a finite median ESS is >= 1 (any bundle with weight), so max(ESS, 0.25 or 0.5) = ESS",
-    "studies/diagnostic_checks.py:check:Gt->GtE:p95 > worst#0":
+    "studies/diagnostic_warnings.py:check:Gt->GtE:p95 > worst#0":
         "only ties change: the same worst error and suggested N, the message names the other "
         "of two equally bad fringes",
     "studies/diagnostics.py:full_map:drop-USub:-1#3":

@@ -243,7 +243,7 @@ def permittivity(refractive_index) -> complex | None:
 def from_config(cfg, incidence_deg: float = 0.0) -> SpecularHaloBRDF:
     """The ``rayleigh_rice`` model of a configuration (``incidence_deg``: the set-up's, used
     when the configuration gives none)."""
-    from .topography import KCorrelation
+    from .psd import KCorrelation
 
     theta0 = math.radians(cfg.incidence_deg if cfg.incidence_deg is not None else incidence_deg)
     psd = KCorrelation(cfg.sigma_nm * 1e-6, 2 * math.pi * cfg.correlation_length_tangential_um * 1e-3,

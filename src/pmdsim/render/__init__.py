@@ -1,6 +1,8 @@
 """Rendering: scattered bundles, BRDF weights and pattern sums, tile by tile on Dask
 (:class:`Simulation`); trace once, render any number of patterns from that transport."""
 
-from .simulation import FringeResult, Geometry, Simulation, local_scheduler, scene_geometry_rows
+from .results import FringeResult, Geometry
+from .simulation import Simulation
+from .rows import local_scheduler, scene_geometry_rows
 
 __all__ = ["Simulation", "FringeResult", "Geometry", "scene_geometry_rows", "local_scheduler"]

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import threading
 import uuid
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -42,9 +42,8 @@ from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
 from ..scene.quadrature import convergence_exponent
-from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, convergence_factor,  # noqa: F401
-                      convergence_of_ratios, phase_error, value_error, worst_phase_error)
-from .rows import (FringeFinish, TileErrors, convergence_stride, fringe_errors,  # noqa: F401
+from .results import (FringeResult, Geometry, convergence_of_ratios, value_error, worst_phase_error)
+from .rows import (FringeFinish, TileErrors, convergence_stride, fringe_errors,
                    fuses, keep_grid, local_scheduler, reduce_subrays, render_rule_fused,
                    scene_geometry_rows, vision_geometry_rows)
 from ..trace import bundle_geometry, cone_basis, trace_pixels

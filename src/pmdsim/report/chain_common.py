@@ -12,7 +12,6 @@ from matplotlib.colors import to_rgba
 from matplotlib.patches import Patch
 
 from ..quantiles import percentile as quantile_of
-from .scene import camera_axes as _image_axes  # noqa: F401  (the maps' axes)
 from .scene import imshow
 
 

@@ -250,7 +250,9 @@ def plot_setup(sim, path: str | Path, pixel: tuple[int, int] | None = None,
         Vision rays and their principal reflections are drawn for an
         ``n_vision x n_vision`` grid of pixels.
     """
-    import mpl_toolkits.mplot3d  # noqa: F401  (registers the 3-D projection)
+    import importlib
+
+    importlib.import_module("mpl_toolkits.mplot3d")  # registers the 3-D projection
 
     scene = sim.scene
     mon = scene.monitor

@@ -16,7 +16,8 @@ from typing import Callable
 
 from ..config import RunConfig, check_resources
 from ..scene import resolve_roi
-from ..studies.budget import HEIGHT_COLUMNS, TABLE_COLUMNS, budget
+from ..studies.budget_error import HEIGHT_COLUMNS, TABLE_COLUMNS
+from ..studies.budget import budget
 from ..studies.valid_pixels import check_rows
 from .threads import single_blas
 from ..store.folder import atomic_run_dir, check_output_dir

@@ -320,7 +320,7 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
         write_json(tmp / "statistics.json", stats)
         figure_paths = []
         if figures:
-            from ..report.chain import plot_decoded
+            from ..report.chain_maps import plot_decoded
 
             figure_paths = plot_decoded(ds, tmp / "figures")
         seconds = {"read": t_read, "decode": t_decode, "write": time.perf_counter() - t}

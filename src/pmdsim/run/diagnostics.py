@@ -62,6 +62,7 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
     from dataclasses import asdict
 
     from ..studies import diagnostics as dg
+    from ..studies.diagnostic_warnings import check as warnings_of
 
     fr = cfg.patterns.fringes
     cone = cfg.sampling.estimator in dg.CONE_ESTIMATORS
@@ -84,7 +85,7 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
         diag = replace(diag, phase_se=None)
         for key in ("phase_se_method", "phase_se_rad", "modulation_median"):
             summary.pop(key, None)
-    warnings = tuple(dg.check(diag, bounds=cfg.diagnostics))
+    warnings = tuple(warnings_of(diag, bounds=cfg.diagnostics))
     grid = diag.grid
     summary["grid"] = {"columns": int(grid.cols.size), "rows": int(grid.rows.size)}
     if diag.energy is not None:

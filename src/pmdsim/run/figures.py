@@ -85,8 +85,10 @@ def _simulation(ds):
 def draw_one(ds, name: str, folder: Path, run_name: str, description: str = "",
              sim=None) -> Path:
     """Draw figure ``name`` of dataset ``ds`` into ``folder``."""
-    from ..report import chain as plot_chain
     from ..report import scene as plot
+    from ..report.chain_maps import (plot_deviation, plot_histograms, plot_masks,
+                                     plot_modulation_ratio, plot_phase)
+    from ..report.overview import plot_overview
 
     path = Path(folder) / FIGURES[name][0]
     if name == "setup":
@@ -96,16 +98,16 @@ def draw_one(ds, name: str, folder: Path, run_name: str, description: str = "",
     if name == "modulation":
         return plot.plot_modulation(ds, path)
     if name == "overview":
-        return plot_chain.plot_overview(ds, path, run_name, description)
+        return plot_overview(ds, path, run_name, description)
     if name == "surface_errors":
         from ..report.reconstruction import plot_surface_errors
         from ..report.scene import _save
 
         return _save(plot_surface_errors(ds, run_name, description), path)
-    fn = {"phase": plot_chain.plot_phase, "deviation": plot_chain.plot_deviation,
-          "histograms": plot_chain.plot_histograms,
-          "modulation_ratio": plot_chain.plot_modulation_ratio,
-          "masks": plot_chain.plot_masks}[name]
+    fn = {"phase": plot_phase, "deviation": plot_deviation,
+          "histograms": plot_histograms,
+          "modulation_ratio": plot_modulation_ratio,
+          "masks": plot_masks}[name]
     return fn(ds, path, run_name)
 
 

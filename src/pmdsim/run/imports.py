@@ -9,6 +9,7 @@ core (0.7 CPU-s of the Fig. 3 run; docs/performance.md).
 
 from __future__ import annotations
 
+import importlib
 import threading
 
 _IMPORTS: threading.Thread | None = None
@@ -28,15 +29,16 @@ def import_in_background(figures: bool = True) -> None:
     if _IMPORTS is None:
         def work():
             try:
-                import zarr.codecs  # noqa: F401
-
+                for name in ("zarr.codecs", "pmdsim.store.lazy_arrays"):  # (xarray)
+                    importlib.import_module(name)
             except Exception:  # noqa: BLE001 - the dataset step imports them and reports it
                 pass
             finally:
                 _DATASET_IMPORTED.set()
             if figures:
-                from ..report import chain, reconstruction, scene  # noqa: F401
-                import mpl_toolkits.mplot3d  # noqa: F401
+                for name in ("chain_maps", "dots", "overview", "reconstruction", "scene"):
+                    importlib.import_module(f"pmdsim.report.{name}")
+                importlib.import_module("mpl_toolkits.mplot3d")
 
         _IMPORTS = threading.Thread(target=work, name="pmdsim-imports", daemon=True)
         _IMPORTS.start()

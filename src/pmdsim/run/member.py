@@ -288,9 +288,9 @@ def draw(m: Member) -> None:
         return
     m.figure_paths = m.figures.paths(m.notes)
     if m.dot_table and m.standalone:
-        from ..report import chain as plot_chain
+        from ..report.dots import dot_figures
 
-        m.figure_paths += draw_safely(m.notes, "of the dots", plot_chain.dot_figures,
+        m.figure_paths += draw_safely(m.notes, "of the dots", dot_figures,
                                       m.folder / "figures", {m.cfg.name: m.dot_images},
                                       {m.cfg.name: m.dot_table}, m.sim, {})
     m.steps.advance()

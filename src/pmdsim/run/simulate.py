@@ -275,4 +275,4 @@ def moved(result: RunResult, tmp: Path, final: Path, **changes) -> RunResult:
         variants=tuple(moved(r, tmp, final) for r in result.variants), **changes)
 
 
-__all__ = ["RunResult", "RunPlan", "run_simulation", "plan_run", "on_cluster"]
+__all__ = [ "RunPlan", "run_simulation", "plan_run", "on_cluster"]

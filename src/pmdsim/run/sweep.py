@@ -87,12 +87,12 @@ def _extent(plan: SweepPlan, dim: str) -> int:
 
 
 def _quantities():
-    from ..studies.sweep import QUANTITIES
+    from ..measure.chain import QUANTITIES
     return QUANTITIES
 
 
 def _statistics():
-    from ..studies.sweep import STATISTICS
+    from ..measure.chain import STATISTICS
     return STATISTICS
 
 

@@ -99,16 +99,17 @@ def write_variant_outputs(cfg: RunConfig, tmp: Path, names: list[str], subs, fig
     paths: list[Path] = []
     if not figures or not (decoded or has_dots):
         return paths
-    from ..report import chain as plot_chain
+    from ..report.dots import dot_figures
+    from ..report.overview import plot_variant_deviation
 
     datasets = {n: load_run(tmp / n) for n in names}
     if decoded:
         paths += draw_safely(notes if notes is not None else [], "deviation_variants.png",
-                             plot_chain.plot_variant_deviation, datasets,
+                             plot_variant_deviation, datasets,
                              tmp / "figures" / "deviation_variants.png", descriptions)
     if has_dots:
         images = {n: datasets[n]["dots"] for n in names}  # lazy: one dot image at a time
         paths += draw_safely(notes if notes is not None else [], "of the dots",
-                             plot_chain.dot_figures, tmp / "figures", images, tables, sim,
+                             dot_figures, tmp / "figures", images, tables, sim,
                              descriptions)
     return paths

@@ -36,7 +36,6 @@ the rendering integral, whose per-pixel error the budget carries to every statis
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -105,7 +104,7 @@ HEIGHT_STATS = ("slope_rms_x_urad", "slope_rms_y_urad", "slope_p95_x_urad", "slo
 def node_errors(err, shifted) -> dict:
     """Per reconstruction node, the numerical error of the slope errors (urad) and of the
     height error after removal (nm): the larger change between ``err`` and the
-    :class:`~pmdsim.studies.budget.HeightError` of each decoding moved by ``+-e``."""
+    :class:`~pmdsim.studies.height_rows.HeightError` of each decoding moved by ``+-e``."""
     out = {}
     for key in ("slope_x_urad", "slope_y_urad", "height_nm"):
         base = getattr(err, key)

@@ -108,7 +108,7 @@ def calibration_rows(cfg, scene, decoded, rec0, spec, disc) -> list[dict]:
     """Height rows (``part = "calibration"``) of every group of ``cfg.budget.calibration``
     with a non-zero uncertainty, and their quadrature sum; ``decoded``/``rec0``: the ideal
     mirror's decoding through the ideal system and its reconstruction."""
-    from .budget import SurfaceMaps, height_error, height_row, prior_of, reconstruct_decoded
+    from .height_rows import SurfaceMaps, height_error, height_row, prior_of, reconstruct_decoded
 
     unc = cfg.budget.calibration
     base = SurfaceMaps.of(rec0)

@@ -210,10 +210,11 @@ def convergence_study(
     warnings, diag_summary = [], {}
     if diagnostics:
         from . import diagnostics as dg
+        from .diagnostic_warnings import check as warnings_of
 
         diag = dg.diagnose(sim_of(base), widths, directions, grid=small.diagnostics.grid,
                            phase_method=small.diagnostics.phase_method)
-        warnings = dg.check(diag, bounds=small.diagnostics)
+        warnings = warnings_of(diag, bounds=small.diagnostics)
         diag_summary = diag.summary
         say("diagnostics")
 

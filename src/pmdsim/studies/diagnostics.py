@@ -649,6 +649,3 @@ def _with_specular_peak(brdf, phase_se, rays):
     rays = replace(rays, modulation=(a + h * m) / (a + h), phase_se=rays.phase_se * share)
     return (None if phase_se is None else phase_se * share), rays
 
-
-from .diagnostic_checks import (MAX_SUGGESTED_RAYS, MIN_ESS, DiagnosticWarning,  # noqa: E402,F401
-                                _nice_up, _wider_width, check)

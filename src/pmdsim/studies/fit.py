@@ -54,7 +54,7 @@ from ..render import Simulation
 from .fit_stats import (NoiseModel, fringe_signal_ratio, harmonic_noise_variance,
                         parameter_covariance)
 
-__all__ = ["FIT_FIELDS", "NoiseModel", "FitResult", "fit_fringe_images", "fit_config",
+__all__ = ["FIT_FIELDS", "FitResult", "fit_fringe_images", "fit_config",
            "check_fit_resources", "fit_levels", "decoded_modulation", "median_modulation", "closed_form_start",
            "slope_jacobian", "format_fit"]
 

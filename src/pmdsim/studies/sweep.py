@@ -440,4 +440,4 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
 
 __all__ = ["SweepPoint", "SweepPlan", "plan_sweep", "point_seed", "measure_point", "reference_key",
            "geometry_key", "KeyedCache", "GEOMETRIES", "REFERENCES",
-           "POINT_VARIABLES", "MAP_VARIABLES", "QUANTITIES", "STATISTICS"]
+           "POINT_VARIABLES", "MAP_VARIABLES"]

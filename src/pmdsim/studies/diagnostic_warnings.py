@@ -1,5 +1,6 @@
-"""Warnings from :class:`~pmdsim.studies.diagnostics.Diagnostics`, each naming the setting
-that fixes it (moved from :mod:`pmdsim.studies.diagnostics`, which re-exports them)."""
+"""The sampling warnings of a run's diagnostics (:class:`~pmdsim.studies.diagnostics.Diagnostics`):
+:func:`check` names, for each, what is wrong and the setting that fixes it
+(:class:`DiagnosticWarning`)."""
 
 from __future__ import annotations
 
