@@ -35,7 +35,7 @@ def _old_write(ds, path):
     """The writer before issue 13: zstd level 5, a rounded copy of every variable first."""
     from zarr.codecs import BloscCodec
 
-    from pmdsim.store import schema as d
+    from pmdsim.store import writer as d
 
     enc = d._encoding(ds)
     for e in enc.values():

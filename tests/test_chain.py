@@ -25,6 +25,7 @@ from conftest import base_dict
 from pmdsim.measure import chain
 from pmdsim.measure import decode as dec
 from pmdsim import run as pipeline
+from pmdsim.store import schema
 from pmdsim.config import parse_config
 from pmdsim.render import Simulation
 
@@ -312,7 +313,7 @@ def test_pipeline_writes_the_chain(variant_run):
         figures = {p.name for p in (folder / "figures").iterdir()}
         assert {"overview.png", "phase.png", "deviation.png", "histograms.png",
                 "modulation_ratio.png", "masks.png"} <= figures
-        ds = pipeline.load_run(folder)
+        ds = schema.load_run(folder)
         for var in ("wrapped_phase", "absolute_phase", "modulation", "decode_flags",
                     "monitor_coord_px", "reference_wrapped_phase", "reference_absolute_phase",
                     "reference_modulation", "reference_decode_flags",
@@ -337,7 +338,7 @@ def test_pipeline_writes_the_chain(variant_run):
     # The slope follows from the coordinate deviation with the full 3-D geometry: the
     # small-angle coord / (2 d) in the plane of incidence (the x-z plane: direction x),
     # 1/cos(25 deg) more across it (direction y).
-    wide = pipeline.load_run(out, variant="wide")
+    wide = schema.load_run(out, variant="wide")
     slope = wide["slope_deviation_urad"].values
     scalar = wide["coord_deviation_mm"].values / (2 * wide["surface_to_monitor_mm"].values) * 1e6
     assert np.array_equal(np.isfinite(slope), np.isfinite(scalar))
@@ -347,7 +348,7 @@ def test_pipeline_writes_the_chain(variant_run):
         k = directions.index(d)
         ratio = (slope[k] / scalar[k])[big[k]]
         assert abs(np.median(ratio) / want - 1) < 0.03, (d, np.median(ratio))
-    combined = pipeline.load_run(out)
+    combined = schema.load_run(out)
     assert combined["coord_deviation_px"].dims == ("variant", "direction", "row", "col")
     assert combined["reference_monitor_coord_px"].dims == ("direction", "row", "col")
 
@@ -367,7 +368,7 @@ def test_statistics_json_values_follow_from_the_stored_maps(variant_run):
     STORED = 2.0 ** -KEEP_BITS
 
     out = variant_run.outdir
-    ds = pipeline.load_run(out, variant="wide")
+    ds = schema.load_run(out, variant="wide")
     stats = json.loads((out / "wide" / "statistics.json").read_text())["directions"]
     for di, d in enumerate(("x", "y")):
         ok = ds["valid"].values[di]
@@ -405,7 +406,7 @@ def test_decoding_required_but_impossible_is_a_clear_error(tmp_path):
     res = pipeline.run_simulation(parse_config(d), tmp_path / "bare", decode=False,
                                   diagnostics=False)
     assert not res.statistics and not (tmp_path / "bare" / "statistics.json").exists()
-    assert "coord_deviation_px" not in pipeline.load_run(tmp_path / "off")
+    assert "coord_deviation_px" not in schema.load_run(tmp_path / "off")
 
 
 def test_nearest_monitor_reference_quantisation_is_reported(tmp_path):
@@ -435,11 +436,11 @@ def test_dot_moments_table_and_figures(tmp_path):
     assert {r["variant"] for r in rows} == {"a", "b"}
     assert (out / "figures" / "dot_contact_sheet.png").is_file()
     assert (out / "figures" / "dot_shapes.png").is_file()
-    ds = pipeline.load_run(out, variant="b")
+    ds = schema.load_run(out, variant="b")
     seen = np.isfinite(ds["dot_elongation"].values)
     assert seen.any()
     # The wide lobe (alpha_x 10 x alpha_y) elongates the dots the mirror shows square.
-    mirror = pipeline.load_run(out, variant="a")["dot_elongation"].values
+    mirror = schema.load_run(out, variant="a")["dot_elongation"].values
     assert np.all(np.abs(mirror[seen] - 1) < 0.02)
     assert np.all(ds["dot_elongation"].values[seen] > mirror[seen] + 0.02)
     # Moments agree with analysis.image_moments on the stored image.

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from conftest import make_config
+from pmdsim.studies import diagnostic_warnings as dw
 from pmdsim.studies import diagnostics as dg
 from pmdsim.brdf import Beckmann, Ward
 from pmdsim.config import DiagnosticsConfig
@@ -169,7 +170,7 @@ def test_diagnose_and_check_name_the_fixing_setting():
     diag = dg.diagnose(sim, widths=(40.0, 400.0), grid=(8, 6), n_samples=4096)
     e = diag.energy.summary()
     assert e["fraction_median"] < 0.5
-    warns = dg.check(diag, bounds=DiagnosticsConfig())
+    warns = dw.check(diag, bounds=DiagnosticsConfig())
     codes = {w.code: w for w in warns}
     w = codes["energy_fraction"]
     assert w.setting == "sampling.theta_max_deg" and w.suggested > 3.0
@@ -181,7 +182,7 @@ def test_diagnose_and_check_name_the_fixing_setting():
 
     rad = Simulation.from_config(make_config(sampling={"n_rays": 256, "estimator": "radiometric"}))
     diag = dg.diagnose(rad, widths=(400.0,), directions=("y",), grid=(8, 6), n_samples=2048)
-    warns = dg.check(diag, max_phase_error_mrad=50.0)
+    warns = dw.check(diag, max_phase_error_mrad=50.0)
     assert not [w for w in warns if w.code in ("energy_fraction", "effective_sample_size")]
     assert diag.rays.ess[np.isfinite(diag.rays.ess)].min() > 200  # nearly equal weights
 
@@ -192,7 +193,7 @@ def test_check_reports_washed_out_fringes():
         sampling={"n_rays": 2048, "estimator": "radiometric"}))
     diag = dg.diagnose(sim, widths=(4.0, 2000.0), directions=("x",), grid=(6, 5), n_samples=1024,
                        n_seeds=3)
-    warns = dg.check(diag, max_phase_error_mrad=1e3)
+    warns = dw.check(diag, max_phase_error_mrad=1e3)
     washed = [w for w in warns if w.code == "washed_out"]
     assert len(washed) == 1 and "4 px" in washed[0].message
     # the suggestion replaces the washed-out width by a wider one
@@ -202,7 +203,7 @@ def test_check_reports_washed_out_fringes():
 def test_mirror_has_nothing_to_diagnose():
     sim = Simulation.from_config(make_config(brdf={"__replace__": {"model": "mirror"}}))
     diag = dg.diagnose(sim, grid=(4, 4))
-    assert diag.energy is None and diag.phase_se is None and dg.check(diag) == []
+    assert diag.energy is None and diag.phase_se is None and dw.check(diag) == []
 
 
 # =========================================================================== convergence study

@@ -7,6 +7,7 @@ import pytest
 
 import naive_decode as naive
 from pmdsim.measure import decode as dec
+from pmdsim.measure.decode_plan import unambiguous_range_px
 from pmdsim.measure.images import load_image_stack
 from pmdsim.kernels import decode as kd
 
@@ -404,7 +405,7 @@ def test_bad_arguments_raise_value_error_naming_the_argument(kwargs, match):
 def test_equal_widths_in_heterodyne_tree_raise():
     # 1/2 - 1/3 == 1/3 - 1/6: both first beats are 6 px, their beat is constant
     with pytest.raises(ValueError, match="widths.*equal wavelengths"):
-        dec.unambiguous_range_px([2, 3, 6], "heterodyne")
+        unambiguous_range_px([2, 3, 6], "heterodyne")
 
 
 def test_other_functions_validate():
@@ -421,10 +422,10 @@ def test_other_functions_validate():
 
 
 def test_unambiguous_range():
-    assert dec.unambiguous_range_px([50, 400, 3200]) == 3200
-    assert dec.unambiguous_range_px([48, 54, 60], "heterodyne") == pytest.approx(2160)
-    assert dec.unambiguous_range_px([60, 48], "heterodyne") == pytest.approx(240)
-    assert dec.unambiguous_range_px([96, 128, 160], "number_theoretic") == 1920
+    assert unambiguous_range_px([50, 400, 3200]) == 3200
+    assert unambiguous_range_px([48, 54, 60], "heterodyne") == pytest.approx(2160)
+    assert unambiguous_range_px([60, 48], "heterodyne") == pytest.approx(240)
+    assert unambiguous_range_px([96, 128, 160], "number_theoretic") == 1920
 
 
 def test_monitor_coordinate_conversions():

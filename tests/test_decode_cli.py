@@ -11,6 +11,8 @@ import pytest
 from typer.testing import CliRunner
 
 from pmdsim import run as pipeline
+
+from pmdsim.store import schema
 from pmdsim.cli import app
 from pmdsim.config import parse_config
 from test_pipeline import tiny_config_dict
@@ -59,7 +61,7 @@ def test_from_run_round_trips_the_simulation(run, tmp_path, direction):
     cmp = stats["compared_with_run"]
     assert cmp["variant"] == "wide" and cmp["n_valid"] > 1500
     assert cmp["max"] < 1e-3
-    ds = pipeline.load_run(run, variant="wide")
+    ds = schema.load_run(run, variant="wide")
     valid_run = ds["decode_flags"].sel(direction=direction).values == 0
     import xarray as xr
 

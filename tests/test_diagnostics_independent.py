@@ -15,6 +15,7 @@ import pytest
 
 import naive_stats as ns
 from conftest import make_config
+from pmdsim.studies import diagnostic_warnings as dw
 from pmdsim.studies import diagnostics as dg
 from pmdsim.render import Simulation
 from pmdsim.scene.sampling import ConeSampling
@@ -56,7 +57,7 @@ def test_suggested_n_rays_follows_n_times_ratio_squared():
         se[1, 1] = 0.1 * p95
         se[0, 1] = 0.2 * p95
         assert np.percentile(se[0, 0], 95) == pytest.approx(p95, rel=1e-12)
-        warns = dg.check(_diag(se, n_rays=n_rays), max_phase_error_mrad=target,
+        warns = dw.check(_diag(se, n_rays=n_rays), max_phase_error_mrad=target,
                          min_energy_fraction=0.0)
         w = {x.code: x for x in warns}["phase_error"]
         assert w.setting == "sampling.n_rays" and w.suggested == expected, (n_rays, p95, target)
@@ -74,12 +75,12 @@ def test_phase_error_below_target_gives_no_warning_and_washed_out_fringes_are_sk
     mod = np.full((2, 2, 3, 7), 0.8)
     mod[0, 0] = 0.04
     kw = dict(modulation=mod, n_rays=5000, ess=np.full((3, 7), 4000.0))
-    warns = dg.check(_diag(se, **kw), max_phase_error_mrad=1.0)
+    warns = dw.check(_diag(se, **kw), max_phase_error_mrad=1.0)
     assert [w.code for w in warns] == ["washed_out"]
     assert "x fringes of 40 px" in warns[0].message
     assert warns[0].setting == "patterns.fringes.widths_px" and 40.0 not in warns[0].suggested
     se[1, 1] = 1.2e-3
-    warns = dg.check(_diag(se, **kw), max_phase_error_mrad=1.0)
+    warns = dw.check(_diag(se, **kw), max_phase_error_mrad=1.0)
     w = {x.code: x for x in warns}["phase_error"]
     assert w.suggested == 7200 and "y fringes of 400 px" in w.message   # 5000 x 1.44
 
@@ -92,8 +93,8 @@ def test_modulation_within_the_noise_floor_is_undetermined():
     se = np.full((1, 1, 3, 7), 1e-4)
     mod = np.full((1, 1, 3, 7), 0.3)
     kw = dict(directions=("x",), widths=(40.0,), modulation=mod, n_rays=100)
-    assert dg.check(_diag(se, ess=np.full((3, 7), 100.0), **kw)) == []
-    warns = dg.check(_diag(se, ess=np.full((3, 7), 25.0), **kw))
+    assert dw.check(_diag(se, ess=np.full((3, 7), 100.0), **kw)) == []
+    warns = dw.check(_diag(se, ess=np.full((3, 7), 25.0), **kw))
     assert [w.code for w in warns] == ["modulation_undetermined"]
     assert warns[0].setting == "sampling.n_rays" and warns[0].suggested == 9600
 
@@ -106,14 +107,14 @@ def test_ess_warning_fires_below_the_fraction_only_for_cone_estimators():
     se = np.full((2, 2, 3, 7), 1e-5)
     ess = np.full((3, 7), 9.9)
     ess[0, :3] = 1000.0                   # a few large values: mean 150, median 9.9
-    warns = dg.check(_diag(se, ess=ess))
+    warns = dw.check(_diag(se, ess=ess))
     w = {x.code: x for x in warns}["effective_sample_size"]
     assert (w.setting, w.suggested) == ("sampling.estimator", "radiometric")
     assert "effective sample size 9.9 of 100 rays" in w.message
     for value in (10.0, 10.1):
-        assert dg.check(_diag(se, ess=np.full((3, 7), value))) == []
-    assert dg.check(_diag(se, ess=ess, estimator="radiometric")) == []
-    assert [x.code for x in dg.check(_diag(se, ess=np.full((3, 7), 20.0)),
+        assert dw.check(_diag(se, ess=np.full((3, 7), value))) == []
+    assert dw.check(_diag(se, ess=ess, estimator="radiometric")) == []
+    assert [x.code for x in dw.check(_diag(se, ess=np.full((3, 7), 20.0)),
                                      min_ess_fraction=0.25)] == ["effective_sample_size"]
 
 
@@ -130,20 +131,20 @@ def test_energy_warning_names_the_cone_that_keeps_the_target():
     need[2, 6] = 3.91
     e = dg.EnergyFraction(1.0, 0.95, frac, need, np.ones(grid.grid_shape), grid)
     se = np.full((2, 2, 3, 7), 1e-5)
-    w = {x.code: x for x in dg.check(_diag(se, energy=e))}["energy_fraction"]
+    w = {x.code: x for x in dw.check(_diag(se, energy=e))}["energy_fraction"]
     assert w.setting == "sampling.theta_max_deg" and w.suggested == 4.0
     assert "holds 38 %" in w.message and "min 30 %" in w.message and ">= 4 deg" in w.message
     e90 = dg.EnergyFraction(1.0, 0.90, frac, need, np.ones(grid.grid_shape), grid)
-    w = {x.code: x for x in dg.check(_diag(se, energy=e90))}["energy_fraction"]
+    w = {x.code: x for x in dw.check(_diag(se, energy=e90))}["energy_fraction"]
     assert w.suggested is None
-    assert not [x for x in dg.check(_diag(se, energy=e, estimator="radiometric"))
+    assert not [x for x in dw.check(_diag(se, energy=e, estimator="radiometric"))
                 if x.code == "energy_fraction"]
-    assert dg.check(_diag(se, energy=e), min_energy_fraction=0.37) == []
+    assert dw.check(_diag(se, energy=e), min_energy_fraction=0.37) == []
 
 
 def test_nice_up_rounds_up_to_two_digits():
     """1089 -> 1100, 190 -> 190, 184.96 -> 190, 7.2 -> 8, 12345 -> 13000."""
-    assert [dg._nice_up(x) for x in (1089, 190, 184.96, 7.2, 12345)] == [1100, 190, 190, 8, 13000]
+    assert [dw._nice_up(x) for x in (1089, 190, 184.96, 7.2, 12345)] == [1100, 190, 190, 8, 13000]
 
 
 def test_pixel_grid_spread_and_order():
@@ -301,7 +302,7 @@ def test_ess_of_a_narrow_lobe_in_a_wide_cone_matches_quadrature_and_warns():
         assert ess[p] == pytest.approx(expected, rel=0.05), (p, ess[p], expected)
     diag = dg.diagnose(sim, widths=(400.0,), directions=("x",), grid=(4, 3),
                        phase_method="delta", n_samples=1024)
-    warns = {x.code: x for x in dg.check(diag, max_phase_error_mrad=1e3)}
+    warns = {x.code: x for x in dw.check(diag, max_phase_error_mrad=1e3)}
     assert "effective_sample_size" in warns
     assert diag.summary["ess_median"] < 0.1 * 401
 
@@ -342,17 +343,17 @@ def test_check_boundaries_are_strict():
     '>' / '<' turned into '>=' / '<=' (a warning for a run that meets its bound)."""
     se = np.full((1, 1, 3, 7), 1e-3)
     kw = dict(directions=("x",), widths=(40.0,), n_rays=100)
-    assert dg.check(_diag(se, **kw), max_phase_error_mrad=1.0) == []
+    assert dw.check(_diag(se, **kw), max_phase_error_mrad=1.0) == []
     grid = _grid()
     e = dg.EnergyFraction(1.0, 0.95, np.full(grid.grid_shape, 0.375),
                           np.full(grid.grid_shape, 3.9), np.ones(grid.grid_shape), grid)
-    assert dg.check(_diag(se, energy=e, **kw), min_energy_fraction=0.375) == []
+    assert dw.check(_diag(se, energy=e, **kw), min_energy_fraction=0.375) == []
     mod = np.full((1, 1, 3, 7), 0.2)          # ESS 100: floor 2 / 10 = 0.2 exactly
-    assert dg.check(_diag(se * 0.1, ess=np.full((3, 7), 100.0), modulation=mod, **kw)) == []
+    assert dw.check(_diag(se * 0.1, ess=np.full((3, 7), 100.0), modulation=mod, **kw)) == []
     # the default smallest measurable modulation is 5 %: 6 % with a low noise floor is fine
     mod = np.full((1, 1, 3, 7), 0.06)
-    assert dg.check(_diag(se * 0.1, ess=np.full((3, 7), 1e4), modulation=mod, **kw)) == []
-    assert [w.code for w in dg.check(_diag(se * 0.1, ess=np.full((3, 7), 1e4), modulation=mod,
+    assert dw.check(_diag(se * 0.1, ess=np.full((3, 7), 1e4), modulation=mod, **kw)) == []
+    assert [w.code for w in dw.check(_diag(se * 0.1, ess=np.full((3, 7), 1e4), modulation=mod,
                                            **kw), min_modulation=0.07)] == ["washed_out"]
 
 
@@ -411,7 +412,7 @@ def test_full_map_on_a_line_and_beyond_the_nodes():
 
 def test_nice_up_of_nothing_is_zero():
     """0, negative and non-finite ray counts give 0 (no suggestion), not an error."""
-    assert [dg._nice_up(x) for x in (0.0, -5.0, float("inf"), float("nan"))] == [0, 0, 0, 0]
+    assert [dw._nice_up(x) for x in (0.0, -5.0, float("inf"), float("nan"))] == [0, 0, 0, 0]
 
 
 def test_phase_error_of_empty_and_single_ray_bundles():
@@ -533,8 +534,8 @@ def test_fewer_than_four_effective_rays_are_not_judged():
     se = np.full((1, 1, 3, 7), 1e-5)
     kw = dict(directions=("x",), widths=(400.0,), modulation=np.full((1, 1, 3, 7), 1.0),
               n_rays=10)
-    assert dg.check(_diag(se, ess=np.full((3, 7), 4.0), **kw)) == []
-    warns = dg.check(_diag(se, ess=np.full((3, 7), 3.99), **kw))
+    assert dw.check(_diag(se, ess=np.full((3, 7), 4.0), **kw)) == []
+    warns = dw.check(_diag(se, ess=np.full((3, 7), 3.99), **kw))
     assert [w.code for w in warns] == ["effective_sample_size"] and "< 4" in warns[0].message
-    warns = dg.check(_diag(se, ess=np.full((3, 7), 3.99), estimator="radiometric", **kw))
+    warns = dw.check(_diag(se, ess=np.full((3, 7), 3.99), estimator="radiometric", **kw))
     assert [w.code for w in warns] == ["too_few_rays"] and warns[0].suggested == 16

@@ -10,6 +10,8 @@ from matplotlib.figure import Figure
 from typer.testing import CliRunner
 
 from pmdsim import run as pipeline
+
+from pmdsim.store import schema
 from pmdsim.cli import app
 from pmdsim.config import parse_config
 from pmdsim.report.scene import MAX_IMAGE_PX, imshow
@@ -82,7 +84,7 @@ def test_forked_drawing_draws_the_same_picture_as_in_process(decoded_run, tmp_pa
 
     from pmdsim.run.figures import Drawing, _simulation
 
-    ds = pipeline.load_run(decoded_run.outdir).load()
+    ds = schema.load_run(decoded_run.outdir).load()
     sim = _simulation(ds)
     names = ["overview", "setup"]
     forked = Drawing(names, tmp_path / "forked", "tiny", "", ds, sim, fork=True)
@@ -128,7 +130,7 @@ def test_a_failed_fork_draws_in_the_run_process(decoded_run, tmp_path, monkeypat
     def no_fork():
         raise OSError(12, "Cannot allocate memory")
 
-    ds = pipeline.load_run(decoded_run.outdir).load()
+    ds = schema.load_run(decoded_run.outdir).load()
     monkeypatch.setattr(os, "fork", no_fork)
     d = Drawing(["surface_errors"], tmp_path, "tiny", "", ds, _simulation(ds), fork=True)
     assert d.proc is None
@@ -173,7 +175,7 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
     assert [e[1] for e in drawn] == [("setup",), ("overview",), ("surface_errors",)]
     stats = json.loads((res.outdir / "statistics.json").read_text())
     assert "reconstruction" in stats and "diagnostics" in stats
-    assert json.loads(pipeline.load_run(res.outdir).attrs["statistics_json"]) == stats
+    assert json.loads(schema.load_run(res.outdir).attrs["statistics_json"]) == stats
     assert sorted(p.name for p in res.figure_paths) == [
         "overview.png", "setup.png", "surface_errors.png"]
 
@@ -235,7 +237,7 @@ def test_every_run_figure_has_labelled_axes(decoded_run, tmp_path, recorded):
     from pmdsim.report.scene import plot_variant_fringes
     from pmdsim.run.figures import FIGURES, _simulation, draw_one
 
-    ds = pipeline.load_run(decoded_run.outdir).load()
+    ds = schema.load_run(decoded_run.outdir).load()
     sim = _simulation(ds)
     for name in FIGURES:  # every figure a run draws (pmdsim report --all)
         draw_one(ds, name, tmp_path, "tiny", "a tiny run", sim=sim)
@@ -322,7 +324,7 @@ def test_deviation_figures_print_value_pm_numerical_error(decoded_run, tmp_path,
     import re
 
 
-    ds = pipeline.load_run(decoded_run.outdir).load()
+    ds = schema.load_run(decoded_run.outdir).load()
     st = json.loads(ds.attrs["statistics_json"])
     errors = {}
     for i, (d, s) in enumerate(st["directions"].items()):

@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from pmdsim import run as pipeline
+
+from pmdsim.store import schema
 from pmdsim.store.writer import KEEP_BITS, keep_bits
 from pmdsim.config import RunConfig, parse_config
 from pmdsim.render import Simulation
@@ -142,7 +144,7 @@ def test_progress_reaches_total(full_run):
 
 def test_dataset_matches_simulation(full_run, full_cfg):
     result, _ = full_run
-    ds = pipeline.load_run(result.outdir)
+    ds = schema.load_run(result.outdir)
     assert dict(ds.sizes) == {"row": 40, "col": 48, "direction": 2, "width": 2, "shift": 4,
                               "dot": 3, "image": 1, "diag_row": 20, "diag_col": 24}
     assert ds["fringes"].dims == ("direction", "width", "shift", "row", "col")
@@ -175,11 +177,11 @@ def test_dataset_matches_simulation(full_run, full_cfg):
 
 def test_config_round_trips_and_rerun_is_identical(full_run, full_cfg, tmp_path):
     result, _ = full_run
-    ds = pipeline.load_run(result.dataset_path)
+    ds = schema.load_run(result.dataset_path)
     cfg = RunConfig.model_validate_json(ds.attrs["config_json"])
-    assert cfg == full_cfg == pipeline.run_config(ds)
+    assert cfg == full_cfg == schema.run_config(ds)
     again = pipeline.run_simulation(cfg, tmp_path / "again", figures=False)
-    ds2 = pipeline.load_run(again.outdir)
+    ds2 = schema.load_run(again.outdir)
     for name in ("fringes", "fringe_sums_real", "fringe_sums_imag", "f_total", "dots",
                  "images", "specular_u"):
         np.testing.assert_array_equal(ds2[name].values, ds[name].values, err_msg=name)
@@ -191,7 +193,7 @@ def test_config_round_trips_and_rerun_is_identical(full_run, full_cfg, tmp_path)
 
 def test_tiffs_are_uint16_with_documented_scaling(full_run):
     result, _ = full_run
-    ds = pipeline.load_run(result.outdir)
+    ds = schema.load_run(result.outdir)
     values = {"fringes": ds["fringes"].values, "dots": ds["dots"].values,
               "images": ds["images"].values}
     peak = max(np.nanmax(v) for v in values.values())
@@ -217,7 +219,7 @@ def test_png_8bit_output(tmp_path):
     img = read_image(result.image_paths[0])
     assert img.dtype == np.uint8 and img.shape == (40, 48)
     assert max(read_image(p).max() for p in result.image_paths) == round(0.95 * 255)
-    ds = pipeline.load_run(result.outdir)
+    ds = schema.load_run(result.outdir)
     ref = ds["fringes"].values[0, 0, 0].astype(np.float64) * result.exposure
     np.testing.assert_array_equal(img, np.where(np.isnan(ref), 0, np.rint(ref)))
 
@@ -293,22 +295,22 @@ def test_variants_become_sub_runs(tmp_path):
         assert is_run_dir(out / name) and (out / name / "fringes" / "x_w008_k0.tif").is_file()
     assert result.rays_traced == result.surface_pixels * (1 + 10)
 
-    combined = pipeline.load_run(out)
+    combined = schema.load_run(out)
     assert combined["fringes"].dims == ("variant", "direction", "width", "shift", "row", "col")
     assert [str(v) for v in combined["variant"].values] == ["mirror", "wide"]
     assert combined["surface_mask"].dims == ("row", "col")
-    assert pipeline.run_config(combined) == cfg
+    assert schema.run_config(combined) == cfg
     # Each sub-run is reproducible on its own from its stored configuration.
-    wide = pipeline.load_run(out, variant="wide")
-    wide_cfg = pipeline.run_config(wide)
+    wide = schema.load_run(out, variant="wide")
+    wide_cfg = schema.run_config(wide)
     assert wide_cfg.variants == () and wide_cfg.brdf.alpha_x == 0.05
     alone = pipeline.run_simulation(wide_cfg, tmp_path / "alone", figures=False)
-    np.testing.assert_array_equal(pipeline.load_run(alone.outdir)["fringes"].values,
+    np.testing.assert_array_equal(schema.load_run(alone.outdir)["fringes"].values,
                                   wide["fringes"].values)
     np.testing.assert_array_equal(combined["fringes"].sel(variant="wide").values,
                                   wide["fringes"].values)
     # The mirror: full modulation, values = monitor luminance at the specular point.
-    mirror = pipeline.load_run(out, variant="mirror")
+    mirror = schema.load_run(out, variant="mirror")
     mod = np.hypot(mirror["fringe_sums_real"], mirror["fringe_sums_imag"]) / mirror["f_hit"]
     np.testing.assert_allclose(np.nanmin(mod.values), 1.0, rtol=4 * 2.0 ** -KEEP_BITS)
 
@@ -328,13 +330,13 @@ def test_fringes_off_dots_only(tmp_path):
     assert [p.name for p in result.image_paths] == ["dot000_u0080_v0045.tif"]
     assert [p.name for p in result.figure_paths] == ["setup.png", "dot_contact_sheet.png",
                                                      "dot_shapes.png"]
-    ds = pipeline.load_run(result.outdir)
+    ds = schema.load_run(result.outdir)
     assert "fringes" not in ds and ds["dots"].shape == (1, 40, 48)
 
 
 def test_load_run_missing(tmp_path):
     with pytest.raises(FileNotFoundError):
-        pipeline.load_run(tmp_path / "nothing")
+        schema.load_run(tmp_path / "nothing")
 
 
 # ----------------------------------------------------------------------------- CLI
@@ -428,7 +430,7 @@ def test_cli_simulate_prints_diagnostics_warnings(tmp_path):
     manifest = json.loads((out / MANIFEST).read_text())
     assert len(manifest["warnings"]) == len(stats["warnings"])
 
-    ds = pipeline.load_run(out)
+    ds = schema.load_run(out)
     assert ds["diag_energy_fraction"].dims == ("diag_row", "diag_col")
     assert ds["diag_phase_se"].dims == ("direction", "width", "diag_row", "diag_col")
     assert ds["diag_effective_sample_size"].attrs["units"] == "rays"
@@ -461,7 +463,7 @@ def test_cli_simulate_warnings_follow_the_diagnostics_bounds(tmp_path):
     assert stats["warnings"] == [] and stats["grid"] == {"columns": 6, "rows": 5}
     assert stats["bounds"]["max_phase_error_mrad"] == 1000.0
     assert "no warnings" in (out / "summary.txt").read_text()
-    ds = pipeline.load_run(out)
+    ds = schema.load_run(out)
     assert ds.sizes["diag_row"] == 5 and ds.sizes["diag_col"] == 6
 
 
@@ -474,7 +476,7 @@ def test_cli_simulate_no_diagnostics(tmp_path):
     assert result.exit_code == 0, text
     assert "warning:" not in text and "lobe energy" not in text
     assert not (out / "statistics.json").exists()  # nothing decoded, no diagnostics
-    assert not [v for v in pipeline.load_run(out).data_vars if str(v).startswith("diag_")]
+    assert not [v for v in schema.load_run(out).data_vars if str(v).startswith("diag_")]
     assert json.loads((out / MANIFEST).read_text())["warnings"] == []
 
 
@@ -498,7 +500,7 @@ def test_diagnostics_of_variants(tmp_path):
     top = json.loads((result.outdir / "statistics.json").read_text())["variants"]
     assert set(top) == {"radiometric", "paper"}
     assert "pmdsim run diagnostics: paper" in (result.outdir / "summary.txt").read_text()
-    ds = pipeline.load_run(result.outdir)
+    ds = schema.load_run(result.outdir)
     assert ds["diag_effective_sample_size"].dims == ("variant", "diag_row", "diag_col")
     assert np.isnan(ds["diag_effective_sample_size"].sel(variant="mirror").values).all()
     assert np.isnan(ds["diag_energy_fraction"].sel(variant="radiometric").values).all()

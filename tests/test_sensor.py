@@ -106,6 +106,7 @@ def test_simulate_writes_what_the_camera_would(tmp_path):
     """With [sensor] on, the run's fringe images are the sensor's digital numbers: integers,
     12-bit range, written unscaled into 16-bit TIFFs; the chain still decodes."""
     from pmdsim import run as pipeline
+    from pmdsim.store import schema
 
     from test_pipeline import tiny_config_dict
 
@@ -113,7 +114,7 @@ def test_simulate_writes_what_the_camera_would(tmp_path):
     d["sensor"] = {"enabled": True, "target_fill": 0.8, "full_well_electrons": 10000.0,
                    "dark_noise_electrons": 3.0, "bit_depth": 12, "seed": 4}
     res = pipeline.run_simulation(parse_config(d), tmp_path / "run", figures=False)
-    ds = pipeline.load_run(res.outdir)
+    ds = schema.load_run(res.outdir)
     f = ds["fringes"].values
     finite = f[np.isfinite(f)]
     assert np.all(finite == np.rint(finite)) and finite.max() <= 4095

@@ -34,6 +34,7 @@ import numpy as np
 
 from ..config import InputError, MissingInputError
 from ..measure import decode as dec
+from ..measure.decode_plan import METHODS, unambiguous_range_px
 from ..quantiles import median
 from ..store.folder import MANIFEST, atomic_run_dir, check_output_dir, is_run_dir
 from ..store.manifest import write_manifest
@@ -115,10 +116,10 @@ def make_setup(*, widths=None, shifts=None, direction="x", extent_px=None, metho
         raise InputError(f"--extent-px must be positive monitor px, got {extent_px}")
     if pitch_mm is not None and not pitch_mm > 0:
         raise InputError(f"--pitch-mm must be positive, got {pitch_mm}")
-    if method not in dec.METHODS:
-        raise InputError(f"--method must be one of {', '.join(dec.METHODS)}, got {method!r}")
+    if method not in METHODS:
+        raise InputError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
     try:
-        reach = dec.unambiguous_range_px(widths, method)
+        reach = unambiguous_range_px(widths, method)
     except ValueError as err:
         raise InputError(f"--widths {list(widths)} do not fit --method {method}: {err}") from None
     if reach < extent_px:
