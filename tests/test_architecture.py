@@ -122,7 +122,7 @@ def test_a_wrong_import_is_found(module, source):
 
 @pytest.mark.parametrize("module, source", [
     ("pmdsim.kernels.primary", "from .bundle import G_A\nfrom ._jit import fastjit\n"),
-    ("pmdsim.run.member", "from ..report import chain\nfrom ..measure import chain as c\n"),
+    ("pmdsim.run.steps", "from ..report import chain\nfrom ..measure import chain as c\n"),
     ("pmdsim.cli", "from .run import run_simulation\n"),
     ("pmdsim.measure.decode", "from ..kernels import decode as _k\n"),
 ])

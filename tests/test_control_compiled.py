@@ -1,5 +1,5 @@
 """The nearest monitor's control variate's whole-camera steps in compiled passes
-(:meth:`pmdsim.render.control._Layout.sums_of_columns`, :func:`pmdsim.render.control.
+(:meth:`pmdsim.render.control_variate._Layout.sums_of_columns`, :func:`pmdsim.render.control_variate.
 _half_widths`) against the NumPy expressions they replace: the same bytes (signed zeros
 included; of a NaN only that it is one: x86's 0 * inf and sqrt(-1) are a NaN of the other
 sign than NumPy's loops give), with zeros, infinities and NaN among the inputs, float32 and
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pmdsim.render import control
+from pmdsim.render import control_variate as control
 
 
 def _same(a, b) -> bool:

@@ -1,5 +1,5 @@
 """Fringes on a nearest-pixel monitor by the control variate (issue 18,
-:mod:`pmdsim.render.control`): the Gauss rule for the smooth fringe plus rqmc replicates
+:mod:`pmdsim.render.control_variate`): the Gauss rule for the smooth fringe plus rqmc replicates
 of the staircase residual.
 
 References of other methods: the Cranley-Patterson-rotated lattice with 64 x the rays
@@ -121,7 +121,7 @@ def test_diagnostics_state_the_control_variates_error():
 def test_rays_traced_count_the_control_variates_passes():
     """A control-variate render traces the rule (3 x 16 of n_rays = 48) and its embedded
     rule (2 x 12), then the 8 replicates of 6 points twice (profiles and smooth part)."""
-    from pmdsim.render import control
+    from pmdsim.render import control_variate as control
 
     sim = Simulation.from_config(make_config(sampling={"n_rays": 48, "mode": "rule"},
                                              monitor=NEAREST))
@@ -155,7 +155,7 @@ def test_wide_lobes_take_the_box_rule_and_narrow_ones_the_replicates():
     the box rule, with no replicates for integer periods or a linear display; non-integer
     periods on a gamma display keep replicates of the rest; a narrow lobe, the cone
     estimator and a specular peak keep the replicates of the whole staircase."""
-    from pmdsim.render import control
+    from pmdsim.render import control_variate as control
 
     sim = _wide(64, GAMMA)
     sig = control.lobe_widths(sim)
@@ -182,7 +182,7 @@ def test_profile_terms_are_the_displayed_profile_at_every_pixel_centre():
     """The DFT terms of one integer period give the quantised gamma profile exactly at
     every integer pixel centre, also beyond the period; the cosine series' terms give the
     response's series."""
-    from pmdsim.render import control
+    from pmdsim.render import control_variate as control
 
     mon = _wide(64, GAMMA).scene.monitor
     deltas = phase_shifts(4)
@@ -228,7 +228,7 @@ def test_box_rule_agrees_with_the_replicates_of_the_staircase(display, monkeypat
     within the box rule's stated error plus 1.5 x the replicates' 95 % half-width in >= 97 %
     of the pixels (measured 0.99-1.0; the lobes cut by the monitor's edge included), and
     the box rule's stated error is far below the replicates' at 16 x their rays."""
-    from pmdsim.render import control
+    from pmdsim.render import control_variate as control
 
     mon = NEAREST if display == "linear" else GAMMA
     box = _wide(256, mon).render_fringes([20.0], ["x", "y"])

@@ -1,4 +1,4 @@
-"""The second embedded rule on a grid of pixels (:func:`pmdsim.render.rows.
+"""The second embedded rule on a grid of pixels (:func:`pmdsim.render.convergence_grid.
 convergence_stride`): it enters only the medians of the observed convergence, so on a large
 camera it is rendered at every 2nd or 4th row and column. Checked against the same render
 with the pass on every pixel: the grid pixels' inputs of the convergence are the same
@@ -14,7 +14,7 @@ from pmdsim.config import parse_config
 from pmdsim.kernels import bundle as kb
 from pmdsim.render import Simulation
 from pmdsim.render import results as results_mod
-from pmdsim.render import rows
+from pmdsim.render import convergence_grid as rows
 from pmdsim.render import simulation as simulation_mod
 from pmdsim.scene.sampling import ConeSampling
 from test_quadrature import fig3

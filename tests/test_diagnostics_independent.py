@@ -515,7 +515,7 @@ def test_library_defaults_match_the_configuration_defaults():
     from pmdsim.config import DiagnosticsConfig
 
     c = DiagnosticsConfig()
-    p = inspect.signature(dg.check).parameters
+    p = inspect.signature(dw.check).parameters
     assert p["min_energy_fraction"].default == c.min_energy_fraction
     assert p["max_phase_error_mrad"].default == c.max_phase_error_mrad
     assert p["min_ess_fraction"].default == c.min_ess_fraction

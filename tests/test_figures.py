@@ -146,7 +146,7 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
     import json
 
     from pmdsim.run import figures as figures_mod
-    from pmdsim.run import member as member_mod
+    from pmdsim.run import steps as member_mod
     from pmdsim.run import reconstruction as recon
 
     events = []

@@ -245,7 +245,7 @@ def test_failing_overwrite_keeps_the_old_run(tmp_path, monkeypatch):
     def boom(*args, **kwargs):
         raise RuntimeError("dataset failed")
 
-    from pmdsim.run import member
+    from pmdsim.run import steps as member
 
     monkeypatch.setattr(member, "build_dataset", boom)
     with pytest.raises(RuntimeError):

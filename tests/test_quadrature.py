@@ -122,8 +122,8 @@ def test_rays_traced_count_the_embedded_rules():
     2 x 12 and 1 x 8 embedded rules too (80 nodes per bundle; a 1 deg cone, where the
     azimuths follow the lobe with four per theta node); rqmc's replicates share n_rays;
     error_estimate = false renders the rule alone."""
-    from pmdsim.render import rows
-    from pmdsim.run.member import _passes_share
+    from pmdsim.render import convergence_grid as rows
+    from pmdsim.run.steps import _passes_share
 
     def share(**sampling):
         sim = Simulation.from_config(make_config(

@@ -387,7 +387,7 @@ def test_fringes_finished_in_the_tiles_equal_the_finish_after_the_render(monkeyp
     each tile's task (``FringeFinish``), every camera row exactly once; the bytes equal those
     of finishing the whole sums after the render (the path of other schedulers and of the
     rqmc mean)."""
-    from pmdsim.render.rows import FringeFinish
+    from pmdsim.render.fringe_finish import FringeFinish
 
     sim = sim_of(make_config(compute={"tile_rows": 5}, sampling={"estimator": estimator}))
     blocks = []

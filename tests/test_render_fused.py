@@ -1,7 +1,7 @@
-"""The rule and its embedded rules rendered in one tile task (:func:`pmdsim.render.rows.
+"""The rule and its embedded rules rendered in one tile task (:func:`pmdsim.render.geometry_rows.
 render_rule_fused`) against the passes rendered one after another, with the error computed
-over the whole differences afterwards (:func:`pmdsim.render.rows.fringe_errors`), and the
-nearest monitor's rqmc replicates in one tile task (:func:`pmdsim.render.rows.
+over the whole differences afterwards (:func:`pmdsim.render.fringe_finish.fringe_errors`), and the
+nearest monitor's rqmc replicates in one tile task (:func:`pmdsim.render.geometry_rows.
 replicates_fused`) against the whole-camera loop: the same bytes, on tiles that do not
 divide the camera."""
 
@@ -67,7 +67,7 @@ def test_the_embedded_rules_in_the_rules_tiles_give_the_same_bytes(estimator, mo
 def test_the_replicates_in_the_tiles_give_the_same_bytes(estimator, gamma, widths, alpha_y,
                                                          mode, monkeypatch):
     """The nearest monitor's control variate with every rqmc replicate rendered in each
-    tile's task (:func:`pmdsim.render.rows.replicates_fused`) against the replicates
+    tile's task (:func:`pmdsim.render.tile_tasks.replicates_fused`) against the replicates
     rendered one after another over the whole camera: the same bytes."""
     d = fig3(n_rays=64, mode="rule")
     d["monitor"].update(pixel_model="nearest", gamma=gamma)
@@ -76,7 +76,7 @@ def test_the_replicates_in_the_tiles_give_the_same_bytes(estimator, gamma, width
     if estimator == "paper":  # off the x-z plane: phi0 varies (the box case keeps Fig. 3's)
         d["camera"]["position_mm"] = [-845.2, 420.0, 1812.6]
     cfg = parse_config(d)
-    from pmdsim.render import control
+    from pmdsim.render import control_variate as control
 
     cv = dict(module=control, names=("replicates_fused", "fuses_replicates"))
     fused, n_fused = _render(cfg, True, monkeypatch, widths, **cv)

@@ -105,7 +105,7 @@ def test_writing_runs_behind_the_chain_and_the_manifest_comes_last(tmp_path, mon
     images and figures exist."""
     import xarray as xr
 
-    from pmdsim.run import member as member_mod
+    from pmdsim.run import steps as member_mod
     from pmdsim.run import simulate as simulate_mod
 
     seen = {}

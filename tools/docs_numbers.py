@@ -134,7 +134,7 @@ def _fig3_simulation():
 def fig3_rays() -> tuple:
     """docs/performance.md: the rays a Fig. 3 run traces per surface pixel (every pass of its
     rule) and in all, in millions, as the run counts them (``RunResult.rays_traced``)."""
-    from pmdsim.run.member import _passes_share
+    from pmdsim.run.steps import _passes_share
 
     sim = _fig3_simulation()
     mask = sim.geometry().surface_mask

@@ -3,6 +3,7 @@
 
 from .results import FringeResult, Geometry
 from .simulation import Simulation
-from .rows import local_scheduler, scene_geometry_rows
+from .tile_tasks import local_scheduler
+from .geometry_rows import scene_geometry_rows
 
 __all__ = ["Simulation", "FringeResult", "Geometry", "scene_geometry_rows", "local_scheduler"]

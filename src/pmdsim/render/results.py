@@ -59,7 +59,7 @@ def _phase_error_compiled(sums, sums_err, kind, convergence):
     """:func:`phase_error` of whole-camera complex128 arrays: the kernel over 16 pixel
     blocks on two threads, each block taking NumPy's ``|S|`` (and ``|dS|``) of its own
     pixels (no whole-camera temporaries)."""
-    from ..kernels.synth import phase_error_embedded_rows, phase_error_rows
+    from ..kernels.fringe_finish import phase_error_embedded_rows, phase_error_rows
 
     out = np.empty(sums.shape)
     if kind == "replicates":
@@ -235,7 +235,7 @@ class FringeResult:
         without the second embedded rule.
     stated_phase_error : (n_directions, n_widths, H, W) float64 or None
         The phase error (rad) where the render states it directly: a non-linear display on
-        a nearest-pixel monitor (:mod:`pmdsim.render.control`: the error of the shifted
+        a nearest-pixel monitor (:mod:`pmdsim.render.control_variate`: the error of the shifted
         images' fringe sum ``sum_k I_k exp(-i delta_k)``), else None.
     """
 

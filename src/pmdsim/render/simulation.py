@@ -37,15 +37,16 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..kernels import bundle as kb
-from . import control
+from . import control_variate as control
 from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
 from ..scene.quadrature import convergence_exponent
 from .results import (FringeResult, Geometry, convergence_of_ratios, value_error, worst_phase_error)
-from .rows import (FringeFinish, TileErrors, convergence_stride, fringe_errors,
-                   fuses, keep_grid, local_scheduler, reduce_subrays, render_rule_fused,
-                   scene_geometry_rows, vision_geometry_rows)
+from .fringe_finish import FringeFinish, TileErrors, fringe_errors
+from .convergence_grid import convergence_stride, keep_grid
+from .tile_tasks import fuses, local_scheduler, render_rule_fused
+from .geometry_rows import reduce_subrays, scene_geometry_rows, vision_geometry_rows
 from ..trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
@@ -147,7 +148,7 @@ class Simulation:
         pass; mode ``rule``, whose embedded passes only give the error), or None (the mean
         of rqmc replicates; a specular peak's mirror pass added after the tiles): only then
         can a caller finish the sums inside that pass's tiles (``finish``,
-        :class:`~pmdsim.render.rows.FringeFinish`). Keep in step with :meth:`_render`."""
+        :class:`~pmdsim.render.fringe_finish.FringeFinish`). Keep in step with :meth:`_render`."""
         from .specular import specular_reflectance
 
         passes = self.plan(smooth)
@@ -221,7 +222,7 @@ class Simulation:
         in-process scheduler, each tile task calls ``fn(r0, r1, sums)`` (``sums`` the whole
         (H, W, ncols) array, rows ``r0:r1`` final) right after its kernel, while the rows
         are in cache (:meth:`result_pass`). With ``raw=False`` and pinhole rays the caller
-        reads only what ``fn`` (a :class:`~pmdsim.render.rows.FringeFinish`) keeps: the
+        reads only what ``fn`` (a :class:`~pmdsim.render.fringe_finish.FringeFinish`) keeps: the
         tiles' raw sums live in a buffer of the worker thread, and the result is an empty
         (H, W, 0) token that :meth:`FringeFinish.complete` sees as finished."""
         kernel = self._kernel(scene, mode, ncols, **patterns)

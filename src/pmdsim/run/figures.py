@@ -29,7 +29,7 @@ import threading
 from pathlib import Path
 
 from ..store.schema import DATASET_NAME, load_run
-from .imports import imports_done
+from .preload import imports_done
 
 #: Every per-run figure: name -> (file, needs) with needs "fringes" (fringe images in the
 #: dataset), "chain" (the measurement chain's variables), "reconstruction" (slope and

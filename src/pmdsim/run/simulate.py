@@ -63,7 +63,7 @@ from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
 from ..scene import resolve_roi
 from ..store.manifest import write_run_manifest, write_variants_manifest
-from .member import run_member
+from .steps import run_member
 from .reference import chain_mode, specular_reference
 from .result import ProgressFn, RunResult, _Steps
 from .threads import single_blas

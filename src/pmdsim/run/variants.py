@@ -14,7 +14,7 @@ from ..render import Simulation
 from ..report.text import summary_text_of
 from ..store.schema import CONFIG_NAME
 from ..store.manifest import write_run_manifest
-from .member import run_member
+from .steps import run_member
 from .result import RunResult, draw_safely
 from ..store.schema import load_run
 from ..store.tables import write_dot_csv, write_json

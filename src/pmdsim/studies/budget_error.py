@@ -11,7 +11,7 @@ the rendering integral, whose per-pixel error the budget carries to every statis
   gamma != 1 or a LUT: its images are not linear in the fringe sums), the surface is
   decoded once more through the same chain (same sensor noise) and ``e`` is the decoded
   difference (:func:`difference_error`): for a randomised set (``rqmc``, and the nearest
-  monitor's control variate ``rule+rqmc``, :mod:`pmdsim.render.control`) with an
+  monitor's control variate ``rule+rqmc``, :mod:`pmdsim.render.control_variate`) with an
   independent seed at the same order (about sqrt(2) times the random part of either), for
   a deterministic rule with half the nodes (the lower order's error, larger than the
   rendered one's) (:func:`second_estimate`). Through a sensor the same decoded

@@ -422,7 +422,7 @@ def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
     from ..render.results import convergence_factor, phase_error
     from ..scene.quadrature import convergence_exponent, student_t975
 
-    from ..render import control
+    from ..render import control_variate as control
 
     nearest = sim.scene.monitor.pixel_model == "nearest"
     rows, cols = grid.pixel_rows, grid.pixel_cols

@@ -39,7 +39,7 @@ from ..store.schema import (CONFIG_NAME, DATASET_NAME, assign_to_dataset, build_
                             dot_dataset_variables)
 from .diagnostics import diagnose_run
 from .figures import FigureSchedule
-from .imports import dataset_imported, import_in_background
+from .preload import dataset_imported, import_in_background
 from .result import RunResult, _Steps, draw_safely
 from ..store.writer import DatasetWriter
 from ..store.images import exposure_factor, write_images
@@ -356,8 +356,8 @@ def _passes_share(sim, smooth: bool, mask) -> float:
     """The rays of all the sample sets of one render call (:meth:`Simulation.plan`) per
     ``n_rays`` and surface pixel (``mask``): 1 + about 0.56 for a rule with its embedded
     rule, + 0.25 for the second embedded rule on every pixel (on a large camera only on a
-    grid of them: :func:`pmdsim.render.rows.convergence_stride`), else 1."""
-    from ..render.rows import convergence_stride, grid_share
+    grid of them: :func:`pmdsim.render.convergence_grid.convergence_stride`), else 1."""
+    from ..render.convergence_grid import convergence_stride, grid_share
 
     passes = sim.plan(smooth)
     if sim.scene.brdf.is_delta or passes[0].mode != "rule":
@@ -372,7 +372,7 @@ def result(m: Member) -> RunResult:
     sim = m.sim
     # every pass of a call: a rule's embedded rules add their nodes (rqmc's replicates
     # share n_rays; the other modes render one set)
-    from ..render import control
+    from ..render import control_variate as control
 
     mask = m.geometry.surface_mask
     fringe_share = (control.rays_share(sim, m.fringes.sampling["mode"])

@@ -68,7 +68,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels import bundle as kb
-from .rows import fuses_replicates, replicates_fused, welford_update
+from .tile_tasks import fuses_replicates, replicates_fused, welford_update
 
 #: Fourier terms of the display response in the smooth part of a non-linear display (gamma,
 #: LUT, drive bits) on a narrow lobe (wide lobes: :data:`BOX_TERMS`): the fundamental only.
@@ -383,7 +383,7 @@ class _Layout:
         linear display the sums of the tables' layout (``cols`` its columns) or of the
         harmonic layout (the harmonic columns: ``fringe_sums(to_tables(h))`` without the
         tables)."""
-        from ..kernels.synth import complex_of_columns
+        from ..kernels.fringe_finish import complex_of_columns
         from .results import in_blocks
 
         nd, nw = len(self.directions), len(self.widths)
@@ -552,7 +552,7 @@ def render_fringes_cv(sim, directions, widths, deltas, linear, table_u, table_v,
 def _half_widths(m2_re, m2_im, half: float) -> np.ndarray:
     """``half * sqrt(m2_re) + 1j * half * sqrt(m2_im)`` in one compiled pass (the same
     bytes; no whole-camera temporaries)."""
-    from ..kernels.synth import half_width_rows
+    from ..kernels.fringe_finish import half_width_rows
     from .results import in_blocks
 
     out = np.empty(m2_re.shape, np.complex128)

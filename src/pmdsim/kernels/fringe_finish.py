@@ -157,7 +157,7 @@ def phase_error_embedded_rows(sums, err, mag, emag, q, floor, safety, roundoff, 
 @jit
 def replicate_update_rows(t, h, hcols, tcols, r, mean_res, mean_s, m2_re, m2_im):
     """One rqmc replicate of the nearest monitor's control variate for one block of pixels
-    on a linear display (:func:`pmdsim.render.rows.replicates_fused`): the residual
+    on a linear display (:func:`pmdsim.render.tile_tasks.replicates_fused`): the residual
     ``res = t - to_tables(h)`` (the table columns ``tcols[f], tcols[f] + 1`` of fringe
     ``f`` take ``h``'s ``hcols[f], hcols[f] + 1``, the first two columns its first two,
     the rest zero), its first two columns zeroed (f_total, f_hit: the rule's), the running
