@@ -4,7 +4,6 @@ cluster's workers (a LocalCluster of two in-process workers: fast)."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from pmdsim.config import parse_config

@@ -50,6 +50,7 @@ SKIPPED = [
     (r"^\. \.venv/bin/activate", "CI's own set-up step (.ci/run activates its environment)"),
     (r"^python -m pip install ", "CI's own set-up step (.ci/run installs the package)"),
     (r"^python -m pytest", "the tests themselves"),
+    (r"^ruff check", "the linter and the tests themselves (.ci/run runs both)"),
     (r"^pmdsim warmup", "CI's own set-up step (.ci/run warms the kernel cache before the tests; "
                         "tests/test_warmup.py runs it)"),
     (r"^python benchmarks/", "a timed benchmark (run on an idle machine, not in the tests)"),

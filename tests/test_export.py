@@ -3,7 +3,6 @@ doubles, as ISO 25178-72 lays them out), CSV and xyz with units in the header.""
 
 from __future__ import annotations
 
-import datetime as dt
 import hashlib
 import xml.etree.ElementTree as ET
 import zipfile

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from conftest import base_dict, merge
 from test_cli_bad_input import _toml
 from test_physics_sanity import REFUSED
-from test_user_files import GRID_CASES, LUT_CASES, _write_case
+from test_user_files import LUT_CASES, _write_case
 
 LENS = {"focal_length_mm": 16.0, "pixel_pitch_mm": 0.2, "focal_length_px": None}
 HEIGHT_MAP = {"type": "height_map", "spacing_mm": [1.0, 1.5]}

@@ -5,6 +5,7 @@ reference or is impossible is refused naming *that* section and field."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest

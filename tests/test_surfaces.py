@@ -16,7 +16,7 @@ from scipy import ndimage, optimize
 
 from pmdsim.config import ConfigError, parse_config
 from pmdsim.measure.integrate import zernike
-from pmdsim.scene.surfaces import SagSurface, surface_from_config, zernike_monomials
+from pmdsim.scene.surfaces import surface_from_config, zernike_monomials
 
 VERTEX = np.array([3.0, -2.0, 1.0])
 NORMAL = np.array([0.1, -0.2, 1.0]) / np.linalg.norm([0.1, -0.2, 1.0])

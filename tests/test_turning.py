@@ -76,7 +76,7 @@ def _order_config(theta_deg, lam_nm, d=500.0):
 
 
 def test_orders_sit_at_the_grating_equation():
-    theta, lam, f, d, pitch = 20.0, 545e-6, 0.03, 500.0, 0.1
+    theta, lam, f, d = 20.0, 545e-6, 0.03, 500.0
     sim = Simulation.from_config(_order_config(theta, lam * 1e6, d))
     u, v, w, dirs, origin = sim.transport([0], [0])
     hit = np.isfinite(u[0]) & (w[0] > 0)

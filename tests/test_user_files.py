@@ -17,8 +17,7 @@ from typer.testing import CliRunner
 from conftest import base_dict, merge
 from pmdsim.config import ConfigError, InputError
 from pmdsim.config.files import (FileInputError, MissingFileError, read_flatness_map,
-                                 read_height_map, read_response_lut, read_table,
-                                 read_slope_table, read_variation_map,
+                                 read_height_map, read_response_lut, read_slope_table, read_variation_map,
                                  register_height_map_reader,
                                  HEIGHT_MAP_READERS)
 

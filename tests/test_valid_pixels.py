@@ -60,7 +60,6 @@ def test_a_lobe_off_the_monitor_is_refused_naming_that_stage(tmp_path):
 def test_a_sweep_point_without_valid_pixels_is_not_a_result(tmp_path):
     """The sweep computes and stores the point (NaN statistics) but exits 1 naming it and
     the directions; with diagnostics.allow_no_valid_pixels the same store is complete."""
-    import json
 
     from typer.testing import CliRunner
 

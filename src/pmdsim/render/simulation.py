@@ -474,7 +474,7 @@ class Simulation:
                 raise ValueError(f"directions: must be 'x' or 'y', got {d!r}")
         deltas = phase_shifts(shifts)
         mon = self.scene.monitor
-        black, white, gamma = mon.black_level, mon.white_level, mon.gamma
+        black, white = mon.black_level, mon.white_level
         nw, nd = len(widths), len(directions)
         coords = {"x": np.arange(mon.width, dtype=np.float64), "y": np.arange(mon.height, dtype=np.float64)}
         linear = mon.is_linear
