@@ -266,14 +266,18 @@ def test_scattering_that_breaks_the_finest_fringes_is_flagged_not_hidden(finest,
 
 
 # ----------------------------------------------------------------------------- decode_problem
+def _problem(cfg):
+    return chain.decode_problem(cfg.patterns.fringes, cfg.decode, cfg.monitor.resolution)
+
+
 def test_decode_problem_names_the_widths_and_the_fix():
     cfg = scene_config(widths=(8.0, 32.0))
-    msg = chain.decode_problem(cfg)
+    msg = _problem(cfg)
     assert "patterns.fringes.widths_px" in msg and "add a width of at least 200" in msg
-    assert chain.decode_problem(scene_config(widths=HIERARCHICAL)) is None
+    assert _problem(scene_config(widths=HIERARCHICAL)) is None
     het = parse_config({**json.loads(scene_config(widths=(30.0, 70.0)).model_dump_json()),
                         "decode": {"method": "heterodyne"}})
-    assert "heterodyne" in chain.decode_problem(het)
+    assert "heterodyne" in _problem(het)
 
 
 # ----------------------------------------------------------------------------- pipeline

@@ -16,7 +16,8 @@ from typer.testing import CliRunner
 from conftest import base_dict, merge
 from pmdsim.config import ConfigError, parse_config
 from pmdsim.scene import Scene
-from pmdsim.scene.sanity import check_physics, check_sensor
+from pmdsim.studies.physics_checks import check_physics
+from pmdsim.scene.sanity import check_sensor
 from pmdsim.scene.sensor import Sensor
 
 
@@ -292,17 +293,17 @@ def test_sweep_checks_every_point_before_anything_is_created(tmp_path):
 
 
 def test_the_sweep_checks_each_distinct_point_once_and_labels_its_notes():
-    from pmdsim.scene import sanity
+    from pmdsim.studies import physics_checks
 
     cfgs = [parse_config(merge(base_dict(), {"monitor": {"falloff_exponent": 1000.0},
                                              "sampling": {"seed": s}})) for s in range(3)]
     calls = []
-    real = sanity.check_physics
+    real = physics_checks.check_physics
     try:
-        sanity.check_physics = lambda cfg, scene=None: calls.append(cfg) or real(cfg)
-        notes = sanity.check_each(cfgs, ["a", "b", "c"])
+        physics_checks.check_physics = lambda cfg, scene=None: calls.append(cfg) or real(cfg)
+        notes = physics_checks.check_each(cfgs, ["a", "b", "c"])
     finally:
-        sanity.check_physics = real
+        physics_checks.check_physics = real
     assert len(calls) == 1 and len(notes) == 1 and notes[0].startswith("a: monitor.falloff")
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from pmdsim.config import ConfigError, estimate_resources, parse_config
 from pmdsim.render import Simulation
-from pmdsim.scene import resolve_roi
+from pmdsim.run.simulate import resolve_roi
 
 from conftest import base_dict, merge
 

@@ -48,6 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import RayleighRiceConfig
 from .slope_density import SlopeDensityBRDF, TabulatedSlopes
 
 
@@ -240,7 +241,7 @@ def permittivity(refractive_index) -> complex | None:
     return complex(n, k) ** 2
 
 
-def from_config(cfg, incidence_deg: float = 0.0) -> SpecularHaloBRDF:
+def from_config(cfg: RayleighRiceConfig, incidence_deg: float = 0.0) -> SpecularHaloBRDF:
     """The ``rayleigh_rice`` model of a configuration (``incidence_deg``: the set-up's, used
     when the configuration gives none)."""
     from .psd import KCorrelation

@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..config import TopographyConfig
 from .slope_density import TabulatedSlopes
 from .psd import TabulatedPSD, fit_k_correlation, periodogram, window_fraction
 
@@ -194,7 +195,7 @@ def _pc(x: float) -> str:
 
 
 # =========================================================================== configuration
-def read_local(cfg):
+def read_local(cfg: TopographyConfig):
     """The configured topography file in the local frame: (heights mm, dx, dy, Topography)."""
     from ..topofile import read_topography
 
@@ -205,7 +206,7 @@ def read_local(cfg):
     return h, dx, dy, t
 
 
-def from_config(cfg, incidence_deg: float = 0.0):
+def from_config(cfg: TopographyConfig, incidence_deg: float = 0.0):
     """The ``topography`` model: the slope density (geometric) or the specular peak plus the
     Rayleigh-Rice halo of the map's PSD (smooth), by ``cfg.regime`` (``auto``: the
     Rayleigh parameter at the configured or the set-up's incidence, :func:`regime`)."""

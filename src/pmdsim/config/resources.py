@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from .base import ConfigError
 from .brdf import MirrorConfig
+from .monitor import GAMMA_HARMONICS
 from .run import RunConfig
 
 # ----------------------------------------------------------------------------- resources
@@ -23,9 +24,6 @@ from .run import RunConfig
 RAYS_PER_CPU_SECOND = 3.0e6
 #: Resident memory of the interpreter with NumPy, Numba, xarray and Dask loaded.
 BASE_MEMORY_BYTES = 400 * 2**20
-#: Harmonics of a non-linear (gamma != 1) display in the continuous pixel model
-#: (``pmdsim.render.GAMMA_HARMONICS``; config imports nothing of the package).
-_GAMMA_HARMONICS = 16
 #: Grid pixels of the diagnostics' ray transport keep every ray: float64 u, v, weight,
 #: a 3-vector direction and scratch, per ray.
 _TRANSPORT_BYTES_PER_RAY = 64
@@ -89,7 +87,7 @@ def _member_estimate(cfg: "RunConfig", n_px: float, width: int) -> tuple[dict, f
         nd, nw, k = len(fr.directions), len(fr.widths_px), fr.shifts
         linear = cfg.monitor.gamma == 1.0
         if cfg.monitor.pixel_model == "continuous":
-            ncols = 2 + 2 * nd * nw * (1 if linear else _GAMMA_HARMONICS)
+            ncols = 2 + 2 * nd * nw * (1 if linear else GAMMA_HARMONICS)
         else:
             ncols = 2 + nd * nw * (2 if linear else k)
         # the tiles' float64 outputs and their concatenation, the float32 images, the

@@ -3,7 +3,7 @@ across sections."""
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Protocol
 
 from pydantic import Field, model_validator
 
@@ -24,6 +24,25 @@ from .sensor import SensorConfig
 from .budget import BudgetConfig
 from .sweep import SweepConfig
 from .variants import VariantConfig
+
+
+class SceneSections(Protocol):
+    """The sections a scene is built from (:meth:`pmdsim.scene.Scene.from_config`): what a
+    :class:`RunConfig` has, and all the scene may read of it."""
+
+    camera: CameraConfig
+    monitor: MonitorConfig
+    surface: SurfaceConfig
+    anisotropy: AnisotropyConfig
+    brdf: BrdfConfig
+    sampling: SamplingConfig
+
+
+class SimulationSections(SceneSections, Protocol):
+    """The sections a simulation is built from (:meth:`pmdsim.render.Simulation.from_config`):
+    the scene's and ``compute`` (tiles, scheduler, workers)."""
+
+    compute: ComputeConfig
 
 
 class RunConfig(_Model):

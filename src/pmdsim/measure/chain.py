@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..config import DecodeConfig, FringeConfig
 from ..quantiles import median
 from . import deviation as analysis
 from . import decode as dec
@@ -59,21 +60,23 @@ def extent_px(monitor_resolution, direction: str) -> float:
     return float(w if direction == "x" else h)
 
 
-def decode_problem(cfg) -> str | None:
-    """Why the fringes of a configuration cannot be decoded, or None if they can.
+def decode_problem(fringes: FringeConfig | None, decode: DecodeConfig,
+                   monitor_resolution) -> str | None:
+    """Why the fringes (``patterns.fringes``) cannot be decoded with ``decode`` on a monitor
+    of ``monitor_resolution`` (width, height), or None if they can.
 
     The message names ``patterns.fringes.widths_px`` and the fix (e.g. the width to add).
     """
-    fr = cfg.patterns.fringes
+    fr = fringes
     if fr is None:
         return "no fringes are configured (patterns.fringes = false): nothing to decode"
-    method = cfg.decode.method
+    method = decode.method
     try:
         reach = dec.unambiguous_range_px(fr.widths_px, method)
     except ValueError as err:
         return (f"patterns.fringes.widths_px = {list(fr.widths_px)} do not fit "
                 f"decode.method = {method!r}: {err}")
-    need = max(extent_px(cfg.monitor.resolution, d) for d in fr.directions)
+    need = max(extent_px(monitor_resolution, d) for d in fr.directions)
     if reach < need:
         if method == "hierarchical":
             fix = (f"add a width of at least {need:g} monitor px (e.g. widths_px = "
@@ -401,31 +404,5 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
     return rows
 
 
-def decode_specular_reference(cfg, sim, geometry, progress=None):
-    """Render, capture (with ``[sensor]``: its own noise stream 1) and decode the fringes of
-    the ideal specular reference of ``sim`` (mirror BRDF, one ray per pixel, the same camera,
-    surface and monitor model). Returns ``(decoded, distance_mm)``: the decoded directions
-    (:func:`decode_fringes`) and the surface-to-monitor distance
-    (:func:`surface_to_monitor_mm`)."""
-    from dataclasses import replace
-
-    from ..render import Simulation
-    from ..scene.sensor import Sensor, capture_dn
-
-    fr_cfg = cfg.patterns.fringes
-    ref_sim = Simulation(sim.scene.specular(), sim.tile_rows, sim.scheduler, sim.num_workers)
-    fr = ref_sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
-                                progress=progress)
-    sensor = Sensor.from_config(cfg.sensor)
-    if sensor.enabled:
-        fr = replace(fr, images=capture_dn(sensor, fr.images, 1))
-    decoded = decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
-                             sensor.saturation_dn if sensor.enabled else None,
-                             keep_amplitude=False)
-    del fr
-    return decoded, surface_to_monitor_mm(sim, geometry)
-
-
 __all__ = ["DirectionChain", "ChainResult", "decode_problem", "decode_fringes", "compare",
-           "decode_specular_reference",
            "surface_to_monitor_mm", "SlopeGeometry", "slope_deviation_urad", "statistics", "dot_table", "DOT_COLUMNS", "QUANTITIES", "STATISTICS", "DOT_THRESHOLD_FRACTION"]

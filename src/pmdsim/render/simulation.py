@@ -38,6 +38,8 @@ import numpy as np
 
 from ..kernels import bundle as kb
 from . import control_variate as control
+from ..config import SimulationSections
+from ..config.monitor import GAMMA_HARMONICS
 from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
@@ -50,10 +52,6 @@ from .geometry_rows import reduce_subrays, scene_geometry_rows, vision_geometry_
 from ..trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
-
-
-#: Harmonics used for analytic fringes on a continuous monitor with gamma != 1.
-GAMMA_HARMONICS = 16
 
 
 class Simulation:
@@ -83,7 +81,9 @@ class Simulation:
         self.num_workers = num_workers
 
     @classmethod
-    def from_config(cls, cfg) -> "Simulation":
+    def from_config(cls, cfg: SimulationSections) -> "Simulation":
+        """The simulation of the scene's sections and ``compute`` (a
+        :class:`~pmdsim.config.RunConfig` has them)."""
         return cls(Scene.from_config(cfg), cfg.compute.tile_rows, cfg.compute.scheduler,
                    cfg.compute.num_workers)
 

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..config import RunConfig, check_resources
-from ..scene import resolve_roi
+from .simulate import resolve_roi
 from ..studies.budget_error import HEIGHT_COLUMNS, TABLE_COLUMNS
 from ..studies.budget import budget
 from ..studies.valid_pixels import check_rows
@@ -66,7 +66,7 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     check_resources(cfg)  # the budget's largest run, before anything is computed
     check_output_dir(final, overwrite, MARKER)
     from ..scene import Scene
-    from ..scene.sanity import check_physics
+    from ..studies.physics_checks import check_physics
 
     check_physics(cfg, Scene.from_config(cfg))  # a sensor/display that leaves no signal
     result = budget(cfg, progress, truth)

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..config import RunConfig
-from ..scene.sanity import check_physics
+from ..studies.physics_checks import check_physics
 from ..studies.valid_pixels import check_rows
 from ..studies.convergence import (ALL_ESTIMATORS, COLUMNS, DEFAULT_N, DEFAULT_THETA_DEG,
                                    convergence_study)

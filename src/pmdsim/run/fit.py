@@ -21,7 +21,7 @@ from ..config import ConfigError, InputError, RunConfig
 from ..studies.fit import (MAX_CHI2, MAX_RAYS, FitResult, check_fit_resources,
                            fit_fringe_images, format_fit)
 from ..studies.fit_stats import NoiseModel
-from ..scene.sanity import check_physics
+from ..studies.physics_checks import check_physics
 from .threads import single_blas
 from ..store.folder import atomic_run_dir, check_output_dir
 from ..store.tables import write_json

@@ -57,11 +57,11 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..config import RESERVED_VARIANT_NAMES, ConfigError, RunConfig, check_resources
-from ..scene.sanity import check_physics
+from ..studies.physics_checks import check_physics
 from ..studies import coverage
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
-from ..scene import resolve_roi
+from ..scene import resolved_camera
 from ..store.manifest import write_run_manifest, write_variants_manifest
 from .steps import run_member
 from .reference import chain_mode, specular_reference
@@ -95,6 +95,13 @@ class RunPlan:
 
 
 @single_blas
+def resolve_roi(cfg: RunConfig) -> RunConfig:
+    """``cfg`` with ``camera.roi = "auto"`` replaced by its window
+    (:func:`pmdsim.scene.resolved_camera`); ``cfg`` itself otherwise."""
+    camera = resolved_camera(cfg.camera, cfg.surface)
+    return cfg if camera is cfg.camera else cfg.model_copy(update={"camera": camera})
+
+
 def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | None = None,
                    *, overwrite: bool = False, figures: bool | None = None,
                    decode: bool | None = None, diagnostics: bool = True,
@@ -229,8 +236,8 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
                 f"invalid configuration:\n  variants.{k}.name: {v.name!r} cannot name a sub-folder of the run (reserved "
                 f"or hidden: {sorted(RESERVED_NAMES)}); choose another name")
     members = [(name, c, Simulation.from_config(c)) for name, c in cfg.expand()]
-    dots = resolve_dots(cfg)
-    image_files, levels = resolve_images(cfg)
+    dots = resolve_dots(cfg.patterns.dots, cfg.monitor.resolution)
+    image_files, levels = resolve_images(cfg.patterns.images, cfg.monitor.resolution)
     decoding, notes = chain_mode(cfg, decode)
     for _, c, s in members:  # sensor, display and BRDF that leave no signal: refused here
         notes += [n for n in check_physics(c, s.scene) if n not in notes]

@@ -237,10 +237,10 @@ def _labels(plan: SweepPlan) -> list[str]:
 
 
 def check_sweep_physics(plan: SweepPlan) -> list[str]:
-    """The physics sanity of every point (:func:`pmdsim.scene.sanity.check_each`), before
+    """The physics sanity of every point (:func:`pmdsim.studies.physics_checks.check_each`), before
     anything is created: a sensor, display or BRDF that leaves no signal is refused naming
     the point, its values and the field; returns the notes, each naming its point."""
-    from ..scene.sanity import check_each
+    from ..studies.physics_checks import check_each
 
     return check_each([p.config for p in plan.points], _labels(plan))
 
