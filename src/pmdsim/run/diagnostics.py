@@ -38,7 +38,7 @@ class _KnownGeometry:
 
 
 @dataclass(frozen=True, eq=False)
-class _Diagnosed:
+class RunDiagnostics:
     """The run diagnostics of one configuration: ``summary`` (statistics.json
     ``"diagnostics"``), the :class:`~pmdsim.studies.diagnostics.DiagnosticWarning` s, and the
     dataset ``coords`` and ``variables`` ``{name: (dims, data, attrs)}``."""
@@ -51,7 +51,7 @@ class _Diagnosed:
 
 
 def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
-                 exclude: np.ndarray | None = None) -> _Diagnosed | None:
+                 exclude: np.ndarray | None = None) -> RunDiagnostics | None:
     """Energy fraction inside theta_max (cone estimators), effective sample size and the
     phase standard error (``[diagnostics] phase_method``) of every fringe (with fringes) on the coarse pixel
     grid of ``[diagnostics]``, and the :func:`~pmdsim.studies.diagnostics.check` warnings for its
@@ -123,4 +123,4 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
                if diag.phase_se_method == "seeds" else
                "delta method: std of the per-ray terms / (sqrt(N) |mean|), the error of N "
                "independent rays (an upper bound for the lattice sample sets)") + where})
-    return _Diagnosed(summary, warnings, coords, variables)
+    return RunDiagnostics(summary, warnings, coords, variables)

@@ -63,7 +63,7 @@ from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
 from ..scene import resolved_camera
 from ..store.manifest import write_run_manifest, write_variants_manifest
-from .steps import run_member
+from .steps import RunInputs, run_member
 from .reference import chain_mode, specular_reference
 from .result import ProgressFn, RunResult, _Steps
 from .threads import single_blas
@@ -80,10 +80,10 @@ class RunPlan:
     """Everything a run needs, resolved and checked before anything is written."""
 
     cfg: RunConfig
-    members: list          # (name, RunConfig, Simulation) per variant (one without variants)
-    inputs: tuple          # (dots, image_files, monitor image levels, tiles per render)
+    members: list[tuple[str, RunConfig, Simulation]]  # per variant (one without variants)
+    inputs: RunInputs
     decoding: bool
-    notes: list
+    notes: list[str]
     figures: bool
     diagnostics: bool
     steps: _Steps
@@ -249,7 +249,7 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
     n_diagnosed = sum(not s.scene.brdf.is_delta for _, _, s in members) if diagnostics else 0
     steps = _Steps(progress, 1 + len(members) * (n_calls * n_tiles + 2 + int(figures))
                    + int(top_figures) + (n_tiles if decoding else 0) + n_diagnosed)
-    return RunPlan(cfg, members, (dots, image_files, levels, n_tiles), decoding, notes,
+    return RunPlan(cfg, members, RunInputs(dots, image_files, levels, n_tiles), decoding, notes,
                    figures, diagnostics, steps)
 
 

@@ -28,22 +28,39 @@ import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
 
 from ..config import RunConfig
 from ..measure import chain
-from ..render import Geometry, Simulation
+from ..render import FringeResult, Geometry, Simulation
 from ..report.text import description, summary_text_of
 from ..scene.sensor import Sensor, capture_dn
 from ..studies import coverage
 from ..store.schema import (CONFIG_NAME, DATASET_NAME, assign_to_dataset, build_dataset,
                             dot_dataset_variables)
-from .diagnostics import diagnose_run
+from .diagnostics import RunDiagnostics, diagnose_run
 from .figures import FigureSchedule
 from .preload import dataset_imported, import_in_background
 from .result import RunResult, _Steps, draw_safely
 from ..store.writer import DatasetWriter
+from ..patterns import Dot
+from .reference import Reference
 from ..store.images import exposure_factor, write_images
 from ..store.tables import write_dot_csv, write_json
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+
+class RunInputs(NamedTuple):
+    """What a run renders besides its fringes, resolved once for all its members."""
+
+    dots: list[Dot]                  # the dots of ``patterns.dots``
+    image_files: list[str]           # the monitor images of ``patterns.images``
+    levels: np.ndarray | None        # their levels (Q, Hm, Wm) in [0, 1]
+    n_tiles: int                     # tiles per render (progress)
 
 
 @dataclass(eq=False)
@@ -56,33 +73,33 @@ class Member:
     geometry: Geometry
     folder: Path
     steps: _Steps
-    inputs: tuple                  # (dots, image files, monitor image levels, tiles)
-    reference: object = None       # pmdsim.run.reference.Reference, when decoding
+    inputs: RunInputs
+    reference: Reference | None = None  # when decoding
     standalone: bool = True
     diagnostics: bool = True
     figures: FigureSchedule | None = None
     writer: DatasetWriter | None = None
     images_writer: ThreadPoolExecutor | None = None
 
-    fringes: object = None         # FringeResult
-    dot_images: object = None
-    images: object = None
-    off_monitor: object = None
+    fringes: FringeResult | None = None
+    dot_images: np.ndarray | None = None  # (dots, H, W)
+    images: np.ndarray | None = None      # (monitor images, H, W)
+    off_monitor: np.ndarray | None = None  # (H, W) bundles that partly miss the monitor
     phase_error: dict | None = None  # direction -> (H, W) numerical phase error, finest width
     sensor: Sensor | None = None
     exposure: float = float("nan")
-    ds: object = None              # the xarray Dataset, replaced (never changed) by steps
+    ds: xr.Dataset | None = None   # replaced (never changed) by steps
     decoded: dict | None = None
-    measured: object = None        # chain.ChainResult
+    measured: chain.ChainResult | None = None
     stats: dict = field(default_factory=dict)        # the chain's (and reconstruction's)
     statistics: dict = field(default_factory=dict)   # statistics.json
-    dot_table: list = field(default_factory=list)
-    diagnosed: object = None
+    dot_table: list[dict] = field(default_factory=list)
+    diagnosed: RunDiagnostics | None = None
     images_written: Future | None = None
-    image_paths: list = field(default_factory=list)
-    figure_paths: list = field(default_factory=list)
-    notes: list = field(default_factory=list)
-    timings: dict = field(default_factory=dict)
+    image_paths: list[Path] = field(default_factory=list)
+    figure_paths: list[Path] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
 
     @property
     def dots(self):
