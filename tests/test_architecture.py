@@ -42,7 +42,7 @@ LAYERS = {
 
 
 def part_of(module: str) -> str:
-    """``pmdsim.run.files`` -> ``run``; ``pmdsim`` -> ``__init__``."""
+    """``pmdsim.run.steps`` -> ``run``; ``pmdsim`` -> ``__init__``."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else "__init__"
 

@@ -214,7 +214,7 @@ def _realistic_budget() -> dict:
     if path:
         data = json.loads(Path(path).read_text())
         from pmdsim.config import physical_estimator
-        from pmdsim.scene import resolve_roi
+        from pmdsim.run.simulate import resolve_roi
 
         now = resolve_roi(physical_estimator(cfg)).model_dump(mode="json")
         if data["config"] != json.loads(json.dumps(now)):

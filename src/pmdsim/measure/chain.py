@@ -11,8 +11,8 @@ the surface point that moves the exact specular monitor point by the deviation),
 the surface points, the small-angle :func:`pmdsim.measure.deviation.slope_deviation`
 (coord / 2 d: right in the plane of incidence, cos(theta_i) short across it). :func:`dot_table` measures the second moments of dot images.
 
-Everything here computes; nothing is written (see :mod:`pmdsim.run`) or drawn (see
-:mod:`pmdsim.report.chain`).
+Everything here computes; nothing is written (see :mod:`pmdsim.store`) or drawn (see
+:mod:`pmdsim.report.chain_maps`).
 
 What a deviation means
 ----------------------

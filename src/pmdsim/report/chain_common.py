@@ -1,6 +1,6 @@
 """What the measurement-chain figures share: the colours of the pixel classes, the deviation
 quantities and their units, symmetric colour limits, the class overlay, map sizes and
-number formatting (:mod:`pmdsim.report.chain`)."""
+number formatting (:mod:`pmdsim.report.chain_maps`, :mod:`pmdsim.report.overview`, :mod:`pmdsim.report.dots`)."""
 
 from __future__ import annotations
 

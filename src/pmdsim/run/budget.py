@@ -62,7 +62,7 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     from ..config import physical_estimator
 
     final = Path(outdir).absolute()
-    cfg = resolve_roi(physical_estimator(cfg))  # the rendering integral unless cfg names one  # camera.roi = "auto": the window that sees the part
+    cfg = resolve_roi(physical_estimator(cfg))  # the rendering integral unless cfg names one; camera.roi = "auto": the window that sees the part
     check_resources(cfg)  # the budget's largest run, before anything is computed
     check_output_dir(final, overwrite, MARKER)
     from ..scene import Scene

@@ -1,6 +1,6 @@
 """Run diagnostics as a run stores them: :func:`pmdsim.studies.diagnostics.diagnose` on the
 ``[diagnostics]`` grid of a run's configuration, reduced to a JSON summary, the
-:func:`~pmdsim.studies.diagnostics.check` warnings and the ``diag_*`` dataset variables."""
+:func:`~pmdsim.studies.diagnostic_warnings.check` warnings and the ``diag_*`` dataset variables."""
 
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ class _KnownGeometry:
 @dataclass(frozen=True, eq=False)
 class RunDiagnostics:
     """The run diagnostics of one configuration: ``summary`` (statistics.json
-    ``"diagnostics"``), the :class:`~pmdsim.studies.diagnostics.DiagnosticWarning` s, and the
+    ``"diagnostics"``), the :class:`~pmdsim.studies.diagnostic_warnings.DiagnosticWarning` s, and the
     dataset ``coords`` and ``variables`` ``{name: (dims, data, attrs)}``."""
 
     summary: dict
@@ -54,7 +54,7 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
                  exclude: np.ndarray | None = None) -> RunDiagnostics | None:
     """Energy fraction inside theta_max (cone estimators), effective sample size and the
     phase standard error (``[diagnostics] phase_method``) of every fringe (with fringes) on the coarse pixel
-    grid of ``[diagnostics]``, and the :func:`~pmdsim.studies.diagnostics.check` warnings for its
+    grid of ``[diagnostics]``, and the :func:`~pmdsim.studies.diagnostic_warnings.check` warnings for its
     bounds. None for the mirror (no lobe). ``exclude`` (H, W): pixels left out of the
     judgement (bundles off the monitor)."""
     if sim.scene.brdf.is_delta:

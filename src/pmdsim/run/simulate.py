@@ -31,7 +31,7 @@ grid of ``[diagnostics]`` (:mod:`pmdsim.studies.diagnostics`) the fraction of th
 ``theta_max`` (cone estimators), the effective sample size of the weights and, with fringes,
 the standard error of the phase of every fringe (``[diagnostics] phase_method``) (one pass over the grid pixels'
 rays); the maps go into the dataset (``diag_*`` on ``diag_row``/``diag_col``), the summary and
-the :func:`pmdsim.studies.diagnostics.check` warnings (bounds from ``[diagnostics]``) into
+the :func:`pmdsim.studies.diagnostic_warnings.check` warnings (bounds from ``[diagnostics]``) into
 ``statistics.json``/``summary.txt``, the manifest and ``RunResult.warnings``.
 
 With ``variants`` (a comparison of BRDFs, anisotropy frames or sampling on one set-up)
@@ -43,7 +43,7 @@ figures of all variants); :func:`load_run` concatenates the variants along a
 ``variant`` dimension.
 
 Image files are integers scaled by one run-wide exposure factor (one per variant; see
-:mod:`pmdsim.run.files`). The dataset holds the float camera values, the per-pixel weight sums, the masks and the
+:mod:`pmdsim.store.images`). The dataset holds the float camera values, the per-pixel weight sums, the masks and the
 exact specular monitor coordinates, with units and descriptions in the attributes and the
 resolved configuration as JSON in ``attrs["config_json"]``, so that
 ``RunConfig.model_validate_json(load_run(path).attrs["config_json"])`` reproduces the run.

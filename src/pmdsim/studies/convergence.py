@@ -21,7 +21,7 @@ the decoded phase and in the modulation B / A: one render serves both and their 
 identical (they are listed for completeness).
 
 With ``diagnostics`` (default) the configured settings are also checked
-(:func:`pmdsim.studies.diagnostics.diagnose` and :func:`~pmdsim.studies.diagnostics.check` on the reduced
+(:func:`pmdsim.studies.diagnostics.diagnose` and :func:`~pmdsim.studies.diagnostic_warnings.check` on the reduced
 camera, bounds from ``[diagnostics]``): the warnings name the setting that fixes them.
 
 Outputs (written atomically: into a temporary sibling folder renamed at the end):
@@ -110,7 +110,7 @@ def _stats(dev: np.ndarray, valid: np.ndarray):
 @dataclass(frozen=True)
 class ConvergenceStudy:
     """Rows of the study (dicts with :data:`COLUMNS`), its settings and the diagnostics of
-    the configured settings (summary and :func:`~pmdsim.studies.diagnostics.check` warnings)."""
+    the configured settings (summary and :func:`~pmdsim.studies.diagnostic_warnings.check` warnings)."""
 
     rows: list
     meta: dict
