@@ -92,6 +92,9 @@ def violations(source: str, module: str, is_package: bool = False) -> list[str]:
             out.append(f"{module}:{line} imports {target}: unknown part {other!r}")
         elif own == "kernels" and other != "kernels":
             out.append(f"{module}:{line} imports {target}: kernels import only kernels")
+        elif own == "report" and other == "store":
+            out.append(f"{module}:{line} imports {target}: report draws from a dataset alone, "
+                       "never from the store")
         elif LAYERS[other] > LAYERS[own]:
             out.append(f"{module}:{line} imports {target} ({other}, layer {LAYERS[other]}) "
                        f"from {own} (layer {LAYERS[own]}): imports must point down the data flow")
@@ -117,6 +120,7 @@ def test_every_import_points_down_the_data_flow():
     ("pmdsim.studies.diagnostics", "import pmdsim.cli\n"),
     ("pmdsim.report.text", "from pmdsim.run.simulate import run_simulation\n"),
     ("pmdsim.store.schema", "from ..report import chain\n"),
+    ("pmdsim.report.text", "from ..store.schema import load_run\n"),
     ("pmdsim.scene.camera", "from ..trace import trace_primary\n"),
     ("pmdsim.newthing", "import numpy\n"),
 ])
