@@ -38,6 +38,7 @@ from ..config import DecodeConfig, FringeConfig
 from ..quantiles import median
 from . import deviation as analysis
 from . import decode as dec
+from .decode_plan import unambiguous_range_px
 
 #: Background threshold of the dot moments, as a fraction of each dot image's maximum.
 DOT_THRESHOLD_FRACTION = 0.05
@@ -72,7 +73,7 @@ def decode_problem(fringes: FringeConfig | None, decode: DecodeConfig,
         return "no fringes are configured (patterns.fringes = false): nothing to decode"
     method = decode.method
     try:
-        reach = dec.unambiguous_range_px(fr.widths_px, method)
+        reach = unambiguous_range_px(fr.widths_px, method)
     except ValueError as err:
         return (f"patterns.fringes.widths_px = {list(fr.widths_px)} do not fit "
                 f"decode.method = {method!r}: {err}")

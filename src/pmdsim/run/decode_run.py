@@ -35,6 +35,7 @@ import numpy as np
 from ..config import InputError, MissingInputError
 from ..measure import decode as dec
 from ..measure.decode_plan import METHODS, unambiguous_range_px
+from ..measure.images import load_image_stack
 from ..quantiles import median
 from ..store.folder import MANIFEST, atomic_run_dir, check_output_dir, is_run_dir
 from ..store.manifest import write_manifest
@@ -253,7 +254,7 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
     t0 = time.perf_counter()
     paths = [Path(p) for p in paths]
     check_output_dir(outdir, overwrite)
-    frames = dec.load_image_stack(paths)
+    frames = load_image_stack(paths)
     n_w, k = len(setup.widths_px), setup.shifts
     if frames.shape[0] != n_w * k:
         raise InputError(
