@@ -9,7 +9,7 @@ non-measured points and outliers handled as asked:
 - the instrument formats read through **surfalize** (GPL-3.0, an optional extra of its own:
   ``pip install pmdsim[instruments]``) *that are tested* on files written by an independent
   writer or by surfalize's own writer (values, orientation and dx != dy spacing checked,
-  ``tests/test_topography.py``, ``tests/test_topofile_formats.py``): Digital Surf
+  ``tests/brdf/test_topography.py``, ``tests/config/test_topofile_formats.py``): Digital Surf
   ``.sur``, ISO 25178-71 ``.sdf``, Alicona ``.al3d``, ``.tmd`` (TrueMap), surfalize's own
   ``.sflz``, Keyence ``.vk4``/``.vk3`` (files written after Gwyddion's ``keyence.c``
   layout and read alike by Gwyddion itself) and Sensofar ``.plux`` (after

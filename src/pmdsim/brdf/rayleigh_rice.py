@@ -38,7 +38,7 @@ This equals the Rayleigh-Rice BRDF exactly at the specular direction for inciden
 ``theta_0`` and departs from it, to second order in the scattering angle, through
 ``(cos_i + cos_o) / (2 cos(theta_0))`` (the halo's width scales with ``cos(theta_0) /
 cos(theta_i)`` at other incidences), ``cos_i cos_o`` versus ``cos^4(theta_0) / cos^4(theta_h)``
-and ``Q``'s angular dependence: ``tests/test_rayleigh_rice.py`` bounds the difference.
+and ``Q``'s angular dependence: ``tests/brdf/test_rayleigh_rice.py`` bounds the difference.
 """
 
 from __future__ import annotations

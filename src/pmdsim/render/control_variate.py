@@ -60,7 +60,7 @@ above :data:`EDGE_MAX_OFF` of the weight off the monitor the phase is stated as 
 within pi. Each term's share of the bound is its weight in ``S``, so terms that do not
 alias into the K-step phase weigh nothing. Tests check the box rule against the
 replicates of the whole staircase at 16 x the rays and against a NumPy mean over the
-rays of the nearest pixels' luminance (``tests/test_control_variate.py``).
+rays of the nearest pixels' luminance (``tests/render/test_control_variate.py``).
 """
 
 from __future__ import annotations

@@ -159,7 +159,7 @@ def convergence_exponent(order: tuple[int, int], kind: str = "cone") -> float | 
     than the cone's product rule (``kind``): the scaling was validated on cone rules only; on
     the radiometric Gauss-Hermite rules (8 x 8 to 11 x 11, a Ward lobe with unequal alphas
     under 16 px fringes) the scaled statement bounded the true error in only 80-88 % of the
-    pixels (``tests/test_budget_error.py``), so they keep the unscaled embedded statement."""
+    pixels (``tests/studies/test_budget_error.py``), so they keep the unscaled embedded statement."""
     if kind != "cone":
         return None
     m1, m2 = embedded_order(order), second_embedded_order(order)

@@ -23,7 +23,7 @@ from pmdsim.studies.sweep import plan_sweep
 
 from test_sweep import _config
 
-SRC = str(Path(__file__).resolve().parents[1] / "src")
+SRC = str(Path(__file__).resolve().parents[2] / "src")
 TWO = {"decimation": 0, "parameters": {"brdf.alpha_x": [0.004, 0.03]}}
 
 

@@ -10,7 +10,7 @@ import pytest
 from conftest import make_config
 from pmdsim.config import ConfigError, check_resources, estimate_resources, load_config
 
-EXAMPLES = Path(__file__).parent.parent / "examples"
+EXAMPLES = Path(__file__).parents[2] / "examples"
 GB = 2**30
 
 

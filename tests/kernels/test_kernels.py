@@ -385,7 +385,7 @@ def test_render_kernels_free_every_array_they_allocate(tmp_path):
     import sys
     from pathlib import Path
 
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]
     env = dict(os.environ, NUMBA_NRT_STATS="1",
                PYTHONPATH=os.pathsep.join([str(here.parent / "src"), str(here)]))
     p = subprocess.run([sys.executable, "-c", _LEAK_CHECK], env=env, cwd=tmp_path,

@@ -17,7 +17,7 @@ from pmdsim.config import ConfigError, parse_config
 from pmdsim.run.sweep import done_mask, load_sweep, run_sweep
 from pmdsim.studies.sweep import measure_point, plan_sweep, point_seed
 
-SRC = str(Path(__file__).resolve().parents[1] / "src")
+SRC = str(Path(__file__).resolve().parents[2] / "src")
 
 
 def _config(sweep: dict) -> dict:

@@ -19,7 +19,7 @@ import pytest
 
 from conftest import base_dict, merge
 
-SRC = str(Path(__file__).parent.parent / "src")
+SRC = str(Path(__file__).parents[2] / "src")
 
 
 def _toml(data: dict) -> str:

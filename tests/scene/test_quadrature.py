@@ -24,7 +24,7 @@ from pmdsim.render import Simulation
 from pmdsim.scene import quadrature as q
 from pmdsim.scene.sampling import ConeSampling
 
-FIG3 = Path(__file__).parent.parent / "examples" / "paper_fig3.toml"
+FIG3 = Path(__file__).parents[2] / "examples" / "paper_fig3.toml"
 WIDTHS = (50.0, 400.0, 3200.0)
 
 
@@ -275,7 +275,7 @@ def test_nearest_monitor_rqmc_error_bounds_the_true_one():
     """A nearest-pixel monitor (steps in the integrand) in mode 'rqmc' (8 scrambled Sobol
     replicates): the stated 95 % error must bound the error against a converged reference
     of another method (the Cranley-Patterson-rotated lattice, 64 x the rays) in about 95 %
-    of the pixels. (Mode 'rule' renders the control variate: tests/test_control_variate.py.)"""
+    of the pixels. (Mode 'rule' renders the control variate: tests/render/test_control_variate.py.)"""
     cfg = make_config(sampling={"n_rays": 256, "mode": "rqmc"}, monitor={"pixel_model": "nearest"})
     sim = Simulation.from_config(cfg)
     fr = sim.render_fringes([20.0], ["x", "y"])

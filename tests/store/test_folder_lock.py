@@ -16,7 +16,7 @@ import pytest
 from pmdsim.store.folder_lock import (OutputBusy, Terminated, claim_output, lock_path,
                                       remove_stale, signals_as_interrupt)
 
-SRC = str(Path(__file__).parent.parent / "src")
+SRC = str(Path(__file__).parents[2] / "src")
 
 
 def _holder(target: Path) -> subprocess.Popen:

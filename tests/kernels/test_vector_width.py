@@ -15,7 +15,7 @@ import pytest
 
 from pmdsim.kernels import _jit
 
-SRC = str(Path(__file__).parent.parent / "src")
+SRC = str(Path(__file__).parents[2] / "src")
 
 
 class _Features(dict):
@@ -101,7 +101,7 @@ def test_the_render_does_not_depend_on_the_vector_width(tmp_path):
         env["PYTHONPATH"] = SRC
         if bits == "256":  # its own cache: compiled for 256-bit vectors in the test
             env.update(PMDSIM_VECTOR_BITS="256", NUMBA_CACHE_DIR=str(tmp_path / "cache-256"))
-        code = _RENDER.format(tests=str(Path(__file__).parent), out=str(out))
+        code = _RENDER.format(tests=str(Path(__file__).parents[1]), out=str(out))
         p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                            text=True, timeout=900)
         assert p.returncode == 0, p.stderr[-3000:]

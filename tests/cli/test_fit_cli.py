@@ -3,7 +3,7 @@ cannot describe (noise, shuffled frames, other fringe widths) exit 1 with the re
 their files written and marked failed; bad input (a camera that sees no monitor, images of
 another size, ``-o`` naming an existing file) exits 2 with a clean message before any fit.
 
-Tiny scene: the 20 x 16 px camera of tests/test_fit.py, three widths, four shifts; the
+Tiny scene: the 20 x 16 px camera of tests/studies/test_fit.py, three widths, four shifts; the
 "measured" images are rendered with 512 rays (a different sample set than the fit's
 default 100) and captured by a 12-bit EMVA sensor (shot and dark noise)."""
 
@@ -25,7 +25,7 @@ from pmdsim.config import parse_config
 from pmdsim.render import Simulation
 from pmdsim.scene.sensor import Sensor
 
-SRC = str(Path(__file__).parent.parent / "src")
+SRC = str(Path(__file__).parents[2] / "src")
 TRUTH = (0.025, 0.010)
 WIDTHS = [15.0, 30.0, 70.0]
 SENSOR = {"enabled": True, "exposure_electrons": 7000.0, "full_well_electrons": 10000.0,

@@ -163,7 +163,7 @@ def test_run_writes_surface_errors(tmp_path):
     from pmdsim.run import run_simulation
     from pmdsim.store.schema import load_run
 
-    cfg = load_config(Path(__file__).parents[1] / "examples" / "turned_sphere.toml")
+    cfg = load_config(Path(__file__).parents[2] / "examples" / "turned_sphere.toml")
     d = cfg.model_dump()
     d["camera"].update(resolution=(64, 64), pixel_pitch_mm=0.03)
     d["sampling"]["n_rays"] = 8
@@ -374,7 +374,7 @@ def test_run_states_the_reconstructions_numerical_error(tmp_path):
     from pmdsim.store.schema import load_run
     from pmdsim.run.reconstruction import reconstruct_coords
 
-    cfg = load_config(Path(__file__).parents[1] / "examples" / "turned_sphere.toml")
+    cfg = load_config(Path(__file__).parents[2] / "examples" / "turned_sphere.toml")
     d = cfg.model_dump()
     d["camera"].update(resolution=(64, 48), pixel_pitch_mm=0.03)
     d["sampling"].update(n_rays=16, mode="rule")

@@ -11,7 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-SRC = str(Path(__file__).parent.parent / "src")
+SRC = str(Path(__file__).parents[2] / "src")
 HEAVY = ("numba", "matplotlib", "dask", "xarray", "zarr", "scipy", "pandas")
 
 

@@ -15,7 +15,7 @@ from conftest import base_dict, merge
 from pmdsim.config import parse_config
 from pmdsim.store.writer import FULL_PRECISION, KEEP_BITS, keep_bits
 
-DOCS = Path(__file__).parent.parent / "docs" / "outputs.md"
+DOCS = Path(__file__).parents[2] / "docs" / "outputs.md"
 
 
 def test_keep_bits_is_numcodecs_bitround():

@@ -19,7 +19,7 @@ from pmdsim.studies.budget import EFFECTS, budget, ideal_config
 
 from conftest import base_dict, merge
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _cfg(**changes):

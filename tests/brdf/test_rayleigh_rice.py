@@ -77,7 +77,7 @@ def test_q_is_the_fresnel_reflectance_at_the_specular_direction():
         assert float(m.q(i, o)) == pytest.approx(float(rr.fresnel_unpolarised(eps, math.cos(th))), rel=1e-12)
 
 
-REFERENCE = Path(__file__).parent / "data" / "pyscatmech_rayleigh_rice.json"
+REFERENCE = Path(__file__).parents[1] / "data" / "pyscatmech_rayleigh_rice.json"
 
 
 def _reference_cases():

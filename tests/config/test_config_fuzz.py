@@ -32,7 +32,7 @@ from pmdsim.config import (
     parse_config,
 )
 
-EXAMPLES = sorted((Path(__file__).parent.parent / "examples").glob("*.toml"))
+EXAMPLES = sorted((Path(__file__).parents[2] / "examples").glob("*.toml"))
 BASES = [tomllib.loads(p.read_text()) for p in EXAMPLES]
 #: A line of a ConfigError that names a field: "  camera.position_mm.0: ..." (or the top
 #: level, for a document that is not a table of sections at all).
