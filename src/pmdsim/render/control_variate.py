@@ -562,13 +562,6 @@ def _half_widths(m2_re, m2_im, half: float) -> np.ndarray:
     return out
 
 
-def table_fringe_sums(out, directions, widths, deltas, linear) -> np.ndarray:
-    """(nd, nw, H, W) complex fringe sums of table-layout sums ``out`` (:class:`_Layout`)."""
-    ncols = out.shape[-1]
-    return _Layout(tuple(directions), tuple(widths), np.asarray(deltas), linear, None,
-                   ncols).fringe_sums(out)
-
-
 #: Replicate passes of each control-variate mode, per ``n_rays`` (:func:`rays_share`).
 REPLICATE_PASSES = {"rule+rqmc": 2.0, "rule+box+rqmc": 1.0, "rule+box": 0.0}
 
