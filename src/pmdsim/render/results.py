@@ -1,6 +1,5 @@
 """What a render returns: :class:`FringeResult` (with the numerical error of its sums) and
-:class:`Geometry`, and the phase error of sums (moved from :mod:`pmdsim.render.simulation`,
-which re-exports them)."""
+:class:`Geometry`, and the phase error of sums and the observed convergence of a rule."""
 
 from __future__ import annotations
 
