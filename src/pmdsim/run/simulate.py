@@ -94,7 +94,6 @@ class RunPlan:
         return self.members[0][2]
 
 
-@single_blas
 def resolve_roi(cfg: RunConfig) -> RunConfig:
     """``cfg`` with ``camera.roi = "auto"`` replaced by its window
     (:func:`pmdsim.scene.resolved_camera`); ``cfg`` itself otherwise."""
@@ -102,6 +101,7 @@ def resolve_roi(cfg: RunConfig) -> RunConfig:
     return cfg if camera is cfg.camera else cfg.model_copy(update={"camera": camera})
 
 
+@single_blas
 def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | None = None,
                    *, overwrite: bool = False, figures: bool | None = None,
                    decode: bool | None = None, diagnostics: bool = True,
