@@ -77,8 +77,9 @@ NOT_READ = dict.fromkeys(
 }
 HEIGHT_UNITS_MM = {"mm": 1.0, "um": 1e-3, "nm": 1e-6, "m": 1e3}
 #: Length units of SurfaceTopography's channels, in mm.
-_LENGTH_MM = {"m": 1e3, "mm": 1.0, "\u00b5m": 1e-3, "\u03bcm": 1e-3, "um": 1e-3, "nm": 1e-6,
-              "pm": 1e-9, "\u00c5": 1e-7, "A": 1e-7, "km": 1e6}
+#: ("\u00c2\u00b5m": the UTF-8 micro sign read as Latin-1, as surfalize writes it in .sur)
+_LENGTH_MM = {"m": 1e3, "mm": 1.0, "\u00b5m": 1e-3, "\u03bcm": 1e-3, "\u00c2\u00b5m": 1e-3,
+              "um": 1e-3, "nm": 1e-6, "pm": 1e-9, "\u00c5": 1e-7, "A": 1e-7, "km": 1e6}
 LEVELS = ("none", "mean", "plane")
 FILLS = ("error", "nearest", "mean")
 
@@ -253,7 +254,7 @@ def _read_surfacetopography(path, field, fmt, name):
     except ImportError:
         raise InputError(f"{what}: reading it needs SurfaceTopography (MIT): pip install "
                          "'pmdsim[instruments]'") from None
-    _check_zip(path, field, name, None)
+    _check_zip(path, field, name, _plux_declared_grid if fmt == "plux" else None)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -263,9 +264,7 @@ def _read_surfacetopography(path, field, fmt, name):
         raise InputError(f"{what}: its header asks for more memory than there is: the file is "
                          "garbled or not of this format") from None
     except Exception as err:  # noqa: BLE001 - the readers raise many kinds on damage
-        raise InputError(f"{what}: cannot read it ({_brief(err)}): the file is truncated, "
-                         f"garbled or not a {path.suffix.lower()} file; export it again from "
-                         "the instrument software") from None
+        raise InputError(_unreadable(what, path, err)) from None
     heights = [c for c in channels if getattr(c, "dim", 2) == 2
                and _unit_mm(getattr(c, "unit", None)) is not None]
     default = getattr(reader, "default_channel", None)
@@ -284,9 +283,7 @@ def _read_surfacetopography(path, field, fmt, name):
     except MemoryError:
         raise InputError(f"{what}: needs more memory than there is to read") from None
     except Exception as err:  # noqa: BLE001
-        raise InputError(f"{what}: cannot read its heights ({_brief(err)}): the file is "
-                         "truncated or garbled; export it again from the instrument "
-                         "software") from None
+        raise InputError(_unreadable(what, path, err)) from None
     if sizes is None or len(sizes) != 2 or not getattr(t, "is_uniform", True):
         raise InputError(f"{what}: states no lateral size of a uniform grid; export it with "
                          "its lateral calibration")
@@ -300,6 +297,17 @@ def _read_surfacetopography(path, field, fmt, name):
     dx, dy = (float(s) * scale / n for s, n in zip(sizes, (nx, ny), strict=True))
     return (z * scale, dx, dy,
             f"SurfaceTopography {SurfaceTopography.__version__} ({channel.name})")
+
+
+def _unreadable(what, path, err):
+    """The message for a file SurfaceTopography refused: a feature its reader does not read
+    (a unit or a layout it names), or damage."""
+    name = type(err).__name__
+    if name in ("UnsupportedFormatFeature", "CorruptFile") or "unit" in str(err).lower():
+        return (f"{what}: not read ({_brief(err)}); export the topography again from the "
+                "instrument software, in a length unit, or as X3P or SDF")
+    return (f"{what}: cannot read it ({_brief(err)}): the file is truncated, garbled or not a "
+            f"{path.suffix.lower()} file; export it again from the instrument software")
 
 
 def _unit_mm(unit):
@@ -334,11 +342,34 @@ def _check_zip(path, field, name, declared):
             grid = declared(archive) if declared is not None else None
     except InputError:
         raise
+    except ValueError as err:
+        raise InputError(f"{what}: {err}; not read") from None
     except Exception as err:  # noqa: BLE001 - zipfile/XML raise many kinds on damage
         raise InputError(f"{what}: not a readable ZIP archive ({_brief(err)}): truncated or "
                          "garbled") from None
     if grid is not None:
         _declared_grid(what, *grid)
+
+
+def _plux_declared_grid(archive):
+    """(IMAGE_SIZE_X, _Y) of a Sensofar .plux's index.xml (the layout of SurfaceTopography's
+    PLUX.py), whose LAYER_0.raw must hold exactly that many float32 heights: the reader
+    takes the first nx x ny values whatever follows."""
+    import xml.etree.ElementTree as ET
+
+    info = archive.getinfo("index.xml")
+    if info.file_size > 16 * 2**20:
+        raise ValueError(f"index.xml of {info.file_size} bytes")
+    root = ET.fromstring(archive.read(info))
+    try:
+        nx, ny = (int(root.find(f"GENERAL/IMAGE_SIZE_{a}").text) for a in "XY")
+    except (AttributeError, TypeError, ValueError):
+        raise ValueError("index.xml states no GENERAL/IMAGE_SIZE_X and _Y") from None
+    raw = archive.getinfo("LAYER_0.raw").file_size
+    if 0 < nx * ny <= MAX_GRID_ELEMENTS and raw != 4 * nx * ny:
+        raise ValueError(f"LAYER_0.raw holds {raw} bytes, index.xml states {ny} x {nx} float32 "
+                         f"heights ({4 * nx * ny} bytes): inconsistent")
+    return nx, ny
 
 
 def _x3p_declared_grid(archive):
@@ -465,7 +496,9 @@ def _check_sflz(path, field):
             for _ in range(header["num_layers"]):
                 layer = LAYOUT_LAYER_HEADER.read(fh)
                 _declared_grid(what, layer["width"], layer["height"])
-                itemsize = np.dtype(layer["datatype"].decode().strip("\0 ")).itemsize
+                dtype = layer["datatype"]
+                dtype = dtype.decode() if isinstance(dtype, bytes) else str(dtype)
+                itemsize = np.dtype(dtype.strip("\0 ")).itemsize
                 declared = layer["width"] * layer["height"] * max(layer["channels"], 1) * itemsize
                 data = fh.read(layer["size"])
                 algo = header["compression_algorithm"]
