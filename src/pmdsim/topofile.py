@@ -133,6 +133,7 @@ def read_topography(path, field: str = "surface.file", *, spacing_mm=None,
         raise InputError(f"{field}: level must be one of {LEVELS}, got {level!r}")
     if fill not in FILLS:
         raise InputError(f"{field}: fill must be one of {FILLS}, got {fill!r}")
+    files.check_regular_file(path, field)
     suffix = path.suffix.lower()
     if suffix in NOT_READ:
         raise InputError(f"{field}: {path}: {suffix} files are not read ({NOT_READ[suffix]}); "
@@ -143,7 +144,6 @@ def read_topography(path, field: str = "surface.file", *, spacing_mm=None,
     if suffix not in known:
         raise InputError(f"{field}: {path}: unknown topography format {suffix!r}; read are "
                          f"{', '.join(known)}")
-    files.check_regular_file(path, field)
     if suffix in ST_FORMATS:
         z, dx, dy, reader = _read_surfacetopography(path, field, *ST_FORMATS[suffix])
     elif suffix in X3P_SUFFIXES:
@@ -303,7 +303,7 @@ def _unreadable(what, path, err):
     """The message for a file SurfaceTopography refused: a feature its reader does not read
     (a unit or a layout it names), or damage."""
     name = type(err).__name__
-    if name in ("UnsupportedFormatFeature", "CorruptFile") or "unit" in str(err).lower():
+    if name == "UnsupportedFormatFeature" or "unit" in str(err).lower():
         return (f"{what}: not read ({_brief(err)}); export the topography again from the "
                 "instrument software, in a length unit, or as X3P or SDF")
     return (f"{what}: cannot read it ({_brief(err)}): the file is truncated, garbled or not a "
