@@ -254,13 +254,28 @@ def _nms_bomb(path):
     path.write_bytes(bytes(data))
 
 
+def _sur_bomb(path):  # nx, ny (int32) at bytes 108, 112 of Digital Surf's 512-byte header
+    data = bytearray((DATA / "sur-2.sur").read_bytes()[:4096])
+    struct.pack_into("<iiI", data, 108, HUGE, HUGE, HUGE * HUGE % 2**32)
+    path.write_bytes(bytes(data))
+
+
+def _sdf_bomb(path):  # ISO 25178-71 ASCII: the grid in its header, then two numbers
+    text = (DATA / "sdf-1.sdf").read_text()
+    text = text.replace("NumPoints = 7", f"NumPoints = {HUGE}")
+    text = text.replace("NumProfiles = 4", f"NumProfiles = {HUGE}")
+    assert text.count(str(HUGE)) == 2
+    path.write_text(text)
+
+
 DECLARES = r"declares a grid of 20000 x 20000 = 400,000,000 points, more than the 268,435,456"
 
 
 @pytest.mark.parametrize("suffix,write,match", [
     (".x3p", _x3p_bomb, DECLARES), (".plux", _plux_bomb, DECLARES),
     (".datx", _datx_bomb, DECLARES), (".sflz", _sflz_bomb, DECLARES),
-    (".nms", _nms_bomb, DECLARES),
+    (".nms", _nms_bomb, DECLARES), (".sur", _sur_bomb, DECLARES + "|truncated"),
+    (".sdf", _sdf_bomb, DECLARES + "|truncated"),
     # SurfaceTopography's .plu reader checks the declared grid against the file's size itself
     (".plu", _plu_bomb, r"cannot read it \(CorruptFile: .*truncated"),
 ])
@@ -271,7 +286,7 @@ def test_a_declared_huge_grid_is_refused_before_reading(tmp_path, suffix, write,
     write(path)
     assert path.stat().st_size < 2 * 2**20
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    with pytest.raises(InputError, match=rf"brdf\.file: .*bomb\{suffix}.*{match}"):
+    with pytest.raises(InputError, match=rf"brdf\.file: .*bomb\{suffix}.*({match})"):
         read_topography(path, "brdf.file")
     grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before  # kB
     assert grown < 200 * 1024, f"{grown} kB taken to refuse it"
