@@ -109,7 +109,8 @@ def test_plu_without_the_grid_size_or_of_another_kind_is_refused(tmp_path):
     with pytest.raises(InputError, match=r"brdf\.file: .*shifted\.plu.*declares a grid of"):
         read_topography(path, "brdf.file")
     write_plu(path, z, DX_UM, DY_UM, measurement_type=1)
-    with pytest.raises(InputError, match=r"surface\.file: .*shifted\.plu"):
+    with pytest.raises(InputError, match=r"surface\.file: .*shifted\.plu \(Sensofar PLU\): not "
+                       r"read \(.*`type` has invalid value '1'.*expected value is '3'"):
         read_topography(path)
 
 
