@@ -237,7 +237,8 @@ def _declared_grid(what, nx, ny):
     nx, ny = int(nx), int(ny)
     if nx < 1 or ny < 1:
         raise InputError(f"{what}: declares a grid of {nx} x {ny} points, which holds no "
-                         "heights: the file is garbled or not of this format")
+                         "heights: the file is garbled or not of this format; export it "
+                         "again from the instrument software")
     if nx * ny > MAX_GRID_ELEMENTS:
         raise InputError(f"{what}: declares a grid of {nx} x {ny} = {nx * ny:,} points, more "
                          f"than the {MAX_GRID_ELEMENTS:,} pmdsim reads (2 GB of heights); not "
@@ -291,7 +292,8 @@ def _read_surfacetopography(path, field, fmt, name):
     if z.shape != tuple(channel.nb_grid_pts)[::-1]:
         raise InputError(f"{what}: holds {z.shape[1]} x {z.shape[0]} heights, its header "
                          f"states {channel.nb_grid_pts[0]} x {channel.nb_grid_pts[1]}: "
-                         "inconsistent, not read")
+                         "inconsistent, not read; export it again from the instrument "
+                         "software")
     scale = _unit_mm(t.unit)
     ny, nx = z.shape
     dx, dy = (float(s) * scale / n for s, n in zip(sizes, (nx, ny), strict=True))
@@ -329,7 +331,7 @@ def _check_zip(path, field, name, declared):
     if not zipfile.is_zipfile(path):
         if declared is not None:
             raise InputError(f"{what}: is not a ZIP archive (an {name} file is one): the file "
-                             "is truncated, garbled or not of this format")
+                             "is truncated, garbled or not of this format; export it again")
         return
     try:
         with zipfile.ZipFile(path) as archive:
@@ -338,15 +340,16 @@ def _check_zip(path, field, name, declared):
                     raise InputError(f"{what}: its part {info.filename!r} unpacks to "
                                      f"{info.file_size / 2**30:.3g} GB, more than the "
                                      f"{MAX_UNPACKED_BYTES / 2**30:.3g} GB of the largest grid "
-                                     "pmdsim reads; not read")
+                                     "pmdsim reads; not read: is it the right file?")
             grid = declared(archive) if declared is not None else None
     except InputError:
         raise
     except ValueError as err:
-        raise InputError(f"{what}: {err}; not read") from None
+        raise InputError(f"{what}: {err}; not read: export it again from the instrument "
+                         "software") from None
     except Exception as err:  # noqa: BLE001 - zipfile/XML raise many kinds on damage
         raise InputError(f"{what}: not a readable ZIP archive ({_brief(err)}): truncated or "
-                         "garbled") from None
+                         "garbled; export it again from the instrument software") from None
     if grid is not None:
         _declared_grid(what, *grid)
 
@@ -449,7 +452,8 @@ def _read_nms(path, field):
             head = fh.read(_NMS_HEADER)
             if len(head) < _NMS_HEADER:
                 raise InputError(f"{what}: {len(head)} bytes, shorter than its "
-                                 f"{_NMS_HEADER}-byte header: truncated or not a .nms file")
+                                 f"{_NMS_HEADER}-byte header: truncated or not a .nms file; "
+                                 "export it again")
             zmin, zmax = struct.unpack_from("<2d", head, 16)
             nx, ny, dx_nm, dy_nm = struct.unpack_from("<2I2d", head, 1368)
             _declared_grid(what, nx, ny)
@@ -460,12 +464,13 @@ def _read_nms(path, field):
         raise InputError(f"{what}: cannot read it: {err}") from None
     if raw.size != nx * ny:
         raise InputError(f"{what}: its header states {nx} x {ny} heights, the file holds "
-                         f"{raw.size}: truncated, not read")
+                         f"{raw.size}: truncated, not read; export it again from the "
+                         "instrument software")
     if not (np.isfinite([zmin, zmax, dx_nm, dy_nm]).all() and zmax >= zmin
             and 0 < dx_nm < 1e9 and 0 < dy_nm < 1e9):
         raise InputError(f"{what}: height range {zmin:g} .. {zmax:g} um and spacing "
                          f"{dx_nm:g} x {dy_nm:g} nm in its header are not plausible: garbled "
-                         "or not a .nms file")
+                         "or not a .nms file; export it again from the instrument software")
     z = raw.reshape(ny, nx).astype(np.float64) / 65534.0 * (zmax - zmin) + zmin
     return z * 1e-3, dx_nm * 1e-6, dy_nm * 1e-6, "pmdsim .nms reader"
 
@@ -512,9 +517,9 @@ def _check_sflz(path, field):
                     raise InputError(f"{what}: a layer of {layer['width']} x {layer['height']} "
                                      f"declares {declared} bytes and unpacks to "
                                      f"{'more' if size > declared else size}: garbled, not "
-                                     "read")
+                                     "read; save the surface again from surfalize")
     except InputError:
         raise
     except Exception as err:  # noqa: BLE001 - struct/zlib/lzma/dtype raise many kinds
         raise InputError(f"{what}: cannot read its header ({_brief(err)}): truncated or "
-                         "garbled") from None
+                         "garbled; save the surface again from surfalize") from None
