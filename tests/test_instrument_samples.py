@@ -359,3 +359,32 @@ def test_dev_zero_as_a_device_and_through_the_command_line(tmp_path):
     res = CliRunner().invoke(app, ["texture", "--from", str(tmp_path / "d.x3p")])
     assert res.exit_code == 2 and "--from: " in res.output and "is a folder" in res.output
     assert "not found" not in res.output
+
+
+def test_the_other_user_files_get_the_same_messages(tmp_path):
+    """Every loader of config/files.py checks the path the same way, before opening it."""
+    from pmdsim.config.files import read_response_lut
+
+    os.mkfifo(tmp_path / "lut.csv")
+    with pytest.raises(InputError, match=r"monitor\.response_lut: .*lut\.csv: is a named pipe"):
+        read_response_lut(tmp_path / "lut.csv")  # would block if it were opened
+
+
+def test_texture_report_says_how_many_nan_and_inf_points_it_filled(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from pmdsim.cli import app
+
+    y, x = np.mgrid[0:24, 0:32]
+    h = 0.02 * np.sin(2 * np.pi * x / 8) + 0.003 * y
+    h[3, 4], h[10, 20], h[0, 31] = np.nan, np.inf, -np.inf
+    np.save(tmp_path / "h.npy", h)
+    res = CliRunner().invoke(app, ["texture", "--from", str(tmp_path / "h.npy"), "--spacing-um",
+                                   "1", "2", "--no-figure", "-o", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    assert "filled 3 of 768 points (nearest): 3 not measured (NaN/inf" in res.output
+    js = json.loads((tmp_path / "o" / "topography.json").read_text())
+    assert js["invalid_points"] == js["not_measured_points"] == 3
+    assert "filled 3 of 768" in (tmp_path / "o" / "topography.txt").read_text()
