@@ -81,7 +81,8 @@ def _gwyddion(path, tmp_path):
                          text=True, timeout=120, check=False)
     if res.returncode:
         return None  # this Gwyddion build has no module for the format (.x3p, .nms)
-    return np.asarray(gwyfile.load(str(out))["/0/data"].data)
+    field = gwyfile.load(str(out))["/0/data"]
+    return np.asarray(field.data), field.xreal, field.yreal
 
 
 def test_the_samples_and_their_notice_are_here():
@@ -105,21 +106,24 @@ def test_each_real_file_reads_as_its_tests_state(name, tmp_path):
         with pytest.raises(InputError, match=rf"{t.not_measured} points not measured"):
             read_topography(DATA / name)
     if rms is not None:
-        assert _rms(t.heights, ok) == pytest.approx(rms * mm, rel=1e-5)
+        assert _rms(t.heights, ok) == pytest.approx(rms * mm, rel=1e-6)
     if rms_curv is not None:
         assert _curvature_removed(t.heights, ok, t.dx, t.dy) == pytest.approx(rms_curv * mm,
-                                                                              rel=1e-3)
+                                                                              rel=1e-4)
 
 
 @pytest.mark.parametrize("name", sorted(STATED))
 def test_each_real_file_reads_pointwise_as_gwyddion_reads_it(name, tmp_path):
     """Gwyddion's own file modules (an independent reader): the same heights point by point
-    at the measured points (so the same orientation and unit), where its build reads the
+    at the measured points (so the same orientation and unit) and the same physical size,
+    where its build reads the
     format (not .x3p, .nms here). sur-3.sur: up to a constant (Gwyddion's z offset)."""
-    gz = _gwyddion(DATA / name, tmp_path)
-    if gz is None:
+    read = _gwyddion(DATA / name, tmp_path)
+    if read is None:
         pytest.skip(f"Gwyddion reads no {name}")
+    gz, xreal, yreal = read
     t = read_topography(DATA / name, fill="nearest")
+    assert t.size_mm == pytest.approx((xreal * 1e3, yreal * 1e3), rel=1e-9)  # m -> mm
     measured = _measured(name)
     assert gz.shape == t.heights.shape
     ours, theirs = t.heights[measured], gz[measured] * 1e3
