@@ -116,8 +116,8 @@ def test_each_real_file_reads_as_its_tests_state(name, tmp_path):
 def test_each_real_file_reads_pointwise_as_gwyddion_reads_it(name, tmp_path):
     """Gwyddion's own file modules (an independent reader): the same heights point by point
     at the measured points (so the same orientation and unit) and the same physical size,
-    where its build reads the
-    format (not .x3p, .nms here). sur-3.sur: up to a constant (Gwyddion's z offset)."""
+    where its build reads the format (not .x3p, .nms here). sur-3.sur: up to a constant
+    (Gwyddion's z offset)."""
     read = _gwyddion(DATA / name, tmp_path)
     if read is None:
         pytest.skip(f"Gwyddion reads no {name}")
