@@ -313,6 +313,28 @@ def test_a_zip_part_that_unpacks_huge_is_refused_before_reading(tmp_path):
         read_topography(path)
 
 
+def test_an_x3p_part_that_unpacks_beyond_its_declared_grid_is_refused(tmp_path):
+    """A 10 x 10 X3P whose data part the ZIP directory says unpacks to 1 GB (under the
+    2 GB bound, far over what 100 heights fill): refused before x3pio reads it."""
+    x3pio = pytest.importorskip("x3pio")
+    path = tmp_path / "bomb.x3p"
+    x3pio.write(path, np.zeros((10, 10)), x_scale=1e-6, y_scale=2e-6)
+    data = bytearray(path.read_bytes())
+    at = data.find(b"PK\x01\x02")
+    patched = 0
+    while at >= 0:
+        (length,) = struct.unpack_from("<H", data, at + 28)
+        if not data[at + 46:at + 46 + length].endswith(b"main.xml"):
+            struct.pack_into("<I", data, at + 24, 2**30)
+            patched += 1
+        at = data.find(b"PK\x01\x02", at + 4)
+    assert patched
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"bomb\.x3p \(X3P\): its part .* unpacks to "
+                       r"1,073,741,824 bytes, more than the 10 x 10 heights main\.xml declares"):
+        read_topography(path)
+
+
 def test_an_sflz_layer_that_unpacks_beyond_its_grid_is_refused(tmp_path):
     path = tmp_path / "bomb.sflz"
     _sflz_bomb(path, unpacks=True)

@@ -390,7 +390,14 @@ def _x3p_declared_grid(archive):
         raise ValueError("main.xml states no MatrixDimension SizeX and SizeY")
     if int(sizes.get("SizeZ") or 1) != 1:
         raise ValueError(f"main.xml states SizeZ = {sizes['SizeZ']} layers, not one")
-    return int(sizes["SizeX"]), int(sizes["SizeY"])
+    nx, ny = int(sizes["SizeX"]), int(sizes["SizeY"])
+    need = 8 * nx * ny + 4096  # float64 heights at most (and a bit mask of valid points)
+    for part in archive.infolist():
+        if part.filename != "main.xml" and part.file_size > need:
+            raise ValueError(f"its part {part.filename!r} unpacks to {part.file_size:,} bytes, "
+                             f"more than the {nx} x {ny} heights main.xml declares can fill "
+                             f"({need:,}): inconsistent")
+    return nx, ny
 
 
 def _read_x3p(path, field):
