@@ -53,7 +53,7 @@ def _gwyddion(path, tmp_path):
     gwyfile = pytest.importorskip("gwyfile")
     out = tmp_path / (path.name + ".gwy")
     res = subprocess.run([str(conv.binary_path()), str(path), str(out)], capture_output=True,
-                         text=True, timeout=120)
+                         text=True, timeout=120, check=False)
     assert res.returncode == 0, res.stderr
     obj = gwyfile.load(str(out))
     field = obj["/0/data"]
@@ -203,11 +203,11 @@ def test_instrument_file_without_surfacetopography_says_what_to_install(tmp_path
 
 
 @pytest.mark.parametrize("change,match", [
-    (dict(unit="Fringes"), r"not read \(.*Unknown unit 'Fringes'"),
-    (dict(unit_attr="MicroMeters"), r"not read \(.*conflicting height units"),
-    (dict(lateral_category="PixelCat"), r"not read \(.*LateralCat"),
-    (dict(z_category="IntensityCat"), r"not read \(.*HeightCat"),
-    (dict(metadata=False), r"cannot read it .*MetaData"),
+    ({"unit": "Fringes"}, r"not read \(.*Unknown unit 'Fringes'"),
+    ({"unit_attr": "MicroMeters"}, r"not read \(.*conflicting height units"),
+    ({"lateral_category": "PixelCat"}, r"not read \(.*LateralCat"),
+    ({"z_category": "IntensityCat"}, r"not read \(.*HeightCat"),
+    ({"metadata": False}, r"cannot read it .*MetaData"),
 ])
 def test_datx_refuses_what_it_cannot_read_as_heights(tmp_path, change, match):
     pytest.importorskip("h5py")
@@ -215,6 +215,31 @@ def test_datx_refuses_what_it_cannot_read_as_heights(tmp_path, change, match):
     write_datx(path, _z_um(), DX_UM * 1e-6, DY_UM * 1e-6, **change)
     with pytest.raises(InputError, match=r"brdf\.file: .*odd\.datx \(Zygo DATX\): " + match):
         read_topography(path, "brdf.file")
+
+
+# --- Gwyddion .gwy ----------------------------------------------------------------------
+
+def test_gwy_written_by_gwyfile_reads_with_units_spacing_and_mask(tmp_path):
+    """A .gwy file written by gwyfile (Gwyddion's format, an independent writer): heights in
+    the z unit (um here), the real sizes, and the mask's points as not measured."""
+    objects = pytest.importorskip("gwyfile.objects")
+    z = _z_um()
+    y, x = np.mgrid[0:5, 0:7]
+    unit = objects.GwySIUnit
+    field = objects.GwyDataField(z, xreal=7 * DX_UM * 1e-6, yreal=5 * DY_UM * 1e-6,
+                                 si_unit_xy=unit(unitstr="m"), si_unit_z=unit(unitstr="um"))
+    container = objects.GwyContainer()
+    container["/0/data"] = field
+    container["/0/data/title"] = "Height"
+    container["/0/mask"] = objects.GwyDataField(((x == 3) & (y == 2)) * 1.0, xreal=1.0,
+                                                yreal=1.0)
+    path = tmp_path / "part.gwy"
+    container.tofile(str(path))
+    t = read_topography(path, fill="mean")
+    assert t.heights.shape == (5, 7) and t.not_measured == 1 and t.reader.startswith("Surface")
+    ok = ~((x == 3) & (y == 2))
+    np.testing.assert_allclose(t.heights[ok], z[ok] * 1e-3, rtol=1e-12)
+    assert (t.dx, t.dy) == pytest.approx((DX_UM * 1e-3, DY_UM * 1e-3), rel=1e-12)
 
 
 # --- bad files -------------------------------------------------------------------------
@@ -279,7 +304,8 @@ def test_every_instrument_format_is_read_by_a_tested_reader_or_refused(tmp_path)
 
     read = set(ST_FORMATS) | set(X3P_SUFFIXES) | set(OWN_SUFFIXES) | set(SURFALIZE_SUFFIXES)
     assert read == {".plu", ".plux", ".opd", ".dat", ".datx", ".al3d", ".tmd", ".sdf", ".sur",
-                    ".mi", ".frt", ".di", ".spm", ".vk4", ".vk3", ".x3p", ".nms", ".sflz"}
+                    ".mi", ".frt", ".di", ".spm", ".vk4", ".vk3", ".gwy", ".x3p", ".nms",
+                    ".sflz"}
     assert not set(NOT_READ) & (read | set(ARRAY_SUFFIXES))
     theirs = {"." + e.lower() for r in readers for e in (getattr(r, "_file_extensions", None) or ())}
     assert theirs - read - set(ARRAY_SUFFIXES) - set(NOT_READ) == set()

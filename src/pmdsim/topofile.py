@@ -9,7 +9,8 @@ non-measured points and outliers handled as asked. The readers (docs/texture.md,
   (``tests/data/instrument-samples``: grid, physical size, unit and RMS height as
   SurfaceTopography's own tests state them, and as Gwyddion reads them where it can) or on
   a file written after the layout independent readers document
-  (``tests/topofile_writers.py``: ``.datx``, ``.plux``, ``.vk4``/``.vk3``);
+  (``tests/topofile_writers.py``: ``.datx``, ``.plux``, ``.vk4``/``.vk3``; ``.gwy`` by
+  gwyfile);
 - ``.x3p`` (ISO 25178-72) through **x3pio** (MIT; ``pmdsim[topography]``);
 - NanoFocus ``.nms`` by pmdsim's own reader (:func:`_read_nms`): SurfaceTopography 1.27
   reads its spacing in millimetres where the file holds nanometres (``nms-1.nms``: a 160 um
@@ -52,7 +53,7 @@ ST_FORMATS = {
     ".sur": ("sur", "Digital Surf SUR"), ".mi": ("mi", "Molecular Imaging MI"),
     ".frt": ("frt", "FRT MicroProf"), ".di": ("di", "Bruker Nanoscope"),
     ".spm": ("di", "Bruker Nanoscope"), ".vk4": ("vk", "Keyence VK4"),
-    ".vk3": ("vk", "Keyence VK3"),
+    ".vk3": ("vk", "Keyence VK3"), ".gwy": ("gwy", "Gwyddion GWY"),
 }
 X3P_SUFFIXES = (".x3p",)
 OWN_SUFFIXES = (".nms",)
@@ -66,7 +67,7 @@ _UNCHECKED = ("SurfaceTopography reads it, but no file of it was at hand to chec
 _GPL_ONLY = "only surfalize (GPL-3.0) reads it, and no file of it could be checked"
 #: Instrument formats that are refused, with the reason.
 NOT_READ = dict.fromkeys(
-    (".vk6", ".vk7", ".zon", ".lext", ".oir", ".poir", ".gwy", ".zmg", ".os3d", ".opdx",
+    (".vk6", ".vk7", ".zon", ".lext", ".oir", ".poir", ".zmg", ".os3d", ".opdx",
      ".mdt", ".ibw", ".mat", ".nc", ".h5", ".hfm", ".asc", ".xlsx", ".ezd", ".nid", ".bcr",
      ".bcrf", ".cur", ".stp", ".tom", ".top", ".jpk", ".mnt", ".qep", ".hgt", ".apx",
      ".001", ".002", ".003", ".004", ".005", ".zip"), _UNCHECKED) | dict.fromkeys(
