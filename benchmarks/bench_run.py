@@ -316,14 +316,14 @@ def main() -> None:
                     if not args.skip_sweep:
                         t.sweep_round(k)
             same = {}
-            if len(trees) == 2:
+            if len(trees) == 2 and args.rounds > 0:
                 if not args.skip_fig3:
                     same["Fig. 3 run"] = _compare(trees[0].work / "fig3-0",
                                                   trees[1].work / "fig3-0", "run")
                 if not args.skip_sweep:
                     same["sweep example"] = _compare(trees[0].work / "sweep-0-0",
                                                      trees[1].work / "sweep-0-0", "sweep")
-            if not args.skip_sweep and not args.skip_processes:
+            if not args.skip_sweep and not args.skip_processes and args.rounds > 0:
                 this = trees[-1]
                 print("[this] sweep example on 2 worker processes ...", flush=True)
                 _run(PROCESSES_CODE, [SWEEP, this.work / "sweep-processes"], this.src,
