@@ -58,8 +58,9 @@ from .reconstruct import (
 
 __all__ = ["anchor_index", "moved_reconstruction"]
 
-#: Residual reduction asked of the Southwell solve of the height change (relative to its
-#: right-hand side): the propagated error carries this relative solver error.
+#: Residual reduction asked of each Southwell solve of the height change (of its first
+#: guess's residual, as the reconstruction's own ``SOLVE_RTOL``); the loop stops when the
+#: height change settles to ``rtol`` of itself.
 RTOL = 1e-3
 
 
@@ -137,8 +138,8 @@ def moved_reconstruction(rec: Reconstruction, camera, monitor, prior, u, v, ex, 
     mu, mv = _reflected_monitor_points(s, cam_pos, np.einsum("ij,kj->ik", nl, rot), planar)
     pix = camera.project(s)
     row, col = pix[:, 1], pix[:, 0]
-    # the coordinate errors where the reconstruction reads the coordinates: its cubic
-    # spline (mirrored at the image's edges) of the error maps, 0 at invalid pixels
+    # the coordinate errors where the reconstruction reads the coordinates, interpolated
+    # bilinearly (a node's cell holds valid pixels only: the reconstruction's support test)
     du, dv = (ndimage.map_coordinates(np.nan_to_num(np.asarray(e, np.float64)), [row, col],
                                       order=1, mode="nearest") for e in (ex, ey))
     k = len(s)
