@@ -58,13 +58,33 @@ def from_chain(cfg, scene, measured, reference_rec=None):
     stats = statistics(cfg, rec, err, reference_rec)
     ex, ey = ((dc.numerical or {}).get("coord_px") for dc in (dx, dy))
     if ex is not None and ey is not None:  # the render's numerical error, carried through
-        # from the reconstructed height: the moved coordinates' fixed point is next to it
-        _, moved, _ = reconstruct_coords(cfg, scene, u + np.nan_to_num(ex),
-                                         v + np.nan_to_num(ey), valid,
-                                         start=rec.height_mm, tables=False)
+        moved = moved_errors(cfg, scene, rec, u, v, ex, ey, valid)
         if moved is not None and moved.height_nm.shape == err.height_nm.shape:
             add_numerical_error(stats, err, moved)
     return variables(rec, err, reference_rec), {"reconstruction": stats}
+
+
+def moved_errors(cfg, scene, rec, u, v, ex, ey, valid):
+    """The :class:`~pmdsim.measure.reconstruct.SurfaceErrors` of the reconstruction ``rec``
+    of (``u``, ``v``) with every coordinate moved by its numerical error (``ex``, ``ey``):
+    carried linearly (:func:`pmdsim.measure.reconstruct_error.moved_reconstruction`), or,
+    for a monitor model it does not know, the reconstruction repeated with the moved
+    coordinates from the reconstructed height (their fixed point is next to it)."""
+    from ..measure.reconstruct_error import moved_reconstruction
+
+    rc = cfg.reconstruct
+    prior = scene.surface
+    if rc.prior is not None:
+        from ..scene.surfaces import surface_from_config
+
+        prior = surface_from_config(rc.prior)
+    moved = moved_reconstruction(rec, scene.camera, scene.monitor, prior, u, v, ex, ey,
+                                 order=rc.order, anchor=rc.anchor)
+    if moved is not None:
+        return surface_errors(moved, scene.surface, rc.remove, tables=False)
+    _, err, _ = reconstruct_coords(cfg, scene, u + np.nan_to_num(ex), v + np.nan_to_num(ey),
+                                   valid, start=rec.height_mm, tables=False)
+    return err
 
 
 #: The statistics of each surface error that get a numerical error, with what they are of:
@@ -75,8 +95,8 @@ _ERROR_STATS = {"height_error_nm": "height_nm", "slope_error_x_urad": "slope_x_u
 
 def add_numerical_error(stats: dict, err, moved) -> None:
     """Add ``<stat>_err`` to the RMS / PV / P95 of each surface error in ``stats``: the
-    reconstruction is repeated with every decoded coordinate moved by its numerical error
-    (x and y together; the reconstruction is linear in small coordinate changes), each
+    reconstruction with every decoded coordinate moved by its numerical error (x and y
+    together; the reconstruction is linear in small coordinate changes: :func:`moved_errors`), each
     node's change is its error, carried to the statistics as the budget's height rows are
     (:func:`pmdsim.studies.budget_error.stat_error`: exact intervals for RMS and P95; the
     PV by the widest range the nodes' errors allow)."""
