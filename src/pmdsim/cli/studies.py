@@ -115,7 +115,7 @@ def budget(
     target_error_mrad: float | None = typer.Option(
         None, "--target-error-mrad",
         help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
-        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "error (P95 over pixels, every fringe) is below this (the same as [sampling] target_error_mrad); "
         "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Error budget: the chain with each system effect of CONFIG alone and all together on
@@ -171,7 +171,7 @@ def sweep(
     target_error_mrad: float | None = typer.Option(
         None, "--target-error-mrad",
         help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
-        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "error (P95 over pixels, every fringe) is below this (the same as [sampling] target_error_mrad); "
         "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Run the measurement chain at every point of the configuration's [sweep] (grid, zip or
