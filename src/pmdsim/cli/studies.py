@@ -83,7 +83,7 @@ def converge(
     n_max = max(r["n_rays"] for r in rows)
     table = Table(title=f"pmdsim converge '{cfg.name}' ({wall:.1f} s)", title_justify="left")
     for col in ("estimator", "theta_max", "N", "fringe", "phase RMS vs mirror (mrad)",
-                "vs reference (mrad)", "reference's error (mrad)", "modulation"):
+                "vs reference ± its error (mrad)", "modulation"):
         table.add_column(col, justify="right" if col not in ("estimator", "fringe") else "left")
     picks = [r for r in rows
              if (r["estimator"] == "paper" and r["n_rays"] == cfg.sampling.n_rays
@@ -95,9 +95,13 @@ def converge(
         table.add_row(r["estimator"], th, str(r["n_rays"]) + (" (ref.)" if is_ref else ""),
                       f"{r['direction']} {r['width_px']:g} px",
                       _with_error(r["phase_rms_rad"], r["phase_error_rms_rad"]),
-                      "-" if is_ref else _vs_reference(r),
-                      _mrad(r["reference_error_rms_rad"]),
+                      ("reference ± " + _mrad(r["reference_error_rms_rad"])) if is_ref
+                      else _vs_reference(r),
                       f"{r['modulation_median']:.3f}")
+    if not console.is_terminal:  # a pipe or a file: Rich's 80 columns would wrap every cell
+        from rich.console import Console
+
+        console = Console(width=max(console.width, 132), soft_wrap=True, highlight=False)
     console.print(table)
     ref = result.reference or {}
     stale = [f"{f['direction']} {f['width_px']:g} px ({_mrad(f['error_rms_rad'])} mrad)"
@@ -134,9 +138,10 @@ def _with_error(value: float, err: float) -> str:
 
 def _vs_reference(r: dict) -> str:
     """The row's difference from the reference, or why it is not a number."""
+    ref = _mrad(r["reference_error_rms_rad"])
     if not r["resolved"]:
-        return "not resolved"
-    return f"{1e3 * r['phase_rms_vs_reference_rad']:.3g}"
+        return f"not resolved (± {ref})"
+    return f"{1e3 * r['phase_rms_vs_reference_rad']:.3g} ± {ref}"
 
 
 def budget(
