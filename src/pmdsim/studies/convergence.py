@@ -88,6 +88,9 @@ def reduced_config(cfg: RunConfig, camera_size: tuple[int, int] = (160, 128)) ->
     cam = cfg.camera
     upd = {"resolution": (nw, nh), "focal_length_px": cam.focal_px * sx,
            "focal_length_mm": None, "pixel_pitch_mm": None}
+    if cam.f_number is not None:  # a thin lens keeps its focal length: larger pixels instead
+        upd = {"resolution": (nw, nh), "focal_length_px": None,
+               "pixel_pitch_mm": cam.focal_length_mm / (cam.focal_px * sx)}
     if cam.principal_point_px is not None:
         cx, cy = cam.principal_point_px
         upd["principal_point_px"] = ((cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5)
