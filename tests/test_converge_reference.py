@@ -13,14 +13,18 @@ import math
 
 import numpy as np
 import pytest
+from conftest import base_dict
 from typer.testing import CliRunner
 
-from conftest import base_dict
 from pmdsim.config import parse_config
 from pmdsim.measure.deviation import wrap
 from pmdsim.render import Simulation
 from pmdsim.scene import Scene
-from pmdsim.studies.convergence import REFERENCE_CONVERGED_RAD, convergence_study, reduced_config
+from pmdsim.studies.convergence import (
+    REFERENCE_CONVERGED_RAD,
+    convergence_study,
+    reduced_config,
+)
 
 S3, C3 = math.sin(math.radians(3.0)), math.cos(math.radians(3.0))
 WIDTHS = (12.0, 160.0)
