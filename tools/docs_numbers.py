@@ -263,6 +263,97 @@ def budget_full_system() -> tuple:
                          nh["height_rms_nm"], nh["height_pv_nm"])
 
 
+@functools.cache
+def _roughness_statistics() -> dict:
+    """``examples/roughness_comparison.toml`` run through the chain (decoded, compared with
+    the mirror) on a 320 x 256 camera of the same field of view: statistics per variant."""
+    import tempfile
+
+    from pmdsim.config import load_config
+    from pmdsim.run import run_simulation
+    from pmdsim.studies.convergence import reduced_config
+
+    out = {}
+    for name, c in load_config(ROOT / "examples" / "roughness_comparison.toml").expand():
+        small = reduced_config(c, (320, 256))
+        small = small.model_copy(update={"output": small.output.model_copy(
+            update={"figures": False, "write_images": False})})
+        with tempfile.TemporaryDirectory() as tmp:
+            out[name] = run_simulation(small, Path(tmp) / "run", diagnostics=False).statistics
+    return out
+
+
+def roughness_rows() -> tuple:
+    """docs/examples.md: the roughness example's phase deviation from the mirror (RMS, X and
+    Y, 50 px fringes) with its numerical error (the RMS of the stated per-pixel error, a
+    bound on the RMS's own error), per variant, and the kinematic plate's median
+    modulation ratio to the mirror."""
+    st = _roughness_statistics()
+    out = []
+    for v in ("kinematic", "minimal"):
+        for d in ("x", "y"):
+            s = st[v]["directions"][d]
+            out += [s["phase_mrad"]["rms"], s["numerical_error"]["phase_mrad"]["rms"]]
+    k = st["kinematic"]["directions"]
+    return tuple(out) + tuple(k[d]["modulation"]["ratio_median_by_width"][0] for d in ("x", "y"))
+
+
+def _reorder_roughness(v: tuple) -> tuple:
+    """:func:`roughness_rows` in the order docs/examples.md states them: the modulation
+    ratios first, then kinematic X, Y and minimal X, Y (value, error)."""
+    return v[8:10] + v[0:8]
+
+
+def roughness_sunburst() -> tuple:
+    """docs/examples.md: the 8th azimuthal harmonic (about the turning centre) of the
+    kinematic plate's X 50 px phase deviation from the mirror, mrad, with the paper's 100
+    stratified rays and with the example's Gauss rule (8 x 32), 320 x 256 camera, radii
+    10-95 mm (from the fringe sums, as tests/test_examples_converged.py does)."""
+    import numpy as np
+
+    from pmdsim.config import load_config, with_sampling
+    from pmdsim.render import Simulation
+    from pmdsim.studies.convergence import reduced_config
+    from pmdsim.trace import trace_primary
+
+    cfg = dict(load_config(ROOT / "examples" / "roughness_comparison.toml").expand())["kinematic"]
+    small = reduced_config(cfg, (320, 256))
+    base = Simulation.from_config(small)
+    mirror = Simulation(base.scene.specular()).render_fringes([50.0], ["x"], 4)
+    hits = trace_primary(base.scene)
+    az = np.arctan2(hits.point[..., 1], hits.point[..., 0])
+    rad = np.hypot(hits.point[..., 0], hits.point[..., 1])
+    out = []
+    for kw in ({"mode": "stratified", "n_rays": 100}, {"mode": "rule", "n_rays": 256}):
+        fr = Simulation.from_config(with_sampling(small, target_error_mrad=None, **kw)
+                                    ).render_fringes([50.0], ["x"], 4)
+        dev = np.angle(fr.sums[0, 0] * np.conj(mirror.sums[0, 0]))
+        ok = np.isfinite(dev) & (rad > 10) & (rad < 95)
+        out.append(1e3 * 2 * abs(np.mean(dev[ok] * np.exp(-8j * az[ok]))))
+    return tuple(out)
+
+
+def fig3_converge() -> tuple:
+    """docs/physics.md: ``pmdsim converge examples/paper_fig3.toml --theta 1 --n-values
+    1600`` (160 x 128 camera): per fringe (x 50, x 400, x 3200, y 50, y 400 px) the paper
+    row's median modulation, the reference's (radiometric, N = 1600) median modulation and
+    its stated error (RMS, mrad), and the paper row's difference from the reference
+    (mrad)."""
+    from pmdsim.studies.convergence import convergence_study
+
+    st = convergence_study(_fig3_config(), n_values=(1600,), theta_values=(1.0,),
+                           estimators=("paper", "radiometric"), diagnostics=False)
+    n = _fig3_config().sampling.n_rays
+    out = []
+    for d, w in (("x", 50.0), ("x", 400.0), ("x", 3200.0), ("y", 50.0), ("y", 400.0)):
+        row = {r["estimator"]: r for r in st.rows if r["direction"] == d and r["width_px"] == w
+               and r["n_rays"] == (n if r["estimator"] == "paper" else 1600)}
+        p, ref = row["paper"], row["radiometric"]
+        out += [p["modulation_median"], ref["modulation_median"],
+                1e3 * ref["phase_error_rms_rad"], 1e3 * p["phase_rms_vs_reference_rad"]]
+    return tuple(out)
+
+
 # ----------------------------------------------------------------------------- the table
 _ROW = r" \| " + NUMBER + r" / " + NUMBER
 _PM2 = NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" ± " + NUMBER
@@ -292,6 +383,17 @@ CHECKS = [
           + r" leave it[\s\S]*?The bundle spans u = " + NUMBER + r" \.\.\. "
           + NUMBER + r", v = " + NUMBER + r" \.\.\. " + NUMBER, fig3_pixel_bundle,
           why="the paper's pixel (1, 1), its 100 rays"),
+    Check("roughness-rows", "docs/examples.md",
+          r"median modulation ratio to the mirror is " + NUMBER + r" \(X\) and " + NUMBER
+          + r" \(Y\), and the phase\s+deviation from the mirror is " + NUMBER + r" ± " + NUMBER
+          + r" mrad RMS \(X\) and " + NUMBER + r" ± " + NUMBER + r" mrad RMS \(Y[\s\S]*?deviates by\s+"
+          + NUMBER + r" ± " + NUMBER + r" mrad \(X\) and " + NUMBER + r" ± " + NUMBER
+          + r" mrad \(Y\) RMS", lambda: _reorder_roughness(roughness_rows()), rel_tol=0.02, fast=False,
+          why="the example through the chain, 320 x 256 camera"),
+    Check("roughness-sunburst", "docs/examples.md",
+          r"harmonic of the X deviation about the centre is " + NUMBER + r" mrad with the 100 "
+          r"stratified rays and\s+" + NUMBER + r" mrad with the rule", roughness_sunburst,
+          why="fringe sums, 320 x 256 camera"),
     Check("turning-ward", "docs/texture.md",
           r"\| Ward, equivalent alphas \(0\.0020 / 0\.0246\)" + _ROW * 4,
           _turning_row("ward_equivalent"), fast=False, why="the full example run"),
