@@ -354,6 +354,51 @@ def fig3_converge() -> tuple:
     return tuple(out)
 
 
+@functools.cache
+def _fig3_stratified_se() -> dict:
+    """The diagnostics' phase standard error (seeds method: 8 independent lattice
+    rotations, on their pixel grid of the full camera) of the paper's own sample set (100
+    stratified rays, 1 deg) on Fig. 3, rad, per "direction/width": median and P95."""
+    from pmdsim import Simulation
+    from pmdsim.config import with_sampling
+    from pmdsim.studies.diagnostics import diagnose
+
+    cfg = with_sampling(_fig3_config(), mode="stratified", n_rays=100, target_error_mrad=None)
+    diag = diagnose(Simulation.from_config(cfg), widths=[50, 400], phase_method="seeds")
+    return diag.summary["phase_se_rad"]
+
+
+def fig3_stratified_p95() -> tuple:
+    """The P95 (mrad) of :func:`_fig3_stratified_se` for the x 50 px fringes: the number the
+    diagnostics' warning quotes for the paper's sample set."""
+    return (1e3 * _fig3_stratified_se()["x/50"]["p95"],)
+
+
+def fig3_stratified_error() -> tuple:
+    """docs/physics.md: median / P95 (mrad) of :func:`_fig3_stratified_se` for x 50, x 400,
+    y 50, y 400 px, and the sample set's actual error against the converged rule (the
+    example's 256 nodes) on a 320 x 256 camera, x 50 px: RMS and maximum over the pixels
+    that see the monitor (mrad)."""
+    import numpy as np
+
+    from pmdsim.config import with_sampling
+    from pmdsim.render import Simulation
+    from pmdsim.studies.convergence import reduced_config
+
+    se = _fig3_stratified_se()
+    out = []
+    for key in ("x/50", "x/400", "y/50", "y/400"):
+        out += [1e3 * se[key]["median"], 1e3 * se[key]["p95"]]
+    small = reduced_config(_fig3_config(), (320, 256))
+    ph = []
+    for kw in ({"mode": "stratified", "n_rays": 100}, {}):
+        sim = Simulation.from_config(with_sampling(small, target_error_mrad=None, **kw))
+        ph.append(np.angle(sim.render_fringes([50.0], ["x"], 4).sums[0, 0]))
+    mask = Simulation.from_config(small).geometry().monitor_mask
+    d = np.abs(np.angle(np.exp(1j * (ph[0] - ph[1]))))[mask & np.isfinite(ph[0]) & np.isfinite(ph[1])]
+    return tuple(out) + (1e3 * float(np.sqrt(np.mean(d * d))), 1e3 * float(d.max()))
+
+
 # ----------------------------------------------------------------------------- the table
 _ROW = r" \| " + NUMBER + r" / " + NUMBER
 _PM2 = NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" ± " + NUMBER
@@ -394,6 +439,26 @@ CHECKS = [
           r"harmonic of the X deviation about the centre is " + NUMBER + r" mrad with the 100 "
           r"stratified rays and\s+" + NUMBER + r" mrad with the rule", roughness_sunburst,
           why="fringe sums, 320 x 256 camera"),
+    Check("fig3-converge", "docs/physics.md",
+          r"\| x 50 px" + r" \| " + r" \| ".join([NUMBER] * 4) + r" \|\n\| x 400 px \| "
+          + r" \| ".join([NUMBER] * 4) + r" \|\n\| x 3200 px \| " + r" \| ".join([NUMBER] * 4)
+          + r" \|\n\| y 50 px \| " + r" \| ".join([NUMBER] * 4) + r" \|\n\| y 400 px \| "
+          + r" \| ".join([NUMBER] * 4) + r" \|", fig3_converge, rel_tol=0.01,
+          why="pmdsim converge's study, 160 x 128 camera, 1 deg, N = 1600"),
+    Check("fig3-stratified", "docs/physics.md",
+          r"median / P95 over pixels: " + NUMBER + r" / " + NUMBER + r" mrad \(x 50 px\), "
+          + NUMBER + r" / " + NUMBER + r" mrad \(x 400\),\s+" + NUMBER + r" / " + NUMBER
+          + r" mrad \(y 50\), " + NUMBER + r" / " + NUMBER + r" mrad \(y 400\)[\s\S]*?its x 50 px "
+          r"phase is off by " + NUMBER + r" mrad RMS and " + NUMBER + r" mrad at\s+most",
+          fig3_stratified_error, rel_tol=0.01,
+          why="diagnostics (seeds) on the full camera's grid; 320 x 256 camera vs the rule"),
+    *(Check(f"fig3-stratified-warning-{k}", doc, pat, fig3_stratified_p95, rel_tol=0.01,
+            why="the diagnostics' P95 for the paper's sample set")
+      for k, doc, pat in (
+          ("readme", "README.md", r"phase standard error " + NUMBER + r" mrad for x fringes of 50 px"),
+          ("physics", "docs/physics.md", r"phase standard error " + NUMBER + r" mrad for x fringes of 50 px"),
+          ("outputs", "docs/outputs.md", r"warning: phase standard error " + NUMBER + r" mrad for x fringes"),
+          ("outputs-text", "docs/outputs.md", r"stratified rays: P95 " + NUMBER + r" mrad for x 50 px"))),
     Check("turning-ward", "docs/texture.md",
           r"\| Ward, equivalent alphas \(0\.0020 / 0\.0246\)" + _ROW * 4,
           _turning_row("ward_equivalent"), fast=False, why="the full example run"),
