@@ -399,6 +399,15 @@ def fig3_stratified_error() -> tuple:
     return tuple(out) + (1e3 * float(np.sqrt(np.mean(d * d))), 1e3 * float(d.max()))
 
 
+def fit_coverage_counts() -> tuple:
+    """docs/texture.md: the fit's coverage study (20 seeded cases, half of them noise-free
+    16-bit images): cases covered at k = 2, fits accepted."""
+    from pmdsim.studies.fit_coverage import fit_coverage
+
+    res = fit_coverage(20, 0)
+    return (sum(r.covered for r in res), sum(r.success for r in res))
+
+
 # ----------------------------------------------------------------------------- the table
 _ROW = r" \| " + NUMBER + r" / " + NUMBER
 _PM2 = NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" ± " + NUMBER
@@ -459,6 +468,10 @@ CHECKS = [
           ("physics", "docs/physics.md", r"phase standard error " + NUMBER + r" mrad for x fringes of 50 px"),
           ("outputs", "docs/outputs.md", r"warning: phase standard error " + NUMBER + r" mrad for x fringes"),
           ("outputs-text", "docs/outputs.md", r"stratified rays: P95 " + NUMBER + r" mrad for x 50 px"))),
+    Check("fit-coverage", "docs/texture.md",
+          r"both alphas inside their k = 2 intervals in \*\*" + NUMBER + r" of 20\*\* cases, "
+          r"and " + NUMBER + r" of the 20\s+fits accepted", fit_coverage_counts, fast=False,
+          why="the fit's coverage study, 20 cases"),
     Check("turning-ward", "docs/texture.md",
           r"\| Ward, equivalent alphas \(0\.0020 / 0\.0246\)" + _ROW * 4,
           _turning_row("ward_equivalent"), fast=False, why="the full example run"),
