@@ -408,6 +408,46 @@ def fit_coverage_counts() -> tuple:
     return (sum(r.covered for r in res), sum(r.success for r in res))
 
 
+@functools.cache
+def _varying_statistics() -> dict:
+    """``examples/turned_plate_varying.toml`` through the chain, as configured and with the
+    rim's finish everywhere (``[brdf.variation]`` deleted): statistics of each."""
+    import tempfile
+
+    from pmdsim.config import load_config
+    from pmdsim.run import run_simulation
+
+    cfg = load_config(ROOT / "examples" / "turned_plate_varying.toml")
+    cfg = cfg.model_copy(update={"output": cfg.output.model_copy(
+        update={"figures": False, "write_images": False})})
+    plain = cfg.model_copy(update={"brdf": cfg.brdf.model_copy(update={"variation": None})})
+    out = {}
+    for name, c in (("varying", cfg), ("plain", plain)):
+        with tempfile.TemporaryDirectory() as tmp:
+            out[name] = run_simulation(c, Path(tmp) / "run", diagnostics=False).statistics
+    return out
+
+
+def varying_rows() -> tuple:
+    """docs/examples.md: coordinate deviation (monitor px) RMS with its numerical error,
+    P95 and maximum, X then Y, of the varying finish and then of the rim's finish."""
+    st = _varying_statistics()
+    out = []
+    for v in ("varying", "plain"):
+        for d in ("x", "y"):
+            s = st[v]["directions"][d]
+            c = s["coord_px"]
+            out += [c["rms"], s["numerical_error"]["coord_px"]["rms"], c["p95"], c["max"]]
+    return tuple(out)
+
+
+def fig3_memory_estimate() -> tuple:
+    """docs/configuration.md, docs/robustness.md: ``estimate_resources`` of Fig. 3, GB."""
+    from pmdsim.config import estimate_resources
+
+    return (estimate_resources(_fig3_config()).memory_bytes / 1e9,)
+
+
 # ----------------------------------------------------------------------------- the table
 _ROW = r" \| " + NUMBER + r" / " + NUMBER
 _PM2 = NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" ± " + NUMBER
@@ -472,6 +512,12 @@ CHECKS = [
           r"both alphas inside their k = 2 intervals in \*\*" + NUMBER + r" of 20\*\* cases, "
           r"and " + NUMBER + r" of the 20\s+fits accepted", fit_coverage_counts, fast=False,
           why="the fit's coverage study, 20 cases"),
+    Check("fig3-memory-configuration", "docs/configuration.md",
+          r"CPU-second; " + NUMBER + r" GB estimated for Fig\. 3\)", fig3_memory_estimate,
+          why="the estimate from the configuration"),
+    Check("fig3-memory-robustness", "docs/robustness.md",
+          r"Fig\. 3: " + NUMBER + r" GB\s+estimated\)", fig3_memory_estimate,
+          why="the estimate from the configuration"),
     Check("turning-ward", "docs/texture.md",
           r"\| Ward, equivalent alphas \(0\.0020 / 0\.0246\)" + _ROW * 4,
           _turning_row("ward_equivalent"), fast=False, why="the full example run"),
