@@ -518,6 +518,13 @@ CHECKS = [
     Check("fig3-memory-robustness", "docs/robustness.md",
           r"Fig\. 3: " + NUMBER + r" GB\s+estimated\)", fig3_memory_estimate,
           why="the estimate from the configuration"),
+    Check("varying-rows", "docs/examples.md",
+          r"coordinate deviation RMS / P95 / max " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER
+          + r" /\s+" + NUMBER + r" monitor px \(X\) and " + NUMBER + r" ± " + NUMBER + r" / "
+          + NUMBER + r" / " + NUMBER + r" \(Y\), against " + NUMBER + r" ± " + NUMBER + r" /\s+"
+          + NUMBER + r" / " + NUMBER + r" and " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER
+          + r" / " + NUMBER + r" for the same plate", varying_rows, rel_tol=0.02, fast=False,
+          why="the example through the chain and without its variation"),
     Check("turning-ward", "docs/texture.md",
           r"\| Ward, equivalent alphas \(0\.0020 / 0\.0246\)" + _ROW * 4,
           _turning_row("ward_equivalent"), fast=False, why="the full example run"),
