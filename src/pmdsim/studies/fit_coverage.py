@@ -127,10 +127,10 @@ def truth_images(case: CoverageCase) -> tuple[np.ndarray, RunConfig]:
                               "sampling": {"estimator": "radiometric", "mode": "rule",
                                            "n_rays": case.images_rays}})
     values = Simulation.from_config(truth).render_fringes(WIDTHS, ("x", "y"), SHIFTS).images
-    if case.noise_free:  # 16-bit counts as a run writes them, no sensor
-        from ..run.files import exposure_factor, to_integer_image
-
-        counts = to_integer_image(values, exposure_factor([values], 16), 16).astype(np.float64)
+    if case.noise_free:  # 16-bit counts as a run writes them (brightest at 0.95 full scale)
+        finite = np.isfinite(values)
+        exposure = 0.95 * 65535.0 / float(values[finite].max())
+        counts = np.rint(np.clip(np.where(finite, values, 0.0) * exposure, 0.0, 65535.0))
         cfg = parse_config(d | {"sensor": {"enabled": False}})
         return np.where(np.isfinite(values), counts, np.nan), cfg
     sensor = Sensor.from_config(cfg.sensor)
