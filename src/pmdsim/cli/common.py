@@ -4,9 +4,19 @@ one red line (exit 2) and interrupts (exit 130/143)."""
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
 
 import typer
+import typer.rich_utils
 from rich.console import Console
+
+#: Width of ``--help`` when it does not go to a terminal (a pipe, a file, a test): Rich's
+#: default of 80 columns cut option help into narrow columns and ellipsised long names.
+#: A terminal keeps its own width; ``TERMINAL_WIDTH`` or ``COLUMNS`` override both.
+HELP_WIDTH = 120
+if not (os.environ.get("TERMINAL_WIDTH") or os.environ.get("COLUMNS")) and not sys.stdout.isatty():
+    typer.rich_utils.MAX_WIDTH = HELP_WIDTH
 
 app = typer.Typer(
     name="pmdsim",

@@ -74,7 +74,7 @@ def simulate(
     target_error_mrad: float | None = typer.Option(
         None, "--target-error-mrad",
         help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
-        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "error (P95 over pixels, every fringe) is below this (the same as [sampling] target_error_mrad); "
         "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Render the configured patterns and write a run folder (images, run.zarr, figures);

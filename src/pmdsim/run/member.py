@@ -65,6 +65,7 @@ class Member:
 
     fringes: object = None         # FringeResult
     dot_images: object = None
+    dot_errors: object = None      # (Q, H, W) numerical error of the rendered dot images
     images: object = None
     off_monitor: object = None
     phase_error: dict | None = None  # direction -> (H, W) numerical phase error, finest width
@@ -106,7 +107,8 @@ def render(m: Member) -> None:
         steps.finish_render(base, n_tiles)
     if dots:
         base = steps.done
-        m.dot_images = sim.render_dots(dots, progress=steps.tiles(n_tiles))
+        m.dot_images, m.dot_errors = sim.render_dots(dots, progress=steps.tiles(n_tiles),
+                                                     with_error=True)
         steps.finish_render(base, n_tiles)
     if levels is not None:
         base = steps.done
@@ -129,6 +131,7 @@ def capture(m: Member) -> None:
         m.fringes = replace(m.fringes, images=capture_dn(sensor, m.fringes.images, 0))
     if m.dot_images is not None:
         m.dot_images = capture_dn(sensor, m.dot_images, 2)
+        m.dot_errors = None  # in digital numbers, with the sensor's noise: not the render's
     if m.images is not None:
         m.images = capture_dn(sensor, m.images, 3)
 
@@ -248,7 +251,7 @@ def dots(m: Member) -> None:
     """The dot images' second moments: ``dot_*`` variables and ``dots.csv``."""
     if m.dot_images is None:
         return
-    m.dot_table = chain.dot_table(m.dot_images, m.dots, m.cfg.name)
+    m.dot_table = chain.dot_table(m.dot_images, m.dots, m.cfg.name, dot_errors=m.dot_errors)
     m.ds = m.ds.assign(dot_dataset_variables(m.dot_table))
     pio.write_dot_csv(m.folder / "dots.csv", m.dot_table)
 
