@@ -337,25 +337,36 @@ def test_nearest_valid_pixel_matches_the_distance_transform():
         np.testing.assert_allclose(got, want, atol=1e-12)
 
 
-def test_support_cells_kernel_matches_numpy():
-    """kernels.reconstruct.support_cells against the plain test: the fractional pixel's
-    2 x 2 cell lies inside the image and all four pixels are valid; NaN, inf, negative and
-    edge coordinates included."""
-    from pmdsim.kernels.reconstruct import support_cells
+def test_node_support_kernel_matches_numpy():
+    """kernels.reconstruct.node_support against the plain rule: the spline serves a node
+    whose 4 x 4 support (floor - 1 .. floor + 2) lies inside the image and is all valid;
+    else the node's own pixel (the nearest, round half up) decides: valid -> the rim fit,
+    invalid -> pixel_invalid, outside the image (or NaN, inf) -> outside; edge coordinates
+    included (-0.5 is pixel 0, w - 0.5 is outside)."""
+    from pmdsim.kernels import reconstruct as kr
 
     rng = np.random.default_rng(11)
-    valid = rng.random((40, 50)) > 0.2
-    cols = np.concatenate([rng.uniform(-2, 52, 3000), [np.nan, np.inf, -np.inf, 0.0, 48.999, 49.0, -1e-12]])
-    rows = np.concatenate([rng.uniform(-2, 42, 3000), [1.0, 1.0, 1.0, 0.0, 38.5, 3.0, 2.0]])
-    ok = np.ones(len(cols), bool)
-    ok[5] = False  # stays False
-    want = np.zeros(len(cols), bool)
+    valid = rng.random((40, 50)) > 0.1
+    cols = np.concatenate([rng.uniform(-2, 52, 4000),
+                           [np.nan, np.inf, -np.inf, 0.0, 48.999, 49.0, -0.5, 49.5, -0.5000001, 1.0]])
+    rows = np.concatenate([rng.uniform(-2, 42, 4000), [1.0, 1.0, 1.0, 0.0, 38.5, 3.0, 2.0, 2.0, 2.0, 1.0]])
+    want = np.empty(len(cols), np.int8)
     for k, (c, r) in enumerate(zip(cols, rows)):
-        if k != 5 and np.isfinite(c) and np.isfinite(r) and 0 <= c < 49 and 0 <= r < 39:
-            c0, r0 = int(np.floor(c)), int(np.floor(r))
-            want[k] = valid[r0:r0 + 2, c0:c0 + 2].all()
-    support_cells(valid, cols, rows, ok)
-    np.testing.assert_array_equal(ok, want)
+        if not (np.isfinite(c) and np.isfinite(r) and -0.5 <= c < 49.5 and -0.5 <= r < 39.5):
+            want[k] = kr.SUPPORT_OUTSIDE
+            continue
+        cn, rn = int(np.floor(c + 0.5)), int(np.floor(r + 0.5))
+        c0, r0 = int(np.floor(c)) - 1, int(np.floor(r)) - 1
+        if not valid[rn, cn]:
+            want[k] = kr.SUPPORT_PIXEL_INVALID
+        elif c0 >= 0 and r0 >= 0 and c0 + 4 <= 50 and r0 + 4 <= 40 and valid[r0:r0 + 4, c0:c0 + 4].all():
+            want[k] = kr.SUPPORT_SPLINE
+        else:
+            want[k] = kr.SUPPORT_RIM
+    got = np.empty(len(cols), np.int8)
+    kr.node_support(valid, cols, rows, got)
+    np.testing.assert_array_equal(got, want)
+    assert {kr.SUPPORT_SPLINE, kr.SUPPORT_RIM, kr.SUPPORT_PIXEL_INVALID, kr.SUPPORT_OUTSIDE} <= set(got)
 
 
 def test_run_states_the_reconstructions_numerical_error(tmp_path):
