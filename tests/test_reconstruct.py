@@ -337,16 +337,18 @@ def test_nearest_valid_pixel_matches_the_distance_transform():
         np.testing.assert_allclose(got, want, atol=1e-12)
 
 
-def test_node_support_kernel_matches_numpy():
+@pytest.mark.parametrize("margin", [0, 2])
+def test_node_support_kernel_matches_numpy(margin):
     """kernels.reconstruct.node_support against the plain rule: the spline serves a node
-    whose 4 x 4 support (floor - 1 .. floor + 2) lies inside the image and is all valid;
+    whose 4 x 4 support grown by ``margin`` (floor - 1 - margin .. floor + 2 + margin) lies
+    inside the image and is all valid;
     else the node's own pixel (the nearest, round half up) decides: valid -> the rim fit,
     invalid -> pixel_invalid, outside the image (or NaN, inf) -> outside; edge coordinates
     included (-0.5 is pixel 0, w - 0.5 is outside)."""
     from pmdsim.kernels import reconstruct as kr
 
     rng = np.random.default_rng(11)
-    valid = rng.random((40, 50)) > 0.1
+    valid = rng.random((40, 50)) > (0.1 if margin == 0 else 0.01)
     cols = np.concatenate([rng.uniform(-2, 52, 4000),
                            [np.nan, np.inf, -np.inf, 0.0, 48.999, 49.0, -0.5, 49.5, -0.5000001, 1.0]])
     rows = np.concatenate([rng.uniform(-2, 42, 4000), [1.0, 1.0, 1.0, 0.0, 38.5, 3.0, 2.0, 2.0, 2.0, 1.0]])
@@ -356,15 +358,16 @@ def test_node_support_kernel_matches_numpy():
             want[k] = kr.SUPPORT_OUTSIDE
             continue
         cn, rn = int(np.floor(c + 0.5)), int(np.floor(r + 0.5))
-        c0, r0 = int(np.floor(c)) - 1, int(np.floor(r)) - 1
+        c0, r0 = int(np.floor(c)) - 1 - margin, int(np.floor(r)) - 1 - margin
+        n = 4 + 2 * margin
         if not valid[rn, cn]:
             want[k] = kr.SUPPORT_PIXEL_INVALID
-        elif c0 >= 0 and r0 >= 0 and c0 + 4 <= 50 and r0 + 4 <= 40 and valid[r0:r0 + 4, c0:c0 + 4].all():
+        elif c0 >= 0 and r0 >= 0 and c0 + n <= 50 and r0 + n <= 40 and valid[r0:r0 + n, c0:c0 + n].all():
             want[k] = kr.SUPPORT_SPLINE
         else:
             want[k] = kr.SUPPORT_RIM
     got = np.empty(len(cols), np.int8)
-    kr.node_support(valid, cols, rows, got)
+    kr.node_support(valid, cols, rows, margin, got)
     np.testing.assert_array_equal(got, want)
     assert {kr.SUPPORT_SPLINE, kr.SUPPORT_RIM, kr.SUPPORT_PIXEL_INVALID, kr.SUPPORT_OUTSIDE} <= set(got)
 

@@ -191,14 +191,16 @@ SUPPORT_SPLINE, SUPPORT_RIM, SUPPORT_PIXEL_INVALID, SUPPORT_OUTSIDE = 0, 1, 2, 3
 
 
 @parallel_jit(fastmath=False)
-def node_support(valid, cols, rows, status):
+def node_support(valid, cols, rows, margin, status):
     """``status[k]`` (int8) of the fractional pixel (cols[k], rows[k]) (integers = pixel
     centres) in the decoded maps' validity ``valid`` (H, W): SUPPORT_SPLINE when the cubic
-    spline's 4 x 4 support (floor - 1 .. floor + 2 on each axis) lies inside the image and is
-    valid; else SUPPORT_RIM when the pixel it falls in (the nearest, ``floor(x + 0.5)``) is
-    inside and valid; SUPPORT_PIXEL_INVALID when that pixel is inside and invalid;
-    SUPPORT_OUTSIDE when it is outside the image (or a coordinate is NaN or inf)."""
+    spline's 4 x 4 support grown by ``margin`` pixels on every side (floor - 1 - margin ..
+    floor + 2 + margin on each axis) lies inside the image and is valid; else SUPPORT_RIM
+    when the pixel it falls in (the nearest, ``floor(x + 0.5)``) is inside and valid;
+    SUPPORT_PIXEL_INVALID when that pixel is inside and invalid; SUPPORT_OUTSIDE when it is
+    outside the image (or a coordinate is NaN or inf)."""
     h, w = valid.shape
+    n = 4 + 2 * margin
     for k in numba.prange(status.shape[0]):
         c = cols[k]
         r = rows[k]
@@ -210,12 +212,12 @@ def node_support(valid, cols, rows, status):
         if not valid[rn, cn]:
             status[k] = SUPPORT_PIXEL_INVALID
             continue
-        c0 = math.floor(c) - 1
-        r0 = math.floor(r) - 1
-        full = c0 >= 0 and r0 >= 0 and c0 + 3 < w and r0 + 3 < h
+        c0 = math.floor(c) - 1 - margin
+        r0 = math.floor(r) - 1 - margin
+        full = c0 >= 0 and r0 >= 0 and c0 + n <= w and r0 + n <= h
         if full:
-            for a in range(4):
-                for b in range(4):
+            for a in range(n):
+                for b in range(n):
                     if not valid[r0 + a, c0 + b]:
                         full = False
         status[k] = SUPPORT_SPLINE if full else SUPPORT_RIM

@@ -5,6 +5,7 @@ surface's local frame, mm), with RMS / PV / P95 in the titles."""
 from __future__ import annotations
 
 import json
+import textwrap
 
 import matplotlib.colors
 import numpy as np
@@ -46,7 +47,7 @@ def plot_surface_errors(ds, name: str = "", description: str = ""):
     aspect = abs(ext[3] - ext[2]) / max(abs(ext[1] - ext[0]), 1e-12)
     ph = min(pw * aspect, 4.0)
     pw = ph / aspect if ph < pw * aspect else pw
-    top, bottom = (1.25 if "excluded_nodes" in stats else 1.05), 0.6
+    top, bottom = (1.45 if "excluded_nodes" in stats else 1.05), 0.6
     step = left + pw + cb_gap + cb_w + cb_room
     fig = _fixed_figure((3 * step + 0.1, top + ph + bottom))
     axes = [_axes_at(fig, left + k * step, bottom, pw, ph) for k in range(3)]
@@ -78,8 +79,10 @@ def plot_surface_errors(ds, name: str = "", description: str = ""):
         fig.colorbar(im, cax=cax, label=f"{unit}, scale +-{lim:.3g} (P99.5 of |error|)")
     removed = stats.get("removed", "")
     note = ""
-    if "excluded_nodes" in stats:
-        note = "\n" + excluded_text(stats) + (" (grey)" if stats["excluded_nodes"]["total"] else "")
+    if "excluded_nodes" in stats:  # wrapped to the figure's width (about 12 characters an inch)
+        note = "\n" + textwrap.fill(excluded_text(stats) + (" (grey)" if stats["excluded_nodes"]["total"]
+                                                           else ""),
+                                   int(fig.get_size_inches()[0] * 11))
     fig.suptitle(f"{name}: reconstructed minus true surface ({removed} removed from the height)"
                  + note + (f"\n{description}" if description else ""), fontsize=11,
                  y=1 - 0.08 / fig.get_size_inches()[1], va="top")
