@@ -184,6 +184,16 @@ def test_run_writes_surface_errors(tmp_path):
     assert np.isclose(np.sqrt(np.nanmean((h - np.nanmean(h)) ** 2)), kin["height_error_nm"]["rms"])
     assert (out / "kinematic" / "figures" / "surface_errors.png").is_file()
     assert "height error" in (out / "kinematic" / "summary.txt").read_text()
+    # every aperture node is reported or excluded and counted, with the reason, in
+    # statistics.json, summary.txt and the dataset (which the figure draws grey)
+    ex = kin["excluded_nodes"]
+    status = ds["reconstruction_node_status"].values
+    assert ex["aperture_nodes"] == int((status >= 0).sum()) == kin["grid_points"] + ex["total"]
+    assert ex["total"] == sum(ex[k] for k in kin["excluded_definitions"])
+    assert kin["rim_fit_nodes"] == int((status == 1).sum())
+    assert np.array_equal(np.isfinite(h), (status == 0) | (status == 1))
+    assert f"not reported: {ex['total']} of the aperture's {ex['aperture_nodes']} nodes" in (
+        out / "kinematic" / "summary.txt").read_text()
 
 
 def test_surface_errors_terms_name_a_known_aberration():

@@ -80,9 +80,10 @@ def plot_surface_errors(ds, name: str = "", description: str = ""):
     removed = stats.get("removed", "")
     note = ""
     if "excluded_nodes" in stats:  # wrapped to the figure's width (about 12 characters an inch)
-        note = "\n" + textwrap.fill(excluded_text(stats) + (" (grey)" if stats["excluded_nodes"]["total"]
-                                                           else ""),
-                                   int(fig.get_size_inches()[0] * 11))
+        text = excluded_text(stats)
+        if stats["excluded_nodes"]["total"]:
+            text = text.replace("not reported:", "not reported (grey):", 1)
+        note = "\n" + textwrap.fill(text, int(fig.get_size_inches()[0] * 11))
     fig.suptitle(f"{name}: reconstructed minus true surface ({removed} removed from the height)"
                  + note + (f"\n{description}" if description else ""), fontsize=11,
                  y=1 - 0.08 / fig.get_size_inches()[1], va="top")
