@@ -333,7 +333,7 @@ def test_nearest_valid_pixel_matches_the_distance_transform():
     nearest valid pixel's distance equals SciPy's exact Euclidean distance transform."""
     from scipy import ndimage
 
-    from pmdsim.measure.reconstruct import _nearest_valid
+    from pmdsim.measure.interpolate import _nearest_valid
 
     rng = np.random.default_rng(5)
     for frac in (0.01, 0.3):

@@ -19,7 +19,8 @@ from test_reconstruct import scene_dict
 
 from pmdsim import trace
 from pmdsim.config import parse_config
-from pmdsim.measure.reconstruct import EXCLUSION_REASONS, NODE_RIM_FIT, reconstruct
+from pmdsim.measure.interpolate import EXCLUSION_REASONS, NODE_RIM_FIT
+from pmdsim.measure.reconstruct import reconstruct
 from pmdsim.scene import Scene
 from pmdsim.scene.surfaces import surface_from_config
 

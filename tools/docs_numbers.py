@@ -332,7 +332,7 @@ def rim_spline_margin() -> tuple:
     SPLINE_MARGIN 0..3, and at margin 0 without SPLINE_PAD (urad)."""
     import numpy as np
 
-    from pmdsim.measure import reconstruct as r
+    from pmdsim.measure import interpolate as r
 
     keep = r.SPLINE_MARGIN, r.SPLINE_PAD
     out = []

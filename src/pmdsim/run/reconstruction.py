@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..measure.reconstruct import (
+from ..measure.interpolate import (
     EXCLUSION_REASONS,
     NODE_OUTSIDE_APERTURE,
     NODE_RIM_FIT,
     NODE_SPLINE,
-    reconstruct,
-    surface_errors,
 )
+from ..measure.reconstruct import reconstruct, surface_errors
 
 
 def wanted(cfg, directions) -> bool:
