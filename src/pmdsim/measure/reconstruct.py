@@ -265,6 +265,8 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     # the aperture's nodes: their (x, y) part of the world point is fixed, z moves
     base = pf.centre + x[mask][:, None] * rot[:, 0] + y[mask][:, None] * rot[:, 1]
     status = np.empty(len(base), np.int8)  # how each aperture node is served (node_status)
+    left_out = np.zeros(len(base), bool)  # nodes left out so far
+    first_reason = np.empty_like(status)  # why (where left_out)
     ok_pix = np.ascontiguousarray(ok_pix)
     parts = None  # (node mask, its connected parts)
     for it in range(1, max_iter + 1):
@@ -274,6 +276,12 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         # the decoded maps at the nodes' pixels: by the spline, by the rim fit, or not
         # (status says which, and why)
         mu, mv = maps_at(u, v, ok_pix, cu, cv, col, row, status)
+        # a node left out once stays out, for the reason it was: one whose pixel sits at a
+        # threshold would otherwise come and go with the height, and the loop never settle
+        status[left_out] = first_reason[left_out]
+        new = (status > NODE_RIM_FIT) & ~left_out
+        first_reason[new] = status[new]
+        left_out |= new
         ok_m = status <= NODE_RIM_FIT
         node_ok = np.zeros(mask.shape, bool)
         node_ok[mask] = ok_m
