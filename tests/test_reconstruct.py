@@ -184,6 +184,16 @@ def test_run_writes_surface_errors(tmp_path):
     assert np.isclose(np.sqrt(np.nanmean((h - np.nanmean(h)) ** 2)), kin["height_error_nm"]["rms"])
     assert (out / "kinematic" / "figures" / "surface_errors.png").is_file()
     assert "height error" in (out / "kinematic" / "summary.txt").read_text()
+    # every aperture node is reported or excluded and counted, with the reason, in
+    # statistics.json, summary.txt and the dataset (which the figure draws grey)
+    ex = kin["excluded_nodes"]
+    status = ds["reconstruction_node_status"].values
+    assert ex["aperture_nodes"] == int((status >= 0).sum()) == kin["grid_points"] + ex["total"]
+    assert ex["total"] == sum(ex[k] for k in kin["excluded_definitions"])
+    assert kin["rim_fit_nodes"] == int((status == 1).sum())
+    assert np.array_equal(np.isfinite(h), (status == 0) | (status == 1))
+    assert f"not reported: {ex['total']} of the aperture's {ex['aperture_nodes']} nodes" in (
+        out / "kinematic" / "summary.txt").read_text()
 
 
 def test_surface_errors_terms_name_a_known_aberration():
@@ -323,7 +333,7 @@ def test_nearest_valid_pixel_matches_the_distance_transform():
     nearest valid pixel's distance equals SciPy's exact Euclidean distance transform."""
     from scipy import ndimage
 
-    from pmdsim.measure.reconstruct import _nearest_valid
+    from pmdsim.measure.interpolate import _nearest_valid
 
     rng = np.random.default_rng(5)
     for frac in (0.01, 0.3):
@@ -337,25 +347,39 @@ def test_nearest_valid_pixel_matches_the_distance_transform():
         np.testing.assert_allclose(got, want, atol=1e-12)
 
 
-def test_support_cells_kernel_matches_numpy():
-    """kernels.reconstruct.support_cells against the plain test: the fractional pixel's
-    2 x 2 cell lies inside the image and all four pixels are valid; NaN, inf, negative and
-    edge coordinates included."""
-    from pmdsim.kernels.reconstruct import support_cells
+@pytest.mark.parametrize("margin", [0, 2])
+def test_node_support_kernel_matches_numpy(margin):
+    """kernels.reconstruct.node_support against the plain rule: the spline serves a node
+    whose 4 x 4 support grown by ``margin`` (floor - 1 - margin .. floor + 2 + margin) lies
+    inside the image and is all valid;
+    else the node's own pixel (the nearest, round half up) decides: valid -> the rim fit,
+    invalid -> pixel_invalid, outside the image (or NaN, inf) -> outside; edge coordinates
+    included (-0.5 is pixel 0, w - 0.5 is outside)."""
+    from pmdsim.kernels import reconstruct as kr
 
     rng = np.random.default_rng(11)
-    valid = rng.random((40, 50)) > 0.2
-    cols = np.concatenate([rng.uniform(-2, 52, 3000), [np.nan, np.inf, -np.inf, 0.0, 48.999, 49.0, -1e-12]])
-    rows = np.concatenate([rng.uniform(-2, 42, 3000), [1.0, 1.0, 1.0, 0.0, 38.5, 3.0, 2.0]])
-    ok = np.ones(len(cols), bool)
-    ok[5] = False  # stays False
-    want = np.zeros(len(cols), bool)
+    valid = rng.random((40, 50)) > (0.1 if margin == 0 else 0.01)
+    cols = np.concatenate([rng.uniform(-2, 52, 4000),
+                           [np.nan, np.inf, -np.inf, 0.0, 48.999, 49.0, -0.5, 49.5, -0.5000001, 1.0]])
+    rows = np.concatenate([rng.uniform(-2, 42, 4000), [1.0, 1.0, 1.0, 0.0, 38.5, 3.0, 2.0, 2.0, 2.0, 1.0]])
+    want = np.empty(len(cols), np.int8)
     for k, (c, r) in enumerate(zip(cols, rows)):
-        if k != 5 and np.isfinite(c) and np.isfinite(r) and 0 <= c < 49 and 0 <= r < 39:
-            c0, r0 = int(np.floor(c)), int(np.floor(r))
-            want[k] = valid[r0:r0 + 2, c0:c0 + 2].all()
-    support_cells(valid, cols, rows, ok)
-    np.testing.assert_array_equal(ok, want)
+        if not (np.isfinite(c) and np.isfinite(r) and -0.5 <= c < 49.5 and -0.5 <= r < 39.5):
+            want[k] = kr.SUPPORT_OUTSIDE
+            continue
+        cn, rn = int(np.floor(c + 0.5)), int(np.floor(r + 0.5))
+        c0, r0 = int(np.floor(c)) - 1 - margin, int(np.floor(r)) - 1 - margin
+        n = 4 + 2 * margin
+        if not valid[rn, cn]:
+            want[k] = kr.SUPPORT_PIXEL_INVALID
+        elif c0 >= 0 and r0 >= 0 and c0 + n <= 50 and r0 + n <= 40 and valid[r0:r0 + n, c0:c0 + n].all():
+            want[k] = kr.SUPPORT_SPLINE
+        else:
+            want[k] = kr.SUPPORT_RIM
+    got = np.empty(len(cols), np.int8)
+    kr.node_support(valid, cols, rows, margin, got)
+    np.testing.assert_array_equal(got, want)
+    assert {kr.SUPPORT_SPLINE, kr.SUPPORT_RIM, kr.SUPPORT_PIXEL_INVALID, kr.SUPPORT_OUTSIDE} <= set(got)
 
 
 def test_run_states_the_reconstructions_numerical_error(tmp_path):

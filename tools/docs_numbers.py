@@ -26,9 +26,9 @@ import functools
 import math
 import re
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
@@ -351,6 +351,87 @@ def fig3_converge() -> tuple:
         p, ref = row["paper"], row["radiometric"]
         out += [p["modulation_median"], ref["modulation_median"],
                 1e3 * ref["phase_error_rms_rad"], 1e3 * p["phase_rms_vs_reference_rad"]]
+def _coarse_sphere(aperture_radius_mm, incidence_deg):
+    """The coarse camera of tests/test_rim.py (160 x 120 px, about 0.8 mm per pixel) on a
+    concave sphere R 800 mm, its exact monitor coordinates, reconstructed with the nominal
+    R 790 mm on a 1 mm grid: (reconstruction, true sag and gradient on its grid)."""
+    import numpy as np
+
+    from pmdsim import trace
+    from pmdsim.config import parse_config
+    from pmdsim.measure.reconstruct import reconstruct
+    from pmdsim.scene import Scene
+    from pmdsim.scene.surfaces import surface_from_config
+
+    t = math.radians(incidence_deg)
+    ap = {"shape": "circular", "radius_mm": aperture_radius_mm}
+    d = {"camera": {"resolution": [160, 120], "focal_length_px": 500.0,
+                    "position_mm": [0.0, -400 * math.sin(t), 400 * math.cos(t)],
+                    "look_at_mm": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0]},
+         "monitor": {"resolution": [800, 600], "pixel_pitch_mm": 0.5,
+                     "centre_mm": [0.0, 250 * math.sin(t), 250 * math.cos(t)],
+                     "look_at_mm": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0]},
+         "surface": {"type": "sphere", "radius_mm": 800.0, "aperture": ap},
+         "brdf": {"model": "mirror"}}
+    scene = Scene.from_config(parse_config(d))
+    u, v, _ = trace.specular_monitor_coords(scene, trace.trace_primary(scene))
+    nominal = surface_from_config(parse_config(dict(d, surface={
+        "type": "sphere", "radius_mm": 790.0, "aperture": ap})).surface)
+    rec = reconstruct(u, v, scene.camera, scene.monitor, nominal, spacing_mm=1.0)
+    x, y = np.meshgrid(rec.x_mm, rec.y_mm)
+    return rec, scene.surface.sag(x, y)
+
+
+@functools.cache
+def _rim_sphere() -> dict:
+    import numpy as np
+
+    out = {}
+    for inc in (20.0, 45.0):
+        rec, (z, gx, gy, _) = _coarse_sphere(22.5, inc)
+        m = rec.mask
+        out[inc] = (max(np.abs(rec.slope_x - gx)[m].max(), np.abs(rec.slope_y - gy)[m].max()) * 1e6,
+                    np.abs(rec.height_mm - z)[m].max() * 1e6, sum(rec.excluded.values()),
+                    int(np.isfinite(rec.nominal_mm).sum()), rec.rim_fitted)
+    return out
+
+
+def rim_sphere_errors() -> tuple:
+    """docs/reconstruction.md: issue 37's coarse sphere at 20 and 45 deg: worst slope error
+    (urad) and height error (nm) of the reported nodes."""
+    a, b = _rim_sphere()[20.0], _rim_sphere()[45.0]
+    return a[0], b[0], a[1], b[1]
+
+
+def rim_sphere_counts() -> tuple:
+    """docs/reconstruction.md: the same: nodes not reported of the aperture's, rim-fit nodes."""
+    a, b = _rim_sphere()[20.0], _rim_sphere()[45.0]
+    return a[2], b[2], a[3], a[4], b[4]
+
+
+def rim_image_edge() -> tuple:
+    """docs/reconstruction.md: nodes outside the view on the 140 mm sphere."""
+    rec, _ = _coarse_sphere(70.0, 20.0)
+    return (rec.excluded["outside_camera_view"],)
+
+
+def rim_spline_margin() -> tuple:
+    """docs/reconstruction.md: the spline's worst slope error on the 140 mm sphere at
+    SPLINE_MARGIN 0..3, and at margin 0 without SPLINE_PAD (urad)."""
+    import numpy as np
+
+    from pmdsim.measure import interpolate as r
+
+    keep = r.SPLINE_MARGIN, r.SPLINE_PAD
+    out = []
+    try:
+        for margin, pad in ((0, keep[1]), (1, keep[1]), (2, keep[1]), (3, keep[1]), (0, 0)):
+            r.SPLINE_MARGIN, r.SPLINE_PAD = margin, pad
+            rec, (_, gx, gy, _) = _coarse_sphere(70.0, 20.0)
+            spl = rec.node_status == r.NODE_SPLINE
+            out.append(max(np.abs(rec.slope_x - gx)[spl].max(), np.abs(rec.slope_y - gy)[spl].max()) * 1e6)
+    finally:
+        r.SPLINE_MARGIN, r.SPLINE_PAD = keep
     return tuple(out)
 
 
@@ -446,6 +527,49 @@ def fig3_memory_estimate() -> tuple:
     from pmdsim.config import estimate_resources
 
     return (estimate_resources(_fig3_config()).memory_bytes / 1e9,)
+def _fig3_run() -> dict:
+    """The full ``pmdsim simulate examples/paper_fig3.toml`` (minutes): its reconstruction
+    statistics and the slope errors' RMS / P95 / P99.9 / PV from run.zarr."""
+    import json
+    import tempfile
+
+    import numpy as np
+
+    from pmdsim.run import load_run, run_simulation
+
+    with tempfile.TemporaryDirectory() as tmp:
+        run_simulation(_fig3_config(), Path(tmp) / "run", diagnostics=False, figures=False)
+        st = json.loads((Path(tmp) / "run" / "statistics.json").read_text())["reconstruction"]
+        ds = load_run(Path(tmp) / "run")
+        maps = {k: ds[k].values for k in ("slope_error_x_urad", "slope_error_y_urad")}
+    out = {"stats": st}
+    for k, a in maps.items():
+        f = a[np.isfinite(a)]
+        d = np.abs(f - f.mean())
+        out[k] = (float(np.sqrt(np.mean(f * f))), float(np.percentile(d, 95)),
+                  float(np.percentile(d, 99.9)), float(np.ptp(f)))
+    return out
+
+
+def fig3_rim_table() -> tuple:
+    r = _fig3_run()
+    return r["slope_error_x_urad"] + r["slope_error_y_urad"]
+
+
+def fig3_rim_ratio() -> tuple:
+    x, y = _fig3_run()["slope_error_x_urad"], _fig3_run()["slope_error_y_urad"]
+    return x[3] / x[2], y[3] / y[2]
+
+
+def fig3_rim_counts() -> tuple:
+    st = _fig3_run()["stats"]
+    ex = st["excluded_nodes"]
+    return (ex["aperture_nodes"], st["grid_points"], ex["outside_camera_view"],
+            ex["pixel_invalid"], ex["too_few_valid_pixels"], st["rim_fit_nodes"])
+
+
+def fig3_rim_floor() -> tuple:
+    return (_fig3_run()["stats"]["reference_height_error_nm"]["rms"],)
 
 
 # ----------------------------------------------------------------------------- the table
@@ -559,6 +683,38 @@ CHECKS = [
           + r" \| ".join([NUMBER + r" / " + NUMBER] * 3) + r" \|",
           budget_full_system, rel_tol=0.05, fast=False,
           why="the full example's budget (box rule, seeded sensor)"),
+    Check("rim-sphere-errors", "docs/reconstruction.md",
+          r"Measured \(20 / 45 deg\): worst slope error " + NUMBER + " / " + NUMBER
+          + r" urad, height\s+" + NUMBER + " / " + NUMBER + r" nm;", rim_sphere_errors,
+          abs_tol=3e-4, why="issue 37's coarse sphere (round-off level: urad / nm +-3e-4)"),
+    Check("rim-sphere-counts", "docs/reconstruction.md",
+          r"nodes not reported " + NUMBER + " / " + NUMBER + " of " + NUMBER
+          + r";\s+served by the rim fit " + NUMBER + " / " + NUMBER, rim_sphere_counts,
+          abs_tol=2.0, why="issue 37's coarse sphere (+-2 nodes)"),
+    Check("rim-image-edge", "docs/reconstruction.md",
+          r"the image's edge cuts: " + NUMBER + r" nodes outside the\s+view", rim_image_edge,
+          abs_tol=2.0, why="the 140 mm sphere (+-2 nodes)"),
+    Check("rim-spline-margin", "docs/reconstruction.md",
+          r"slope error at margins 0, 1, 2, 3: " + NUMBER + ", " + NUMBER + ", " + NUMBER + ", "
+          + NUMBER + r" urad; " + NUMBER + r" urad at margin 0", rim_spline_margin,
+          rel_tol=0.05, why="the 140 mm sphere, five reconstructions"),
+    Check("fig3-rim-table", "docs/reconstruction.md",
+          r"\| slope error x, urad \| " + r" \| ".join([NUMBER] * 4)
+          + r" \|\n\| slope error y, urad \| " + r" \| ".join([NUMBER] * 4) + r" \|",
+          fig3_rim_table, rel_tol=0.01, fast=False, why="the full Fig. 3 run"),
+    Check("fig3-rim-ratio", "docs/reconstruction.md",
+          r"PV / P99\.9 = " + NUMBER + r" \(x\) and " + NUMBER + r" \(y\), within the aim",
+          fig3_rim_ratio, rel_tol=0.01, fast=False, why="the full Fig. 3 run"),
+    Check("fig3-rim-counts", "docs/reconstruction.md",
+          r"Of the " + NUMBER + r" nodes of the\s+plate, " + NUMBER + r" are reported; " + NUMBER
+          + r" are outside[\s\S]*?view\), " + NUMBER + r" on invalid pixels[\s\S]*?and "
+          + NUMBER + r" with too few valid\s+pixels around; " + NUMBER + r" rim nodes",
+          fig3_rim_counts, abs_tol=2.0, rel_tol=1e-3, fast=False,
+          why="the full Fig. 3 run (+-2 nodes)"),
+    Check("fig3-rim-floor", "docs/reconstruction.md",
+          r"The specular reference's own\s+height error \(the chain's floor\) is " + NUMBER
+          + " nm RMS", fig3_rim_floor, abs_tol=1e-3, fast=False,
+          why="the full Fig. 3 run (round-off level: +-0.001 nm)"),
 ]
 
 

@@ -187,6 +187,20 @@ def value_pm(st: dict, stat: str) -> str:
     return f"{st[stat]:.3g} ± {e:.2g}"
 
 
+def excluded_text(rec: dict) -> str:
+    """One line: the aperture's nodes that are not reported, by reason, and those the rim
+    fit serves (statistics.json's ``excluded_nodes``, ``rim_fit_nodes``)."""
+    ex = rec["excluded_nodes"]
+    why = {"outside_camera_view": "outside the camera view",
+           "pixel_invalid": "on an invalid pixel out of the rim fit's reach",
+           "too_few_valid_pixels": "with too few valid pixels around"}
+    parts = [f"{ex[k]} {text}" for k, text in why.items() if ex.get(k)]
+    head = (f"not reported: {ex['total']} of the aperture's {ex['aperture_nodes']} nodes "
+            f"({100 * ex['fraction_of_aperture']:.2g} %)")
+    return (head + (": " + ", ".join(parts) if parts else "") +
+            f"; {rec.get('rim_fit_nodes', 0)} rim nodes served by the rim fit")
+
+
 def reconstruction_text(name: str, rec: dict) -> str:
     """The surface-error lines of summary.txt (reconstructed minus true surface)."""
     if "error" in rec:
@@ -201,6 +215,8 @@ def reconstruction_text(name: str, rec: dict) -> str:
         f"y RMS {value_pm(sy, 'rms_about_zero')} urad  PV {value_pm(sy, 'pv')} urad"
         + ("  (value ± the rendering's numerical error)" if "rms_err" in h else ""),
     ]
+    if "excluded_nodes" in rec:
+        lines.append("  " + excluded_text(rec))
     if rec.get("sphere"):
         sp = rec["sphere"]
         lines.append(f"  best-fit sphere: radius {sp['radius_measured_mm']:.8g} mm reconstructed, "

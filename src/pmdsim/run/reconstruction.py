@@ -8,6 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..measure.interpolate import (
+    EXCLUSION_REASONS,
+    NODE_OUTSIDE_APERTURE,
+    NODE_RIM_FIT,
+    NODE_SPLINE,
+)
 from ..measure.reconstruct import reconstruct, surface_errors
 
 
@@ -148,11 +154,31 @@ def variables(rec, err, reference_rec=None) -> dict:
         "slope_error_y_urad": (dims, err.slope_y_urad, {
             "units": "urad", "description": "reconstructed minus true dz/dy (local frame)"}),
     }
+    if rec.node_status is not None:
+        codes = {NODE_OUTSIDE_APERTURE: "outside_aperture", NODE_SPLINE: "reported_spline",
+                 NODE_RIM_FIT: "reported_rim_fit",
+                 **{c: f"excluded_{name}" for c, (name, _) in EXCLUSION_REASONS.items()}}
+        out["reconstruction_node_status"] = (dims, rec.node_status, {
+            "description": "how each grid node of the reconstruction is served, or why it is "
+                           "not reported (docs/reconstruction.md)",
+            "flag_values": list(codes), "flag_meanings": " ".join(codes.values())})
     if reference_rec is not None and reference_rec[0].height_mm.shape == rec.height_mm.shape:
         out["reference_height_error_nm"] = (dims, reference_rec[1].height_nm, {
             "units": "nm", "description": "the specular reference's reconstruction minus the true "
                                           f"height, {err.removed} removed (the chain's own floor)"})
     return out
+
+
+def excluded_nodes(rec) -> dict:
+    """The aperture's nodes that are not reported, by reason, and those the rim fit serves
+    (statistics.json's ``excluded_nodes`` and ``rim_fit_nodes``)."""
+    ex = rec.excluded
+    aperture = int(np.isfinite(rec.nominal_mm).sum())
+    total = sum(ex.values())
+    return {"excluded_nodes": {"total": total, "fraction_of_aperture": total / max(aperture, 1),
+                               "aperture_nodes": aperture, **ex},
+            "rim_fit_nodes": rec.rim_fitted,
+            "excluded_definitions": {name: text for name, text in EXCLUSION_REASONS.values()}}
 
 
 def statistics(cfg, rec, err, reference_rec=None) -> dict:
@@ -165,6 +191,7 @@ def statistics(cfg, rec, err, reference_rec=None) -> dict:
         "converged": rec.converged,
         "grid_points": int(rec.mask.sum()),
         "aperture_fraction": float(rec.mask.sum() / max(np.isfinite(rec.nominal_mm).sum(), 1)),
+        **excluded_nodes(rec),
         **err.stats,
     }
     if reference_rec is not None:
