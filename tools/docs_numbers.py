@@ -351,87 +351,6 @@ def fig3_converge() -> tuple:
         p, ref = row["paper"], row["radiometric"]
         out += [p["modulation_median"], ref["modulation_median"],
                 1e3 * ref["phase_error_rms_rad"], 1e3 * p["phase_rms_vs_reference_rad"]]
-def _coarse_sphere(aperture_radius_mm, incidence_deg):
-    """The coarse camera of tests/test_rim.py (160 x 120 px, about 0.8 mm per pixel) on a
-    concave sphere R 800 mm, its exact monitor coordinates, reconstructed with the nominal
-    R 790 mm on a 1 mm grid: (reconstruction, true sag and gradient on its grid)."""
-    import numpy as np
-
-    from pmdsim import trace
-    from pmdsim.config import parse_config
-    from pmdsim.measure.reconstruct import reconstruct
-    from pmdsim.scene import Scene
-    from pmdsim.scene.surfaces import surface_from_config
-
-    t = math.radians(incidence_deg)
-    ap = {"shape": "circular", "radius_mm": aperture_radius_mm}
-    d = {"camera": {"resolution": [160, 120], "focal_length_px": 500.0,
-                    "position_mm": [0.0, -400 * math.sin(t), 400 * math.cos(t)],
-                    "look_at_mm": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0]},
-         "monitor": {"resolution": [800, 600], "pixel_pitch_mm": 0.5,
-                     "centre_mm": [0.0, 250 * math.sin(t), 250 * math.cos(t)],
-                     "look_at_mm": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0]},
-         "surface": {"type": "sphere", "radius_mm": 800.0, "aperture": ap},
-         "brdf": {"model": "mirror"}}
-    scene = Scene.from_config(parse_config(d))
-    u, v, _ = trace.specular_monitor_coords(scene, trace.trace_primary(scene))
-    nominal = surface_from_config(parse_config(dict(d, surface={
-        "type": "sphere", "radius_mm": 790.0, "aperture": ap})).surface)
-    rec = reconstruct(u, v, scene.camera, scene.monitor, nominal, spacing_mm=1.0)
-    x, y = np.meshgrid(rec.x_mm, rec.y_mm)
-    return rec, scene.surface.sag(x, y)
-
-
-@functools.cache
-def _rim_sphere() -> dict:
-    import numpy as np
-
-    out = {}
-    for inc in (20.0, 45.0):
-        rec, (z, gx, gy, _) = _coarse_sphere(22.5, inc)
-        m = rec.mask
-        out[inc] = (max(np.abs(rec.slope_x - gx)[m].max(), np.abs(rec.slope_y - gy)[m].max()) * 1e6,
-                    np.abs(rec.height_mm - z)[m].max() * 1e6, sum(rec.excluded.values()),
-                    int(np.isfinite(rec.nominal_mm).sum()), rec.rim_fitted)
-    return out
-
-
-def rim_sphere_errors() -> tuple:
-    """docs/reconstruction.md: issue 37's coarse sphere at 20 and 45 deg: worst slope error
-    (urad) and height error (nm) of the reported nodes."""
-    a, b = _rim_sphere()[20.0], _rim_sphere()[45.0]
-    return a[0], b[0], a[1], b[1]
-
-
-def rim_sphere_counts() -> tuple:
-    """docs/reconstruction.md: the same: nodes not reported of the aperture's, rim-fit nodes."""
-    a, b = _rim_sphere()[20.0], _rim_sphere()[45.0]
-    return a[2], b[2], a[3], a[4], b[4]
-
-
-def rim_image_edge() -> tuple:
-    """docs/reconstruction.md: nodes outside the view on the 140 mm sphere."""
-    rec, _ = _coarse_sphere(70.0, 20.0)
-    return (rec.excluded["outside_camera_view"],)
-
-
-def rim_spline_margin() -> tuple:
-    """docs/reconstruction.md: the spline's worst slope error on the 140 mm sphere at
-    SPLINE_MARGIN 0..3, and at margin 0 without SPLINE_PAD (urad)."""
-    import numpy as np
-
-    from pmdsim.measure import interpolate as r
-
-    keep = r.SPLINE_MARGIN, r.SPLINE_PAD
-    out = []
-    try:
-        for margin, pad in ((0, keep[1]), (1, keep[1]), (2, keep[1]), (3, keep[1]), (0, 0)):
-            r.SPLINE_MARGIN, r.SPLINE_PAD = margin, pad
-            rec, (_, gx, gy, _) = _coarse_sphere(70.0, 20.0)
-            spl = rec.node_status == r.NODE_SPLINE
-            out.append(max(np.abs(rec.slope_x - gx)[spl].max(), np.abs(rec.slope_y - gy)[spl].max()) * 1e6)
-    finally:
-        r.SPLINE_MARGIN, r.SPLINE_PAD = keep
     return tuple(out)
 
 
@@ -527,6 +446,93 @@ def fig3_memory_estimate() -> tuple:
     from pmdsim.config import estimate_resources
 
     return (estimate_resources(_fig3_config()).memory_bytes / 1e9,)
+
+
+def _coarse_sphere(aperture_radius_mm, incidence_deg):
+    """The coarse camera of tests/test_rim.py (160 x 120 px, about 0.8 mm per pixel) on a
+    concave sphere R 800 mm, its exact monitor coordinates, reconstructed with the nominal
+    R 790 mm on a 1 mm grid: (reconstruction, true sag and gradient on its grid)."""
+    import numpy as np
+
+    from pmdsim import trace
+    from pmdsim.config import parse_config
+    from pmdsim.measure.reconstruct import reconstruct
+    from pmdsim.scene import Scene
+    from pmdsim.scene.surfaces import surface_from_config
+
+    t = math.radians(incidence_deg)
+    ap = {"shape": "circular", "radius_mm": aperture_radius_mm}
+    d = {"camera": {"resolution": [160, 120], "focal_length_px": 500.0,
+                    "position_mm": [0.0, -400 * math.sin(t), 400 * math.cos(t)],
+                    "look_at_mm": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0]},
+         "monitor": {"resolution": [800, 600], "pixel_pitch_mm": 0.5,
+                     "centre_mm": [0.0, 250 * math.sin(t), 250 * math.cos(t)],
+                     "look_at_mm": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0]},
+         "surface": {"type": "sphere", "radius_mm": 800.0, "aperture": ap},
+         "brdf": {"model": "mirror"}}
+    scene = Scene.from_config(parse_config(d))
+    u, v, _ = trace.specular_monitor_coords(scene, trace.trace_primary(scene))
+    nominal = surface_from_config(parse_config(dict(d, surface={
+        "type": "sphere", "radius_mm": 790.0, "aperture": ap})).surface)
+    rec = reconstruct(u, v, scene.camera, scene.monitor, nominal, spacing_mm=1.0)
+    x, y = np.meshgrid(rec.x_mm, rec.y_mm)
+    return rec, scene.surface.sag(x, y)
+
+
+@functools.cache
+def _rim_sphere() -> dict:
+    import numpy as np
+
+    out = {}
+    for inc in (20.0, 45.0):
+        rec, (z, gx, gy, _) = _coarse_sphere(22.5, inc)
+        m = rec.mask
+        out[inc] = (max(np.abs(rec.slope_x - gx)[m].max(), np.abs(rec.slope_y - gy)[m].max()) * 1e6,
+                    np.abs(rec.height_mm - z)[m].max() * 1e6, sum(rec.excluded.values()),
+                    int(np.isfinite(rec.nominal_mm).sum()), rec.rim_fitted)
+    return out
+
+
+def rim_sphere_errors() -> tuple:
+    """docs/reconstruction.md: issue 37's coarse sphere at 20 and 45 deg: worst slope error
+    (urad) and height error (nm) of the reported nodes."""
+    a, b = _rim_sphere()[20.0], _rim_sphere()[45.0]
+    return a[0], b[0], a[1], b[1]
+
+
+def rim_sphere_counts() -> tuple:
+    """docs/reconstruction.md: the same: nodes not reported of the aperture's, rim-fit nodes."""
+    a, b = _rim_sphere()[20.0], _rim_sphere()[45.0]
+    return a[2], b[2], a[3], a[4], b[4]
+
+
+def rim_image_edge() -> tuple:
+    """docs/reconstruction.md: nodes outside the view on the 140 mm sphere."""
+    rec, _ = _coarse_sphere(70.0, 20.0)
+    return (rec.excluded["outside_camera_view"],)
+
+
+def rim_spline_margin() -> tuple:
+    """docs/reconstruction.md: the spline's worst slope error on the 140 mm sphere at
+    SPLINE_MARGIN 0..3, and at margin 0 without SPLINE_PAD (urad)."""
+    import numpy as np
+
+    from pmdsim.measure import interpolate as r
+
+    keep = r.SPLINE_MARGIN, r.SPLINE_PAD
+    out = []
+    try:
+        for margin, pad in ((0, keep[1]), (1, keep[1]), (2, keep[1]), (3, keep[1]), (0, 0)):
+            r.SPLINE_MARGIN, r.SPLINE_PAD = margin, pad
+            rec, (_, gx, gy, _) = _coarse_sphere(70.0, 20.0)
+            spl = rec.node_status == r.NODE_SPLINE
+            out.append(max(np.abs(rec.slope_x - gx)[spl].max(), np.abs(rec.slope_y - gy)[spl].max()) * 1e6)
+    finally:
+        r.SPLINE_MARGIN, r.SPLINE_PAD = keep
+    return tuple(out)
+
+
+@functools.cache
 def _fig3_run() -> dict:
     """The full ``pmdsim simulate examples/paper_fig3.toml`` (minutes): its reconstruction
     statistics and the slope errors' RMS / P95 / P99.9 / PV from run.zarr."""
