@@ -338,20 +338,26 @@ def _num(x):
     return x if math.isfinite(x) else None
 
 
-def summary(z, dx: float, dy: float, unit: str, mask=None, error=None,
-            window_kind: str = "tukey", bands: dict | None = None) -> dict:
-    """JSON-ready areal parameters, band RMS and 1-D radial PSD of a map (with their
-    numerical errors where ``error`` is given); ``{"n": 0}`` for a map without a valid
-    node."""
+def describe(z, dx: float, dy: float, unit: str, mask=None, error=None,
+             window_kind: str = "tukey", bands: dict | None = None):
+    """(JSON-ready areal parameters, band RMS and 1-D radial PSD of a map, with their
+    numerical errors where ``error`` is given; its :class:`PowerSpectrum`). A map without a
+    valid node: ``({"n": 0, ...}, None)``."""
     z, v = _valid(z, mask)
     ap = areal_parameters(z, dx, dy, v, error)
     out = {"unit": unit, "sdq_unit": f"{unit}/mm",
            **{k: (_num(x) if isinstance(x, float) else x) for k, x in ap.items()}}
     if not v.any():
-        return out
+        return out, None
     p = power_spectrum(z, dx, dy, v, error, window_kind, bands)
     out["psd"] = psd_summary(p, unit)
-    return out
+    return out, p
+
+
+def summary(z, dx: float, dy: float, unit: str, mask=None, error=None,
+            window_kind: str = "tukey", bands: dict | None = None) -> dict:
+    """The JSON part of :func:`describe`."""
+    return describe(z, dx, dy, unit, mask, error, window_kind, bands)[0]
 
 
 def psd_summary(p: PowerSpectrum, unit: str) -> dict:
@@ -372,5 +378,27 @@ def psd_summary(p: PowerSpectrum, unit: str) -> dict:
     return out
 
 
-__all__ = ["AREAL", "BANDS", "PowerSpectrum", "areal_parameters", "default_bands",
-           "power_spectrum", "psd_summary", "summary", "window"]
+#: What the statistics state about the areal parameters and PSDs (statistics.json, budget.json).
+DEFINITIONS = {
+    "sq, sa, sz, ssk, sku": "ISO 25178-2 about the mean of the valid nodes (the map's form "
+                            "removal is the reference): RMS, mean |z|, max - min, skewness, "
+                            "kurtosis; unit: the map's",
+    "sdq": "ISO 25178-2 RMS gradient from forward differences over pairs of valid neighbours, "
+           "each axis averaged over its own pairs; unit: the map's per mm (nm/mm = urad)",
+    "psd": "2-D PSD dx dy |FFT(w (z - m))|^2 / sum w^2 (unit^2 mm^2) with the tapered window w "
+           "of the measured region (tukey: cosine taper over the outer quarter of the distance "
+           "to the edge); radial: power of each annulus (bin width df = the grid's coarser "
+           "frequency step) / df, unit^2 mm, its integral is the window-weighted mean square; "
+           "iso: the annulus' mean of the 2-D PSD; frequencies f in 1/mm (cycles)",
+    "band_rms": "sqrt of the 2-D PSD summed over a band of spatial frequency (form: periods "
+                "longer than the measured extent / 3; high: shorter than 4 grid steps; mid: "
+                "between); their squares add up to the window-weighted mean square",
+    "_err": "numerical error: the run's node errors carried to each number (Sq, Sa: exact "
+            "interval; Sz: widest and narrowest range; Sdq: interval on the differences; "
+            "Ssk, Sku: first order; PSD and band RMS: a bound for any signs of the node "
+            "errors, pmdsim.measure.areal)",
+}
+
+
+__all__ = ["AREAL", "BANDS", "DEFINITIONS", "PowerSpectrum", "areal_parameters",
+           "default_bands", "describe", "power_spectrum", "psd_summary", "summary", "window"]
