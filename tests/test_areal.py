@@ -204,6 +204,33 @@ def test_errors_bound_every_perturbation():
     assert areal.power_spectrum(z, dx, dy).psd_2d_err is None
 
 
+def test_error_maps_bound_their_own_moves_and_are_tighter():
+    """With the signed error maps (the map moved by +-its numerical error), any map moved
+    by a fraction of either changes every PSD value and band RMS by no more than the
+    stated error, which is below the any-sign bound where the error map is smooth."""
+    ny, nx, dx, dy = 40, 56, 0.5, 0.35
+    x, y = _grid(nx, ny, dx, dy)
+    rng = np.random.default_rng(11)
+    z = np.sin(x / 3) * np.cos(y / 2) + 0.05 * rng.standard_normal((ny, nx))
+    mask = (x > 2) & (y < 12)
+    z = np.where(mask, z, np.nan)
+    up = 0.04 * np.cos(x / 9 + 0.3) * (1 + y / 20)  # a smooth error map and its opposite,
+    down = -0.9 * up + 0.002 * np.sin(y)               # not exactly (a non-linear map)
+    e = np.fmax(np.abs(up), np.abs(down))
+    p = areal.power_spectrum(z, dx, dy, error=e, error_maps=[up, down])
+    loose = areal.power_spectrum(z, dx, dy, error=e)
+    for c, m in ((1.0, up), (0.5, up), (1.0, down), (-0.3, down)):
+        p2 = areal.power_spectrum(z + c * m, dx, dy, bands=p.bands)
+        assert np.all(np.abs(p2.psd_2d - p.psd_2d) <= p.psd_2d_err * (1 + 1e-9) + 1e-15)
+        assert np.all(np.abs(p2.psd_radial - p.psd_radial) <= p.psd_radial_err * (1 + 1e-9) + 1e-15)
+        for b in p.bands:
+            assert abs(p2.band_rms[b] - p.band_rms[b]) <= p.band_rms_err[b] * (1 + 1e-9)
+    assert np.all(p.psd_radial_err <= loose.psd_radial_err * (1 + 1e-12))
+    assert p.band_rms_err["high"] < 0.1 * loose.band_rms_err["high"]
+    with pytest.raises(ValueError, match="error_maps: shape"):
+        areal.power_spectrum(z, dx, dy, error_maps=[np.zeros((3, 3))])
+
+
 def test_bad_input():
     with pytest.raises(ValueError, match="2-D"):
         areal.areal_parameters(np.zeros(5), 1.0, 1.0)

@@ -52,16 +52,21 @@ Power spectral density (:func:`power_spectrum`):
   but DC (the high band takes the corners beyond the radial Nyquist frequency), so their
   squares add up to the window-weighted mean square.
 
-Numerical errors of the PSD: the node errors fix magnitudes, not signs. With ``e'`` = ``e``
-plus the largest shift of the weighted mean, any error map ``delta`` with
-``|delta_i| <= e_i`` changes ``|FFT(w delta')|`` at one frequency by at most
-``T = sum w e'`` and the power of a set of n frequencies by at most
-``a^2 = min(n T^2, N sum (w e')^2)`` (Parseval, N grid nodes), so each amplitude (the square
-root of a bin's or band's power) moves by at most ``a`` (triangle inequality): the PSD's
-error is ``(sqrt(P) + a)^2 - P`` in its normalisation and the band RMS's is
-``a / sqrt(N sum w^2)`` (never more than the window-weighted RMS of ``e'``). A bound for
-any signs of the errors: where a band's PSD is below its error the map's spectrum there is
-not resolved by the simulation.
+Numerical errors of the PSD. Each amplitude (the square root of the power at a frequency,
+in a bin or in a band) moves by at most the amplitude ``a`` of the error map's windowed
+spectrum there (triangle inequality), so the PSD's error is ``(sqrt(P) + a)^2 - P`` in its
+normalisation and the band RMS's is ``a / sqrt(N sum w^2)`` (N grid nodes). With
+``error_maps`` (signed maps of how the map moves when its inputs move by their numerical
+error, both signs: the run's and the budget's reconstructions repeated with the decoded
+coordinates moved by +-e) ``a`` is the larger of their spectra: the bound for any error
+whose spectrum is no larger, whatever its phase (the quadrature's errors vary smoothly
+across pixels, the rule the node errors follow). With node errors ``e`` alone (magnitudes,
+no signs) it is the bound for any signs: with ``e'`` = ``e`` plus the largest shift of the
+weighted mean, ``a^2 = min(n T^2, N sum (w e')^2)`` for n frequencies, ``T = sum w e'``;
+never more than the window-weighted RMS of ``e'`` for a band, but a flat floor across the
+spectrum (an error that alternated sign from node to node would put its power at the
+highest frequencies). Where a PSD is below its error the simulation does not resolve the
+map's spectrum there.
 """
 
 from __future__ import annotations
@@ -270,10 +275,12 @@ class PowerSpectrum:
 
 
 def power_spectrum(z, dx: float, dy: float, mask=None, error=None, window_kind: str = "tukey",
-                   bands: dict | None = None) -> PowerSpectrum:
+                   bands: dict | None = None, error_maps=None) -> PowerSpectrum:
     """2-D and radial PSD and band-limited RMS of ``z`` (module docstring); ``bands``
     ``{name: (f_lo, f_hi)}`` (1/mm, default :func:`default_bands`); ``error``: the node
-    errors, carried to every PSD value and band RMS."""
+    errors, carried to every PSD value and band RMS for any signs; ``error_maps``: signed
+    maps (each (H, W)) of how the map moves by its numerical error (e.g. reconstructed with
+    the decoded coordinates moved by +e and by -e): their spectra instead (the larger)."""
     z, v = _valid(z, mask)
     if not v.any():
         raise ValueError("power spectrum: the map has no valid node")
@@ -313,23 +320,35 @@ def power_spectrum(z, dx: float, dy: float, mask=None, error=None, window_kind: 
            "counts": counts, "psd_iso": iso, "psd_radial": radial, "bands": bands,
            "band_rms": band_rms, "window": window_kind, "mean_square": ms,
            "n_valid": int(np.count_nonzero(v))}
-    if e is not None:
+    if error_maps is not None:  # the spectra of the error maps themselves (the larger)
+        a2 = np.zeros_like(s)
+        for dz in error_maps:
+            dz = np.asarray(dz, np.float64)
+            if dz.shape != z.shape:
+                raise ValueError(f"error_maps: shape {dz.shape} is not the map's {z.shape}")
+            dz = np.where(v & np.isfinite(dz), dz, 0.0)
+            fd = np.fft.fft2(np.where(v, (dz - np.sum(wgt * dz) / sw) * wgt, 0.0))
+            a2 = np.maximum(a2, fd.real**2 + fd.imag**2)
+        a2_bin = np.bincount(k[inbin], weights=a2[inbin], minlength=n_bins + 1)[1:]
+        a2_band = {name: float(np.sum(a2[sel])) for name, sel in band_sel.items()}
+    elif e is not None:  # any signs of the node errors (module docstring)
         shift = float(np.sum(wgt * e) / sw)  # the weighted mean moves by at most this
         ep = np.where(v, e + shift, 0.0) * wgt
-        t = float(ep.sum())
+        t2 = float(ep.sum()) ** 2
         pars = n_all * float(np.sum(ep * ep))
+        a2 = np.full_like(s, t2)
+        a2_bin = np.minimum(counts * t2, pars)
+        a2_band = {name: min(np.count_nonzero(sel) * t2, pars) for name, sel in band_sel.items()}
+    if error_maps is not None or e is not None:
+        def grow(p, a_sq):
+            return (np.sqrt(p) + np.sqrt(a_sq)) ** 2 - p
 
-        def grow(p, n):
-            a = np.sqrt(np.minimum(n * t * t, pars))
-            return (np.sqrt(p) + a) ** 2 - p
-
-        out["psd_2d_err"] = np.fft.fftshift(norm * grow(s, 1))
+        out["psd_2d_err"] = np.fft.fftshift(norm * grow(s, a2))
         with np.errstate(invalid="ignore", divide="ignore"):
-            out["psd_iso_err"] = np.where(counts > 0, norm * grow(power, counts) / counts, np.nan)
-        out["psd_radial_err"] = grow(power, counts) / (n_all * sw2 * df)
-        out["band_rms_err"] = {
-            name: float(math.sqrt(min(np.count_nonzero(sel) * t * t, pars) / (n_all * sw2)))
-            for name, sel in band_sel.items()}
+            out["psd_iso_err"] = np.where(counts > 0, norm * grow(power, a2_bin) / counts, np.nan)
+        out["psd_radial_err"] = grow(power, a2_bin) / (n_all * sw2 * df)
+        out["band_rms_err"] = {name: float(math.sqrt(a / (n_all * sw2)))
+                               for name, a in a2_band.items()}
     return PowerSpectrum(**out)
 
 
@@ -339,7 +358,7 @@ def _num(x):
 
 
 def describe(z, dx: float, dy: float, unit: str, mask=None, error=None,
-             window_kind: str = "tukey", bands: dict | None = None):
+             window_kind: str = "tukey", bands: dict | None = None, error_maps=None):
     """(JSON-ready areal parameters, band RMS and 1-D radial PSD of a map, with their
     numerical errors where ``error`` is given; its :class:`PowerSpectrum`). A map without a
     valid node: ``({"n": 0, ...}, None)``."""
@@ -349,15 +368,15 @@ def describe(z, dx: float, dy: float, unit: str, mask=None, error=None,
            **{k: (_num(x) if isinstance(x, float) else x) for k, x in ap.items()}}
     if not v.any():
         return out, None
-    p = power_spectrum(z, dx, dy, v, error, window_kind, bands)
+    p = power_spectrum(z, dx, dy, v, error, window_kind, bands, error_maps)
     out["psd"] = psd_summary(p, unit)
     return out, p
 
 
 def summary(z, dx: float, dy: float, unit: str, mask=None, error=None,
-            window_kind: str = "tukey", bands: dict | None = None) -> dict:
+            window_kind: str = "tukey", bands: dict | None = None, error_maps=None) -> dict:
     """The JSON part of :func:`describe`."""
-    return describe(z, dx, dy, unit, mask, error, window_kind, bands)[0]
+    return describe(z, dx, dy, unit, mask, error, window_kind, bands, error_maps)[0]
 
 
 def psd_summary(p: PowerSpectrum, unit: str) -> dict:

@@ -97,7 +97,7 @@ def _limits(ax, arrays):
     vals = vals[np.isfinite(vals) & (vals > 0)]
     if vals.size:
         top = vals.max()
-        ax.set_ylim(max(vals.min(), top * 1e-9) / 3, top * 30)
+        ax.set_ylim(max(vals.min(), top * 1e-12) / 3, top * 30)
 
 
 def _below(ax, text: str) -> None:
@@ -161,12 +161,13 @@ def plot_surface_psd(ds, name: str = "", description: str = ""):
     fx, fy = np.asarray(ds["psd_fx"].values), np.asarray(ds["psd_fy"].values)
     pos = p2[np.isfinite(p2) & (p2 > 0)]
     vmax = pos.max() if pos.size else 1.0
+    vmin = max(float(np.percentile(pos, 2)), vmax * 1e-12) if pos.size else vmax * 1e-8
     import matplotlib
 
     cmap = matplotlib.colormaps["magma"]
     cmap = cmap.with_extremes(bad=cmap(0.0), under=cmap(0.0))
     im = ax_2.imshow(np.where(p2 > 0, p2, np.nan), origin="lower", cmap=cmap,
-                     norm=LogNorm(vmin=vmax * 1e-8, vmax=vmax, clip=True),
+                     norm=LogNorm(vmin=vmin, vmax=vmax, clip=True),
                      interpolation="nearest",
                      extent=(fx[0] - (fx[1] - fx[0]) / 2, fx[-1] + (fx[1] - fx[0]) / 2,
                              fy[0] - (fy[1] - fy[0]) / 2, fy[-1] + (fy[1] - fy[0]) / 2),

@@ -56,7 +56,7 @@ def from_chain(cfg, scene, measured, reference_rec=None):
     if rec is None:
         return {}, {"reconstruction": {"error": problem}}
     stats = statistics(cfg, rec, err, reference_rec)
-    node_err = None
+    moves = None
     ex, ey = ((dc.numerical or {}).get("coord_px") for dc in (dx, dy))
     if ex is not None and ey is not None:  # the render's numerical error, carried through
         # from the reconstructed height: the moved coordinates' fixed point is next to it
@@ -65,9 +65,9 @@ def from_chain(cfg, scene, measured, reference_rec=None):
                                          start=rec.height_mm, tables=False)
         if moved is not None and moved.height_nm.shape == err.height_nm.shape:
             add_numerical_error(stats, err, moved)
-            node_err = {a: np.nan_to_num(np.abs(getattr(moved, a) - getattr(err, a)), nan=0.0)
-                        for a, _, _ in AREAL_MAPS}
-    avars, stats["areal"] = areal_of(rec, err, node_err, reference_rec)
+            moves = {a: np.nan_to_num(getattr(moved, a) - getattr(err, a), nan=0.0)
+                     for a, _, _ in AREAL_MAPS}
+    avars, stats["areal"] = areal_of(rec, err, moves, reference_rec)
     return {**variables(rec, err, reference_rec), **avars}, {"reconstruction": stats}
 
 
@@ -79,11 +79,12 @@ AREAL_MAPS = (("height_nm", "height_error", "nm"), ("slope_x_urad", "slope_error
 PSD_COORDS = ("psd_fx", "psd_fy", "psd_f")
 
 
-def areal_of(rec, err, node_err=None, reference_rec=None) -> tuple[dict, dict]:
+def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
     """(dataset variables, statistics) of the areal parameters and PSDs of the surface
     errors (:mod:`pmdsim.measure.areal`): per map its Sq ... Sdq, band RMS and radial PSD
-    (with their numerical errors from ``node_err``, ``{attribute: (H, W)}``: each node's
-    change when the decoded coordinates move by their numerical error), its 2-D and radial
+    (with their numerical errors from ``moves``, ``{attribute: (H, W)}``: each node's signed
+    change when the decoded coordinates move by their numerical error; its magnitude is the
+    node's error, the map of changes the PSDs' error spectrum), its 2-D and radial
     PSD as variables; the reference's height error too (the chain's floor; exact, no
     error). The bands are those of the height error's measured region, for every map."""
     from ..measure import areal
@@ -95,12 +96,13 @@ def areal_of(rec, err, node_err=None, reference_rec=None) -> tuple[dict, dict]:
     if not valid.any():
         return out, stats
     bands = areal.default_bands(valid, dx, dy)
-    maps = [(getattr(err, a), name, unit, None if node_err is None else node_err[a])
+    maps = [(getattr(err, a), name, unit, None if moves is None else moves[a])
             for a, name, unit in AREAL_MAPS]
     if reference_rec is not None and reference_rec[1].height_nm.shape == err.height_nm.shape:
         maps.append((reference_rec[1].height_nm, "reference_height_error", "nm", None))
-    for z, name, unit, e in maps:
-        st, p = areal.describe(z, dx, dy, unit, error=e, bands=bands)
+    for z, name, unit, dz in maps:
+        st, p = areal.describe(z, dx, dy, unit, error=None if dz is None else np.abs(dz),
+                               bands=bands, error_maps=None if dz is None else [dz])
         stats[f"{name}_{unit}"] = st
         if p is None:
             continue

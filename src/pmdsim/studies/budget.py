@@ -55,6 +55,7 @@ from ..quantiles import percentile
 from ..render import Simulation
 from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
+from .budget_areal import areal_of
 from .budget_error import (HEIGHT_COLUMNS, HEIGHT_STATS, ROW_STATS, TABLE_COLUMNS,  # noqa: F401
                            at_order, difference_error, error_stats, estimator_label,
                            height_error_bounds, node_errors, second_estimate, stat_error,
@@ -365,6 +366,8 @@ class HeightError:
     slope_y_urad: np.ndarray
     height_nm: np.ndarray
     form: object
+    #: the grid's steps (dx, dy), mm (the areal parameters' and PSDs' grid)
+    spacing_mm: tuple = (float("nan"), float("nan"))
 
 
 def height_error(meas: SurfaceMaps, base: SurfaceMaps, spec: FormSpec, disc=(None, None),
@@ -378,7 +381,8 @@ def height_error(meas: SurfaceMaps, base: SurfaceMaps, spec: FormSpec, disc=(Non
     keep = form.mask
     ex = np.where(keep, meas.slope_x - base.slope_x, np.nan) * 1e6
     ey = np.where(keep, meas.slope_y - base.slope_y, np.nan) * 1e6
-    return HeightError(ex, ey, form.residual * 1e6, form)
+    return HeightError(ex, ey, form.residual * 1e6, form,
+                       (float(meas.x_mm[1] - meas.x_mm[0]), float(meas.y_mm[1] - meas.y_mm[0])))
 
 
 def _zernike_disc(surface):
@@ -396,9 +400,13 @@ def _about_zero(a) -> tuple[float, float]:
 
 
 def height_row(effect: str, label: str, part: str, err: HeightError, seconds: float = 0.0,
-               how: str = "") -> dict:
+               how: str = "", shifted=None, exact: bool = False) -> dict:
     """Slope errors X/Y (urad RMS and P95 about zero) and height error after removal (nm
-    RMS about the mean, PV, P95) of one effect; Zernike tables and sphere radii alongside."""
+    RMS about the mean, PV, P95) of one effect; Zernike tables and sphere radii alongside;
+    ``areal``: the areal parameters and PSDs of the three maps
+    (:func:`pmdsim.studies.budget_areal.areal_of`; numerical errors from ``shifted``, the
+    row's errors with the decoded coordinates moved by +-their numerical error, or 0 with
+    ``exact``)."""
     row = {"effect": effect, "label": label, "part": part}
     for k, a in (("x", err.slope_x_urad), ("y", err.slope_y_urad)):
         row[f"slope_rms_{k}_urad"], row[f"slope_p95_{k}_urad"] = _about_zero(a)
@@ -410,6 +418,8 @@ def height_row(effect: str, label: str, part: str, err: HeightError, seconds: fl
         row["sphere"] = err.form.sphere
     row["zernike_noll_nm"] = [dict(t, coefficient=t["coefficient"] * 1e6) for t in err.form.noll]
     row["zernike_fringe_nm"] = [dict(t, coefficient=t["coefficient"] * 1e6) for t in err.form.fringe]
+    if np.isfinite(err.spacing_mm).all():
+        row["areal"] = areal_of(err, err.spacing_mm, shifted, exact)
     return row
 
 
@@ -477,9 +487,9 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             rows.append(_row(name, label, "system", d, dec.coord[d] - truth.coord[d], ok, truth, dec.seconds))
         if heights:
             rec, sec = rec_of(name, dec)
-            r = height_row(name, label, "system",
-                           height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc),
-                           dec.seconds + sec, "reconstruction minus the true surface")
+            herr = height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc)
+            r = height_row(name, label, "system", herr, dec.seconds + sec,
+                           "reconstruction minus the true surface", exact=True)
             hrows.append({**r, **{f"{k}_err": 0.0 for k in HEIGHT_STATS}})
         return dec
 
@@ -505,16 +515,16 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             rec, sec = rec_of(name, dec)
             base = SurfaceMaps.of(recs[ref_name])
             herr = height_error(SurfaceMaps.of(rec), base, spec, disc)
-            row = height_row(name, label, "surface", herr, seconds + sec,
-                             "surface's reconstruction minus the mirror's")
             shifted = []
             for sign in (1.0, -1.0):
                 moved = Decoded({d: dec.coord[d] + sign * np.nan_to_num(err[d], nan=0.0) for d in dirs},
                                 dec.valid, 0.0)
                 rm = reconstruct_decoded(cfg, scene, moved)
                 shifted.append(height_error(SurfaceMaps.of(rm), base, spec, disc))
-            hrows.append({**row, **height_error_bounds(herr, shifted)})
+            row = height_row(name, label, "surface", herr, seconds + sec,
+                             "surface's reconstruction minus the mirror's", shifted=shifted)
             ne = node_errors(herr, shifted)
+            hrows.append({**row, **height_error_bounds(herr, shifted)})
             numerical_h[name] = HeightError(ne["slope_x_urad"], ne["slope_y_urad"], ne["height_nm"],
                                             herr.form)
 
