@@ -225,6 +225,13 @@ def test_error_maps_bound_their_own_moves_and_are_tighter():
         assert np.all(np.abs(p2.psd_radial - p.psd_radial) <= p.psd_radial_err * (1 + 1e-9) + 1e-15)
         for b in p.bands:
             assert abs(p2.band_rms[b] - p.band_rms[b]) <= p.band_rms_err[b] * (1 + 1e-9)
+    # Sdq: each difference known to its own change, far tighter than any signs (smooth maps)
+    ap = areal.areal_parameters(z, dx, dy, error_maps=[up, down])
+    ap_loose = areal.areal_parameters(z, dx, dy, error=e)
+    for c, m in ((1.0, up), (0.5, up), (1.0, down), (-0.3, down)):
+        assert abs(areal.areal_parameters(z + c * m, dx, dy)["sdq"] - ap["sdq"]) <= ap["sdq_err"]
+    assert ap["sdq_err"] < 0.2 * ap_loose["sdq_err"]
+    assert ap["sq_err"] == ap_loose["sq_err"]  # node errors: the maps' largest magnitude
     assert np.all(p.psd_radial_err <= loose.psd_radial_err * (1 + 1e-12))
     assert p.band_rms_err["high"] < 0.1 * loose.band_rms_err["high"]
     with pytest.raises(ValueError, match="error_maps: shape"):

@@ -22,7 +22,8 @@ Their numerical errors (``*_err``), where the map has node errors ``e``: ``sq`` 
 by the exact interval of a statistic that grows with every ``|d_i|`` (``d`` about the
 mean; :func:`pmdsim.studies.budget_error.stat_error`, the rule of the run's RMS and P95
 errors), ``sz`` by the widest and narrowest range the nodes' errors allow, ``sdq`` by the
-same interval on the differences (each difference known to ``(e_i + e_j) / step``),
+same interval on the differences (each difference known to ``(e_i + e_j) / step`` for any
+signs, or, with the signed error maps below, to the largest change of that difference),
 ``ssk`` and ``sku`` to first order, ``sum_i |dS/dz_i| e_i`` (the largest change any signs
 of the node errors give).
 
@@ -115,6 +116,19 @@ def _node_error(error, valid):
     return np.where(valid & np.isfinite(e), e, 0.0)
 
 
+def _error_maps(maps, valid):
+    """The signed error maps, checked, 0 where the map or they hold no value."""
+    if maps is None:
+        return None
+    out = []
+    for m in maps:
+        m = np.asarray(m, np.float64)
+        if m.shape != valid.shape:
+            raise ValueError(f"error_maps: shape {m.shape} is not the map's {valid.shape}")
+        out.append(np.where(valid & np.isfinite(m), m, 0.0))
+    return out
+
+
 def _interval(f, d, e):
     """The larger distance of ``f(|d|)`` to ``f(|d| + e)`` and ``f(max(|d| - e, 0))``."""
     a = np.abs(d)
@@ -147,12 +161,18 @@ def _sdq(gx, gy):
     return float(np.sqrt(sum(parts))) if parts else float("nan")
 
 
-def areal_parameters(z, dx: float, dy: float, mask=None, error=None) -> dict:
+def areal_parameters(z, dx: float, dy: float, mask=None, error=None, error_maps=None) -> dict:
     """ISO 25178-2 Sq, Sa, Sz, Ssk, Sku and Sdq of ``z`` over its valid nodes (module
-    docstring), with ``n`` (valid nodes); with ``error`` each also as ``<name>_err``.
-    NaN (and ``n`` 0) for a map without a valid node; Sdq NaN without a pair of neighbouring
-    valid nodes, Ssk/Sku NaN for a constant map."""
+    docstring), with ``n`` (valid nodes); with ``error`` each also as ``<name>_err``
+    (``error_maps``, the signed changes of the map, see :func:`power_spectrum`: the node
+    errors are their largest magnitude unless ``error`` is given, and each difference of
+    Sdq is known to the largest change of that difference). NaN (and ``n`` 0) for a map
+    without a valid node; Sdq NaN without a pair of neighbouring valid nodes, Ssk/Sku NaN
+    for a constant map."""
     z, v = _valid(z, mask)
+    maps = _error_maps(error_maps, v)
+    if error is None and maps:
+        error = np.fmax.reduce([np.abs(m) for m in maps])
     e = _node_error(error, v)
     n = int(np.count_nonzero(v))
     nan = float("nan")
@@ -192,8 +212,12 @@ def areal_parameters(z, dx: float, dy: float, mask=None, error=None) -> dict:
         out["ssk_err"] = float(np.sum(np.abs(g_sk) * ev))
         out["sku_err"] = float(np.sum(np.abs(g_ku) * ev))
     if gx.size or gy.size:
-        ex = (e[:, 1:] + e[:, :-1])[okx] / dx
-        ey = (e[1:, :] + e[:-1, :])[oky] / dy
+        if maps:  # the change of each difference
+            ex = np.fmax.reduce([np.abs(np.diff(m, axis=1))[okx] for m in maps]) / dx
+            ey = np.fmax.reduce([np.abs(np.diff(m, axis=0))[oky] for m in maps]) / dy
+        else:  # any signs: the sum of both nodes' errors
+            ex = (e[:, 1:] + e[:, :-1])[okx] / dx
+            ey = (e[1:, :] + e[:-1, :])[oky] / dy
         s = out["sdq"]
         up = _sdq(np.abs(gx) + ex, np.abs(gy) + ey)
         down = _sdq(np.maximum(np.abs(gx) - ex, 0), np.maximum(np.abs(gy) - ey, 0))
@@ -322,11 +346,7 @@ def power_spectrum(z, dx: float, dy: float, mask=None, error=None, window_kind: 
            "n_valid": int(np.count_nonzero(v))}
     if error_maps is not None:  # the spectra of the error maps themselves (the larger)
         a2 = np.zeros_like(s)
-        for dz in error_maps:
-            dz = np.asarray(dz, np.float64)
-            if dz.shape != z.shape:
-                raise ValueError(f"error_maps: shape {dz.shape} is not the map's {z.shape}")
-            dz = np.where(v & np.isfinite(dz), dz, 0.0)
+        for dz in _error_maps(error_maps, v):
             fd = np.fft.fft2(np.where(v, (dz - np.sum(wgt * dz) / sw) * wgt, 0.0))
             a2 = np.maximum(a2, fd.real**2 + fd.imag**2)
         a2_bin = np.bincount(k[inbin], weights=a2[inbin], minlength=n_bins + 1)[1:]
@@ -363,7 +383,7 @@ def describe(z, dx: float, dy: float, unit: str, mask=None, error=None,
     numerical errors where ``error`` is given; its :class:`PowerSpectrum`). A map without a
     valid node: ``({"n": 0, ...}, None)``."""
     z, v = _valid(z, mask)
-    ap = areal_parameters(z, dx, dy, v, error)
+    ap = areal_parameters(z, dx, dy, v, error, error_maps)
     out = {"unit": unit, "sdq_unit": f"{unit}/mm",
            **{k: (_num(x) if isinstance(x, float) else x) for k, x in ap.items()}}
     if not v.any():

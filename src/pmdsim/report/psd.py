@@ -161,7 +161,7 @@ def plot_surface_psd(ds, name: str = "", description: str = ""):
     fx, fy = np.asarray(ds["psd_fx"].values), np.asarray(ds["psd_fy"].values)
     pos = p2[np.isfinite(p2) & (p2 > 0)]
     vmax = pos.max() if pos.size else 1.0
-    vmin = max(float(np.percentile(pos, 2)), vmax * 1e-12) if pos.size else vmax * 1e-8
+    vmin = max(float(np.percentile(pos, 2)), vmax * 1e-9) if pos.size else vmax * 1e-9
     import matplotlib
 
     cmap = matplotlib.colormaps["magma"]
@@ -174,7 +174,8 @@ def plot_surface_psd(ds, name: str = "", description: str = ""):
                      aspect="auto")
     ax_2.set_xlabel("f along surface x (1/mm)")
     ax_2.set_ylabel("f along surface y (1/mm)")
-    ax_2.set_title("height error: 2-D PSD (ridges: directional structure)", fontsize=10)
+    ax_2.set_title("height error: 2-D PSD (ridges: directional structure;\n"
+                   "streaks across the measured region's edges: window leakage)", fontsize=9)
     fig.colorbar(im, cax=cax).set_label("2-D PSD (nm$^2$ mm$^2$)", fontsize=8)
     fig.suptitle(f"{name}: power spectral density of the reconstructed minus true surface; "
                  "bands shaded, band-limited RMS in the legends; dotted: numerical error "
