@@ -57,8 +57,8 @@ def areal_text(height_rows: list[dict]) -> str:
     if not rows:
         return ""
     cols = ("sq", "sa", "sz", "ssk", "sku", "sdq")
-    head = (f"{'part':11s} {'effect':40s} " + " ".join(f"{c.capitalize():>15s}" for c in cols)
-            + " " + " ".join(f"{b + ' RMS':>15s}" for b in ("form", "mid", "high")))
+    head = (f"{'part':11s} {'effect':40s} " + " ".join(f"{c.capitalize():>17s}" for c in cols)
+            + " " + " ".join(f"{b + ' RMS':>17s}" for b in ("form", "mid", "high")))
     lines = [("height error after the removal: ISO 25178 areal parameters (nm; Sdq nm/mm = "
               "urad) and band-limited RMS of its PSD (nm); value ± numerical error"),
              head, "-" * len(head)]
@@ -66,10 +66,10 @@ def areal_text(height_rows: list[dict]) -> str:
         st = r["areal"]["height_error_nm"]
         psd = st.get("psd") or {}
         rms, err = psd.get("band_rms") or {}, psd.get("band_rms_err") or {}
-        bands = " ".join(f"{_pm({'v': rms.get(b), 'v_err': err.get(b)}, 'v'):>15s}"
+        bands = " ".join(f"{_pm({'v': rms.get(b), 'v_err': err.get(b)}, 'v'):>17s}"
                          for b in ("form", "mid", "high"))
         lines.append(f"{r['part']:11s} {r['label'][:40]:40s} "
-                     + " ".join(f"{_pm(st, c):>15s}" for c in cols) + " " + bands)
+                     + " ".join(f"{_pm(st, c):>17s}" for c in cols) + " " + bands)
     bands = (rows[0]["areal"]["height_error_nm"].get("psd") or {}).get("bands_per_mm")
     if bands:
         lines.append(f"bands: form below {bands['form'][1]:.3g} 1/mm (periods > "

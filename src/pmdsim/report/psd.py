@@ -174,8 +174,18 @@ def plot_surface_psd(ds, name: str = "", description: str = ""):
                      aspect="auto")
     ax_2.set_xlabel("f along surface x (1/mm)")
     ax_2.set_ylabel("f along surface y (1/mm)")
-    ax_2.set_title("height error: 2-D PSD (ridges: directional structure;\n"
-                   "streaks across the measured region's edges: window leakage)", fontsize=9)
+    # framed to 3 x the radius holding 99.9 % of the power (the rest is orders below)
+    rad = get("height_error_psd")
+    frame = f[-1]
+    if rad is not None and np.nansum(rad) > 0:
+        cum = np.nancumsum(rad) / np.nansum(rad)
+        frame = min(3 * f[min(int(np.searchsorted(cum, 0.999)), f.size - 1)], f[-1])
+        frame = max(frame, min(10 * f[0], f[-1]))
+    ax_2.set_xlim(-frame, frame)
+    ax_2.set_ylim(-frame, frame)
+    ax_2.set_title("height error: 2-D PSD, |f| < 3 x the radius of 99.9 % of its power\n"
+                   "(ridges: directional structure; streaks normal to the measured\n"
+                   "region's edges: window leakage)", fontsize=8.5)
     fig.colorbar(im, cax=cax).set_label("2-D PSD (nm$^2$ mm$^2$)", fontsize=8)
     fig.suptitle(f"{name}: power spectral density of the reconstructed minus true surface; "
                  "bands shaded, band-limited RMS in the legends; dotted: numerical error "
@@ -193,8 +203,10 @@ def plot_budget_psd(height_rows: list[dict], path, title: str = "error budget"):
     from .scene import _save
 
     rows = [r for r in height_rows if (r.get("areal") or {}).get("height_error_nm", {}).get("psd")]
-    fig = _fixed_figure((15.5, 7.2))
-    w, h, bottom = 5.6, 4.3, 0.7
+    entries = len(rows) + sum(r["part"] == "surface" for r in rows)  # the legend's lines
+    legend_h = 0.17 * entries + 0.3
+    w, h, bottom = 6.4, 4.3, 0.9 + legend_h
+    fig = _fixed_figure((2 * w + 2.6, bottom + h + 1.1))
     axes = [_axes_at(fig, 0.9, bottom, w, h), _axes_at(fig, 0.9 + w + 1.0, bottom, w, h)]
     if not rows:
         for ax in axes:
@@ -232,9 +244,9 @@ def plot_budget_psd(height_rows: list[dict], path, title: str = "error budget"):
                            (axes[1], "urad", "slope error dz/dx")):
         shade_bands(ax, bands, f[0] * 0.9, f[-1] * 1.1)
         psd_axes(ax, f, unit)
-        ax.set_title(what, fontsize=9)
-        ax.legend(loc="lower left", fontsize=6, framealpha=0.85)
+        ax.set_title(what, fontsize=9, pad=26)
+        ax.legend(loc="upper left", bbox_to_anchor=(0.0, -0.6 / h), fontsize=7, frameon=False)
     fig.suptitle(f"{title}: radial PSD of each height row (blue: system, orange: surface, "
                  "green: calibration); dotted: numerical error of the surface rows",
-                 fontsize=10, y=1 - 0.06 / fig.get_size_inches()[1], va="top")
+                 fontsize=10, y=1 - 0.08 / fig.get_size_inches()[1], va="top")
     return _save(fig, path)

@@ -366,8 +366,6 @@ class HeightError:
     slope_y_urad: np.ndarray
     height_nm: np.ndarray
     form: object
-    #: the grid's steps (dx, dy), mm (the areal parameters' and PSDs' grid)
-    spacing_mm: tuple = (float("nan"), float("nan"))
 
 
 def height_error(meas: SurfaceMaps, base: SurfaceMaps, spec: FormSpec, disc=(None, None),
@@ -381,8 +379,7 @@ def height_error(meas: SurfaceMaps, base: SurfaceMaps, spec: FormSpec, disc=(Non
     keep = form.mask
     ex = np.where(keep, meas.slope_x - base.slope_x, np.nan) * 1e6
     ey = np.where(keep, meas.slope_y - base.slope_y, np.nan) * 1e6
-    return HeightError(ex, ey, form.residual * 1e6, form,
-                       (float(meas.x_mm[1] - meas.x_mm[0]), float(meas.y_mm[1] - meas.y_mm[0])))
+    return HeightError(ex, ey, form.residual * 1e6, form)
 
 
 def _zernike_disc(surface):
@@ -400,13 +397,9 @@ def _about_zero(a) -> tuple[float, float]:
 
 
 def height_row(effect: str, label: str, part: str, err: HeightError, seconds: float = 0.0,
-               how: str = "", shifted=None, exact: bool = False) -> dict:
+               how: str = "") -> dict:
     """Slope errors X/Y (urad RMS and P95 about zero) and height error after removal (nm
-    RMS about the mean, PV, P95) of one effect; Zernike tables and sphere radii alongside;
-    ``areal``: the areal parameters and PSDs of the three maps
-    (:func:`pmdsim.studies.budget_areal.areal_of`; numerical errors from ``shifted``, the
-    row's errors with the decoded coordinates moved by +-their numerical error, or 0 with
-    ``exact``)."""
+    RMS about the mean, PV, P95) of one effect; Zernike tables and sphere radii alongside."""
     row = {"effect": effect, "label": label, "part": part}
     for k, a in (("x", err.slope_x_urad), ("y", err.slope_y_urad)):
         row[f"slope_rms_{k}_urad"], row[f"slope_p95_{k}_urad"] = _about_zero(a)
@@ -418,8 +411,6 @@ def height_row(effect: str, label: str, part: str, err: HeightError, seconds: fl
         row["sphere"] = err.form.sphere
     row["zernike_noll_nm"] = [dict(t, coefficient=t["coefficient"] * 1e6) for t in err.form.noll]
     row["zernike_fringe_nm"] = [dict(t, coefficient=t["coefficient"] * 1e6) for t in err.form.fringe]
-    if np.isfinite(err.spacing_mm).all():
-        row["areal"] = areal_of(err, err.spacing_mm, shifted, exact)
     return row
 
 
@@ -488,8 +479,8 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
         if heights:
             rec, sec = rec_of(name, dec)
             herr = height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc)
-            r = height_row(name, label, "system", herr, dec.seconds + sec,
-                           "reconstruction minus the true surface", exact=True)
+            r = height_row(name, label, "system", herr, dec.seconds + sec, "reconstruction minus the true surface")
+            r["areal"] = areal_of(herr, rec.spacing, exact=True)  # the mirror's render: exact
             hrows.append({**r, **{f"{k}_err": 0.0 for k in HEIGHT_STATS}})
         return dec
 
@@ -515,16 +506,17 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             rec, sec = rec_of(name, dec)
             base = SurfaceMaps.of(recs[ref_name])
             herr = height_error(SurfaceMaps.of(rec), base, spec, disc)
+            row = height_row(name, label, "surface", herr, seconds + sec,
+                             "surface's reconstruction minus the mirror's")
             shifted = []
             for sign in (1.0, -1.0):
                 moved = Decoded({d: dec.coord[d] + sign * np.nan_to_num(err[d], nan=0.0) for d in dirs},
                                 dec.valid, 0.0)
                 rm = reconstruct_decoded(cfg, scene, moved)
                 shifted.append(height_error(SurfaceMaps.of(rm), base, spec, disc))
-            row = height_row(name, label, "surface", herr, seconds + sec,
-                             "surface's reconstruction minus the mirror's", shifted=shifted)
-            ne = node_errors(herr, shifted)
+            row["areal"] = areal_of(herr, rec.spacing, shifted)  # areal parameters and PSDs
             hrows.append({**row, **height_error_bounds(herr, shifted)})
+            ne = node_errors(herr, shifted)
             numerical_h[name] = HeightError(ne["slope_x_urad"], ne["slope_y_urad"], ne["height_nm"],
                                             herr.form)
 
