@@ -249,6 +249,9 @@ def test_bad_input():
         areal.power_spectrum(np.full((4, 5), np.nan), 1.0, 1.0)
     with pytest.raises(ValueError, match="form band"):
         areal.default_bands(np.ones((8, 8), bool), 1.0, 1.0, form_period_mm=1.0, high_period_mm=4.0)
+    # a region of a few steps: the defaults cross, the mid band is empty
+    tiny = areal.default_bands(np.ones((3, 4), bool), 1.0, 1.0)
+    assert tiny["form"][1] == tiny["mid"][0] == tiny["mid"][1] == tiny["high"][0] == 0.25
     empty = areal.areal_parameters(np.full((3, 3), np.nan), 1.0, 1.0)
     assert empty["n"] == 0 and math.isnan(empty["sq"])
     s = areal.summary(np.full((3, 3), np.nan), 1.0, 1.0, "nm")

@@ -64,7 +64,7 @@ def test_report_redraws_any_figure_from_the_run_folder(decoded_run, tmp_path):
     res = runner.invoke(app, ["report", str(decoded_run.outdir), "--all", "--workers", "1",
                               "-o", str(tmp_path / "b")])
     assert res.exit_code == 0, res.output
-    assert len(list((tmp_path / "b").iterdir())) == 10
+    assert len(list((tmp_path / "b").iterdir())) == 11
     bad = runner.invoke(app, ["report", str(decoded_run.outdir), "--figure", "nonsense"])
     assert bad.exit_code == 2 and "unknown figure" in bad.output
     missing = runner.invoke(app, ["report", str(tmp_path)])

@@ -253,8 +253,9 @@ def default_bands(valid, dx: float, dy: float, form_period_mm: float | None = No
     """``{band: (f_lo, f_hi)}`` in 1/mm: ``form`` below ``1 / form_period_mm`` (default: the
     measured region's larger extent / :data:`FORM_CYCLES`), ``high`` from
     ``1 / high_period_mm`` (default :data:`HIGH_STEPS` grid steps of the coarser axis) up,
-    ``mid`` between. The high band's upper edge is inf (it takes the grid's corners)."""
+    ``mid`` between (empty for a region of a few grid steps, where the defaults cross). The high band's upper edge is inf (it takes the grid's corners)."""
     valid = np.asarray(valid, bool)
+    given = form_period_mm is not None and high_period_mm is not None
     if form_period_mm is None:
         rows, cols = np.nonzero(valid)
         ext = max((np.ptp(cols) + 1) * dx if cols.size else dx,
@@ -263,6 +264,8 @@ def default_bands(valid, dx: float, dy: float, form_period_mm: float | None = No
     if high_period_mm is None:
         high_period_mm = HIGH_STEPS * max(dx, dy)
     f_form, f_high = 1.0 / float(form_period_mm), 1.0 / float(high_period_mm)
+    if not given and f_form > f_high:  # a region of a few grid steps: no mid band
+        f_form = f_high
     if not 0 < f_form <= f_high:
         raise ValueError(f"PSD bands: the form band's shortest period {form_period_mm:g} mm "
                          f"must be longer than the high band's longest {high_period_mm:g} mm")
