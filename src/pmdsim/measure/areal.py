@@ -19,7 +19,7 @@ mean here):
   low at 13 nodes per period). Units: the map's unit per mm (nm/mm = urad).
 
 Their numerical errors (``*_err``), where the map has node errors ``e``: ``sq`` and ``sa``
-by the exact interval of a statistic that grows with every ``|d_i|`` (``d`` about the
+by the interval of a statistic that grows with every ``|d_i|`` (``d`` about the map's
 mean; :func:`pmdsim.studies.budget_error.stat_error`, the rule of the run's RMS and P95
 errors), ``sz`` by the widest and narrowest range the nodes' errors allow, ``sdq`` by the
 same interval on the differences (each difference known to ``(e_i + e_j) / step`` for any
@@ -35,9 +35,9 @@ Power spectral density (:func:`power_spectrum`):
   :data:`SMALL_HOLE` of the region are not edges: dropped nodes), ``d_max`` its largest
   value. ``"tukey"`` (default): ``w = sin^2(pi d / (2 T))`` within ``T`` =
   :data:`TUKEY_TAPER` ``d_max`` of the edge, 1 inside (the tapered cosine window,
-  following any outline: it keeps the spectral resolution of three quarters of the region
-  and its leakage far below the form's); ``"hann"``: ``T = d_max``, on a disc exactly the
-  rotationally symmetric Hann window of SurfaceTopography, ``(1 + cos(pi r / R)) / 2``;
+  following any outline); ``"hann"``: ``T = d_max``, on a disc the rotationally symmetric
+  Hann window of SurfaceTopography, ``(1 + cos(pi r / R)) / 2`` (to the grid's
+  discreteness);
   ``"none"``: ``w`` = 1 on the valid nodes (a periodic, fully measured map);
 - 2-D PSD ``C(fx, fy) = dx dy |FFT(w (z - m))|^2 / sum(w^2)`` (unit^2 mm^2), spatial
   frequencies f in 1/mm (cycles, not radians), so that ``sum C dfx dfy`` is the
@@ -81,7 +81,7 @@ from scipy import ndimage
 #: Names of the PSD bands, low to high spatial frequency.
 BANDS = ("form", "mid", "high")
 #: Holes (unmeasured regions enclosed by the measured one) smaller than this share of the
-#: measured region are not tapered around by the ``hann`` window (dropped nodes); larger
+#: measured region are not tapered around by the windows (dropped nodes); larger
 #: ones (an annulus's centre) are edges like the outer one.
 SMALL_HOLE = 0.005
 #: Default band edges: the form band holds periods longer than the measured region's
