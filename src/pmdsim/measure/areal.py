@@ -188,7 +188,9 @@ def areal_parameters(z, dx: float, dy: float, mask=None, error=None, error_maps=
     sq = math.sqrt(m2)
     out.update(sq=sq, sa=float(np.mean(np.abs(d))), sz=float(np.ptp(vals)))
     if m2 > 0:
-        m3, m4 = float(np.mean(d**3)), float(np.mean(d**4))
+        d2 = d * d
+        d3 = d2 * d
+        m3, m4 = float(np.mean(d3)), float(np.mean(d2 * d2))
         out["ssk"] = m3 / m2**1.5
         out["sku"] = m4 / m2**2
     okx, gx = _pairs(z, v, 1)
@@ -205,8 +207,8 @@ def areal_parameters(z, dx: float, dy: float, mask=None, error=None, error_maps=
     out["sz_err"] = max(hi - out["sz"], out["sz"] - lo)
     if m2 > 0:
         dm2 = 2 * d / n
-        dm3 = 3 * (d * d - m2) / n
-        dm4 = 4 * (d**3 - m3) / n
+        dm3 = 3 * (d2 - m2) / n
+        dm4 = 4 * (d3 - m3) / n
         g_sk = dm3 / m2**1.5 - 1.5 * m3 / m2**2.5 * dm2
         g_ku = dm4 / m2**2 - 2 * m4 / m2**3 * dm2
         out["ssk_err"] = float(np.sum(np.abs(g_sk) * ev))
@@ -246,6 +248,19 @@ def window(valid, dx: float, dy: float, kind: str = "tukey") -> np.ndarray:
     taper = d.max() * (TUKEY_TAPER if kind == "tukey" else 1.0)
     w = np.sin(0.5 * np.pi * np.minimum(d / taper, 1.0)) ** 2
     return np.where(valid, w, 0.0)
+
+
+_LAST_WINDOW: list = []
+
+
+def _window_of(valid, dx, dy, kind):
+    """:func:`window`, kept for the last region (a run's maps share one)."""
+    for key, w in _LAST_WINDOW:
+        if key[1:] == (dx, dy, kind) and np.array_equal(key[0], valid):
+            return w
+    w = window(valid, dx, dy, kind)
+    _LAST_WINDOW[:] = [((valid.copy(), dx, dy, kind), w)]
+    return w
 
 
 def default_bands(valid, dx: float, dy: float, form_period_mm: float | None = None,
@@ -313,7 +328,7 @@ def power_spectrum(z, dx: float, dy: float, mask=None, error=None, window_kind: 
         raise ValueError("power spectrum: the map has no valid node")
     e = _node_error(error, v)
     h, w_ = z.shape
-    wgt = window(v, dx, dy, window_kind)
+    wgt = _window_of(v, dx, dy, window_kind)
     sw, sw2 = float(wgt.sum()), float(np.sum(wgt * wgt))
     mean = float(np.sum(wgt[v] * z[v]) / sw)
     f = np.fft.fft2(np.where(v, (z - mean) * wgt, 0.0))
