@@ -434,3 +434,27 @@ def test_run_states_the_reconstructions_numerical_error(tmp_path):
             z = np.sqrt(np.mean(a * a))
             assert abs(z - st["rms_about_zero"]) <= 1.05 * st["rms_about_zero_err"] + 1e-9 * z
     assert "± " in (out / "kinematic" / "summary.txt").read_text().split("height error")[1]
+    # the areal parameters and PSDs of the same maps, with errors that cover the same move
+    from pmdsim.measure import areal
+
+    ar = stats["areal"]
+    dx, dy = (float(np.diff(ds[c].values[:2])[0]) for c in ("surface_x", "surface_y"))
+    for key, attr, var in (("height_error_nm", "height_nm", "height_error"),
+                           ("slope_error_x_urad", "slope_x_urad", "slope_error_x"),
+                           ("slope_error_y_urad", "slope_y_urad", "slope_error_y")):
+        st = ar[key]
+        assert st["sq"] == pytest.approx(stats[key]["rms"], rel=1e-9)
+        assert st["sq_err"] == pytest.approx(stats[key]["rms_err"], rel=1e-9)
+        assert st["n"] == stats[key]["n"]
+        bands = {b: (lo, np.inf if hi is None else hi)
+                 for b, (lo, hi) in st["psd"]["bands_per_mm"].items()}
+        m = getattr(moved, attr)
+        p2 = areal.power_spectrum(m, dx, dy, bands=bands)
+        psd, err = ds[f"{var}_psd"].values, ds[f"{var}_psd_err"].values
+        assert np.all(np.abs(p2.psd_radial - psd) <= 1.05 * err + 1e-9 * psd.max())
+        for b, v in st["psd"]["band_rms"].items():
+            assert abs(p2.band_rms[b] - v) <= 1.05 * st["psd"]["band_rms_err"][b] + 1e-9 * v
+        assert ds[f"{var}_psd_2d"].dims == ("psd_fy", "psd_fx")
+        assert ds[f"{var}_psd"].attrs["units"].endswith("^2 mm")
+    assert "reference_height_error_psd" in ds and "sq" in ar["reference_height_error_nm"]
+    assert (out / "kinematic" / "figures" / "surface_psd.png").is_file()

@@ -242,7 +242,29 @@ def reconstruction_text(name: str, rec: dict) -> str:
     if "reference_height_error_nm" in rec:
         r = rec["reference_height_error_nm"]
         lines.append(f"  specular reference (the chain's floor): height RMS {r['rms']:.3g} nm  PV {r['pv']:.3g} nm")
+    lines += areal_lines(rec.get("areal") or {})
     return "\n".join(lines) + "\n"
+
+
+def areal_lines(areal: dict) -> list[str]:
+    """summary.txt's lines of the areal parameters and band RMS of each error map
+    (``statistics.json`` -> ``reconstruction.areal``)."""
+    out = []
+    for key, what in (("height_error_nm", "height error"), ("slope_error_x_urad", "slope error x"),
+                      ("slope_error_y_urad", "slope error y")):
+        st = areal.get(key)
+        if not st or st.get("sq") is None:
+            continue
+        u = st["unit"]
+        psd = st.get("psd") or {}
+        rms, err = psd.get("band_rms") or {}, psd.get("band_rms_err") or {}
+        bands = ", ".join(f"{b} {value_pm({'v': v, 'v_err': err.get(b)}, 'v')}"
+                          for b, v in rms.items() if v is not None)
+        out.append(f"  ISO 25178, {what}: Sq {value_pm(st, 'sq')} {u}  Sa {value_pm(st, 'sa')} {u}  "
+                   f"Sz {value_pm(st, 'sz')} {u}  Ssk {value_pm(st, 'ssk')}  Sku {value_pm(st, 'sku')}  "
+                   f"Sdq {value_pm(st, 'sdq')} {st['sdq_unit']}; band RMS {bands} {u} "
+                   "(PSD: statistics.json, run.zarr, surface_psd.png)")
+    return out
 
 
 

@@ -2,8 +2,10 @@
 
 OUT/budget.csv (per effect and fringe direction), heights.csv (per effect: slope errors
 X/Y and height error after the removal, the calibration rows among them), zernike.csv (the
-Noll and Fringe tables of every height row, after removal), budget.json (all rows, the
-settings, the configuration) and budget.png; the folder is created atomically (:func:`pmdsim.run.files.atomic_run_dir`, marker ``pmdsim-budget.json``).
+Noll and Fringe tables of every height row, after removal), areal.csv (per height row and
+map: ISO 25178 areal parameters and band-limited RMS, :mod:`pmdsim.studies.budget_areal`),
+budget.json (all rows with their radial PSDs, the settings, the configuration), budget.png
+and budget_psd.png (the height rows' radial PSDs); the folder is created atomically (:func:`pmdsim.run.files.atomic_run_dir`, marker ``pmdsim-budget.json``).
 """
 
 from __future__ import annotations
@@ -77,6 +79,9 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
             _csv(tmp / "heights.csv", result.height_rows, HEIGHT_COLUMNS)
             _csv(tmp / "zernike.csv", zernike_rows(result.height_rows),
                  ("effect", "part", "order", "index", "n", "m", "coefficient", "removed"))
+            from ..studies.budget_areal import AREAL_COLUMNS, areal_rows
+
+            _csv(tmp / "areal.csv", areal_rows(result.height_rows), AREAL_COLUMNS)
         pio.write_json(tmp / "budget.json", {
             "name": cfg.name, "truth": truth, "settings": result.settings,
             "units": "every statistic X has its numerical error X_err (null: not stated)",
@@ -89,6 +94,11 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
             plot_budget(rows, tmp / "budget.png", title=f"{cfg.name}: error budget",
                         height_rows=result.height_rows, settings=result.settings)
             fig = final / "budget.png"
+            if result.height_rows:
+                from ..report.psd import plot_budget_psd
+
+                plot_budget_psd(result.height_rows, tmp / "budget_psd.png",
+                                title=f"{cfg.name}: error budget")
         (tmp / MARKER).write_text(json.dumps({"name": cfg.name, "kind": "budget"}) + "\n")
     return BudgetResult(rows, final, final / "budget.csv", fig, result.height_rows, result.settings,
                         tuple(notes))

@@ -239,7 +239,7 @@ def reconstruct(m: Member) -> None:
                                      m.reference.reconstruction)
     m.stats.update(rstats)
     coords = {}
-    for name in ("surface_x_mm", "surface_y_mm"):
+    for name in ("surface_x_mm", "surface_y_mm", *recon.PSD_COORDS):
         if name in rvars:
             dims, data, attrs = rvars.pop(name)
             coords[dims[0]] = (dims, data, attrs)

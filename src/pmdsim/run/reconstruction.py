@@ -62,12 +62,75 @@ def from_chain(cfg, scene, measured, reference_rec=None):
     if rec is None:
         return {}, {"reconstruction": {"error": problem}}
     stats = statistics(cfg, rec, err, reference_rec)
+    moves = None
     ex, ey = ((dc.numerical or {}).get("coord_px") for dc in (dx, dy))
     if ex is not None and ey is not None:  # the render's numerical error, carried through
         moved = moved_errors(cfg, scene, rec, u, v, ex, ey, valid)
         if moved is not None and moved.height_nm.shape == err.height_nm.shape:
             add_numerical_error(stats, err, moved)
-    return variables(rec, err, reference_rec), {"reconstruction": stats}
+            moves = {a: np.nan_to_num(getattr(moved, a) - getattr(err, a), nan=0.0)
+                     for a, _, _ in AREAL_MAPS}
+    avars, stats["areal"] = areal_of(rec, err, moves, reference_rec)
+    return {**variables(rec, err, reference_rec), **avars}, {"reconstruction": stats}
+
+
+#: The error maps that get areal parameters and PSDs: (SurfaceErrors attribute, dataset
+#: name, unit); ``statistics.json`` names them ``<name>_<unit>`` as the RMS/PV/P95.
+AREAL_MAPS = (("height_nm", "height_error", "nm"), ("slope_x_urad", "slope_error_x", "urad"),
+              ("slope_y_urad", "slope_error_y", "urad"))
+#: Coordinates of the PSD variables: 2-D spatial frequencies and the radial bins (1/mm).
+PSD_COORDS = ("psd_fx", "psd_fy", "psd_f")
+
+
+def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
+    """(dataset variables, statistics) of the areal parameters and PSDs of the surface
+    errors (:mod:`pmdsim.measure.areal`): per map its Sq ... Sdq, band RMS and radial PSD
+    (with their numerical errors from ``moves``, ``{attribute: (H, W)}``: each node's signed
+    change when the decoded coordinates move by their numerical error; its magnitude is the
+    node's error, the map of changes the PSDs' error spectrum), its 2-D and radial
+    PSD as variables; the reference's height error too (the chain's floor; exact, no
+    error). The bands are those of the height error's measured region, for every map."""
+    from ..measure import areal
+
+    dx, dy = rec.spacing
+    stats: dict = {"definitions": dict(areal.DEFINITIONS)}
+    out: dict = {}
+    valid = np.isfinite(err.height_nm)
+    if not valid.any():
+        return out, stats
+    bands = areal.default_bands(valid, dx, dy)
+    maps = [(getattr(err, a), name, unit, None if moves is None else moves[a])
+            for a, name, unit in AREAL_MAPS]
+    if reference_rec is not None and reference_rec[1].height_nm.shape == err.height_nm.shape:
+        maps.append((reference_rec[1].height_nm, "reference_height_error", "nm", None))
+    for z, name, unit, dz in maps:
+        st, p = areal.describe(z, dx, dy, unit, error=None if dz is None else np.abs(dz),
+                               bands=bands, error_maps=None if dz is None else [dz])
+        stats[f"{name}_{unit}"] = st
+        if p is None:
+            continue
+        if not out:
+            out["psd_fx"] = (("psd_fx",), p.fx, {"units": "1/mm", "description":
+                             "spatial frequency along the surface's local x (cycles per mm)"})
+            out["psd_fy"] = (("psd_fy",), p.fy, {"units": "1/mm", "description":
+                             "spatial frequency along the surface's local y (cycles per mm)"})
+            out["psd_f"] = (("psd_f",), p.frequency, {"units": "1/mm", "description":
+                            "radial spatial frequency: centre of each bin (width: psd_f[0])"})
+        what = f"{name.replace('_', ' ')} map"
+        out[f"{name}_psd"] = (("psd_f",), p.psd_radial, {
+            "units": f"{unit}^2 mm", "description": f"1-D radial PSD of the {what}: power of "
+            "each annulus of spatial frequency / bin width (pmdsim.measure.areal)"})
+        if name == "reference_height_error":
+            continue
+        out[f"{name}_psd_2d"] = (("psd_fy", "psd_fx"), p.psd_2d, {
+            "units": f"{unit}^2 mm^2", "description": f"2-D PSD of the {what}, tapered window "
+            "(pmdsim.measure.areal), centred on psd_fx, psd_fy"})
+        if p.psd_2d_err is not None:
+            out[f"{name}_psd_err"] = (("psd_f",), p.psd_radial_err, {
+                "units": f"{unit}^2 mm", "description": f"numerical error of {name}_psd"})
+            out[f"{name}_psd_2d_err"] = (("psd_fy", "psd_fx"), p.psd_2d_err, {
+                "units": f"{unit}^2 mm^2", "description": f"numerical error of {name}_psd_2d"})
+    return out, stats
 
 
 def moved_errors(cfg, scene, rec, u, v, ex, ey, valid):

@@ -55,6 +55,7 @@ from ..quantiles import percentile
 from ..render import Simulation
 from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
+from .budget_areal import areal_of
 from .budget_error import (HEIGHT_COLUMNS, HEIGHT_STATS, ROW_STATS, TABLE_COLUMNS,  # noqa: F401
                            at_order, difference_error, error_stats, estimator_label,
                            height_error_bounds, node_errors, second_estimate, stat_error,
@@ -477,9 +478,9 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             rows.append(_row(name, label, "system", d, dec.coord[d] - truth.coord[d], ok, truth, dec.seconds))
         if heights:
             rec, sec = rec_of(name, dec)
-            r = height_row(name, label, "system",
-                           height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc),
-                           dec.seconds + sec, "reconstruction minus the true surface")
+            herr = height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc)
+            r = height_row(name, label, "system", herr, dec.seconds + sec, "reconstruction minus the true surface")
+            r["areal"] = areal_of(herr, rec.spacing, exact=True)  # the mirror's render: exact
             hrows.append({**r, **{f"{k}_err": 0.0 for k in HEIGHT_STATS}})
         return dec
 
@@ -513,6 +514,7 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
                                 dec.valid, 0.0)
                 rm = reconstruct_decoded(cfg, scene, moved)
                 shifted.append(height_error(SurfaceMaps.of(rm), base, spec, disc))
+            row["areal"] = areal_of(herr, rec.spacing, shifted)  # areal parameters and PSDs
             hrows.append({**row, **height_error_bounds(herr, shifted)})
             ne = node_errors(herr, shifted)
             numerical_h[name] = HeightError(ne["slope_x_urad"], ne["slope_y_urad"], ne["height_nm"],
