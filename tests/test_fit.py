@@ -164,7 +164,8 @@ def test_a_fit_that_cannot_fit_the_machine_is_refused_before_the_images_are_read
     slow = d | {"compute": d["compute"] | {"max_cpu_hours": 1e-5}}
     with pytest.raises(ConfigError, match=r"sampling\.n_rays: the fit .*max_cpu_hours"):
         check_fit_resources(parse_config(slow))
-    huge = d | {"camera": d["camera"] | {"resolution": [40000, 30000]}}
+    huge = d | {"camera": d["camera"] | {"resolution": [40000, 30000],  # and a lens to match
+                                         "focal_length_px": 40000.0}}
     with pytest.raises(ConfigError, match=r"camera\.resolution: .* memory"):
         check_fit_resources(parse_config(huge))
     _write_toml(tmp_path / "slow.toml", slow)

@@ -189,7 +189,13 @@ def clean_heights(z, *, level="none", fill="error", outlier_sigma=None, what="he
         med = np.median(z[valid])
         mad = 1.4826 * np.median(np.abs(z[valid] - med))
         if mad > 0:
+            before = int(valid.sum())
             valid &= np.abs(z - med) <= outlier_sigma * mad
+            if valid.sum() < max(3, before // 2):
+                raise InputError(
+                    f"{what}: outlier_sigma = {outlier_sigma:g} marks {before - int(valid.sum())} "
+                    f"of {before} measured points as outliers (robust sigma {mad:.3g}); an outlier "
+                    "is a rare point: raise outlier_sigma (5 is usual) or leave it unset")
             z = _level(np.where(valid, z, np.nan), valid, level)
     invalid = int((~valid).sum())
     if invalid:

@@ -22,6 +22,10 @@ SIGTERM stop a run, remove its temporary folder and exit with 130 / 143.
 
 from __future__ import annotations
 
+from .interrupt import install as _install_interrupt
+
+_install_interrupt()  # Ctrl-C during the start-up: one line, exit 130 (no traceback)
+
 from ..run.pages import hugepages_at_start
 from ..run.threads import blas_pool_at_start
 

@@ -88,18 +88,11 @@ def simulate(
         check_free(output)
     except OutputBusy as err:
         _fail(str(err))
-    from ..config import load_config
-
     console = _console()
     with _guard():
-        cfg = load_config(config)
-        if target_error_mrad is not None:
-            from ..config import ConfigError
+        from ..config import load_config, with_target_error
 
-            if not target_error_mrad > 0:
-                raise ConfigError(f"--target-error-mrad must be > 0, got {target_error_mrad}")
-            cfg = cfg.model_validate({**cfg.model_dump(), "sampling": {
-                **cfg.sampling.model_dump(), "target_error_mrad": target_error_mrad}})
+        cfg = with_target_error(load_config(config), target_error_mrad)  # field-named errors
         from ..report.text import warning_text
         from ..run import run_simulation
         from ..run.files import check_output_dir

@@ -167,11 +167,16 @@ def budget(
     heights.csv, zernike.csv, budget.json, budget.png (docs/system.md). Every row is
     "value ± numerical error"; the surface is rendered with the radiometric estimator unless
     CONFIG names one."""
+    console = _console()
+    with _guard():  # Ctrl-C: one line, exit 130 (the run's temporary folder is removed)
+        _budget(console, config, output, no_figure, overwrite, truth, target_error_mrad)
+
+
+def _budget(console, config, output, no_figure, overwrite, truth, target_error_mrad) -> None:
     from ..config import ConfigError, load_config, physical_estimator, with_target_error
     from ..report.budget import budget_text
     from ..run.budget import run_budget
 
-    console = _console()
     try:
         cfg = with_target_error(physical_estimator(load_config(config)), target_error_mrad)
         t0 = time.perf_counter()

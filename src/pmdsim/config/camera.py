@@ -12,6 +12,12 @@ from .base import (Coord, Float, Int, Length, PositiveFloat, ResolutionAxis, Vec
     _nonzero_vector, _unit)
 
 
+#: The widest diagonal field of view of a pinhole camera that is accepted (deg): beyond it
+#: the image plane is ~25 focal lengths across, a unit slip (38.4 um of pitch as 38.4 mm
+#: gives 179.8 deg on Fig. 3's camera), not a lens (a rectilinear lens stops near 130 deg).
+MAX_FIELD_OF_VIEW_DEG = 175.0
+
+
 class CameraConfig(_Model):
     """Pinhole (``projection = "perspective"``) or object-side telecentric camera. Pose by
     ``position_mm`` + ``look_at_mm`` + ``up``, or by an explicit ``rotation`` (3x3, columns
@@ -107,6 +113,29 @@ class CameraConfig(_Model):
             return (self.roi[2], self.roi[3])
         return tuple(self.resolution)
 
+    def _check_field_of_view(self) -> None:
+        """A pinhole's diagonal field of view beyond :data:`MAX_FIELD_OF_VIEW_DEG` is a unit
+        slip (a pitch in um given as mm, a focal length in m), not a PMD camera."""
+        w, h = self.resolution
+        if self.camera_matrix is not None:
+            fx, fy = self.camera_matrix[0][0], self.camera_matrix[1][1]
+            what = "camera_matrix"
+        elif self.focal_length_px is not None:
+            fx = fy = self.focal_length_px
+            what = f"focal_length_px = {self.focal_length_px:g}"
+        else:
+            fx = fy = self.focal_length_mm / self.pixel_pitch_mm
+            what = (f"focal_length_mm = {self.focal_length_mm:g} over pixel_pitch_mm = "
+                    f"{self.pixel_pitch_mm:g} (a sensor of {w * self.pixel_pitch_mm:.4g} x "
+                    f"{h * self.pixel_pitch_mm:.4g} mm)")
+        fov = 2 * math.degrees(math.atan(math.hypot(w / (2 * fx), h / (2 * fy))))
+        if fov > MAX_FIELD_OF_VIEW_DEG:
+            raise ValueError(
+                f"the camera's field of view is {fov:.4g} deg across the diagonal ({what}, "
+                f"{w} x {h} px), beyond the {MAX_FIELD_OF_VIEW_DEG:g} deg a pinhole camera can "
+                "image: check the units (pixel_pitch_mm is in mm: 3.45 um = 0.00345; "
+                "focal_length_mm in mm)")
+
     @model_validator(mode="after")
     def _check(self) -> "CameraConfig":
         if self.projection == "telecentric":
@@ -153,6 +182,7 @@ class CameraConfig(_Model):
                 raise ValueError(
                     "focal_length_px contradicts focal_length_mm / pixel_pitch_mm: give one"
                 )
+        self._check_field_of_view()
         if isinstance(self.roi, tuple):
             c0, r0, w, h = self.roi
             if c0 + w > self.resolution[0] or r0 + h > self.resolution[1]:

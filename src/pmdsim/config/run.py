@@ -132,7 +132,8 @@ def with_target_error(cfg: "RunConfig", target_error_mrad: float | None) -> "Run
     try:
         return with_sampling(cfg, target_error_mrad=float(target_error_mrad))
     except ValueError as err:
-        why = "; ".join(e["msg"] for e in err.errors()) if hasattr(err, "errors") else str(err)
+        why = ("; ".join(e["msg"].removeprefix("Value error, ") for e in err.errors())
+               if hasattr(err, "errors") else str(err))
         raise ConfigError(f"--target-error-mrad: {why}") from None
 
 def _check_variation_model(brdf, where: str) -> None:

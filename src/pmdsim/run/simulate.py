@@ -163,7 +163,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         geometry = plan.sim.geometry()
         # a set-up that sees nothing stops here, before any scattered ray is traced
         view = coverage.check_view(geometry.surface_mask, geometry.monitor_mask,
-                                   cfg.diagnostics.min_view_fraction)
+                                   cfg.diagnostics.min_view_fraction, roi=cfg.camera.roi)
         if view.warning:
             plan.notes.append(view.warning)
         t_geometry = time.perf_counter() - t

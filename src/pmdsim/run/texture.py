@@ -54,13 +54,17 @@ def run_topography(path, outdir=None, *, figure: bool = True, spacing_mm=None,
     local frame (:func:`pmdsim.brdf.topography.analyse`) and write topography.json,
     topography.txt and topography.png to ``outdir`` if given."""
     from ..brdf import topography as tp
+    from ..config import InputError
     from ..report.texture import plot_topography
     from ..topofile import read_topography
 
     t = read_topography(path, "--from", spacing_mm=spacing_mm, height_unit=height_unit,
                         level=level, fill=fill, outlier_sigma=outlier_sigma)
     h, dx, dy = tp.to_local(t.heights, t.dx, t.dy, radial_axis)
-    a = tp.analyse(h, dx, dy, wavelength_nm, incidence_deg, source=str(path))
+    try:
+        a = tp.analyse(h, dx, dy, wavelength_nm, incidence_deg, source=str(path))
+    except tp.FlatTopography as err:
+        raise InputError(f"--from {path}: {err}") from None
     n = t.heights.size
     outliers = t.invalid - t.not_measured
     text = tp.format_analysis(a) + (
