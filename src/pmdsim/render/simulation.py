@@ -73,6 +73,10 @@ class TargetNotMet(UserWarning):
     """The target of the stated phase error was not met within ``max_rays``."""
 
 
+class RuleTooSmall(UserWarning):
+    """A rule too small to state its numerical error (its phase is stated as unknown)."""
+
+
 class Simulation:
     """Render patterns of one :class:`~pmdsim.scene.Scene` through its light transport.
 
@@ -540,7 +544,7 @@ class Simulation:
             warnings.warn(
                 f"sampling.n_rays = {n}: a rule of {rule.n} nodes is too small to state its "
                 f"numerical error (it is stated as unknown, pi); raise sampling.n_rays to >= "
-                f"{pl.MIN_NODES} (or set sampling.target_error_mrad)", RuntimeWarning,
+                f"{pl.MIN_NODES} (or set sampling.target_error_mrad)", RuleTooSmall,
                 stacklevel=3)
         if samp.target_error is not None:
             worst = worst_phase_error(fr)
