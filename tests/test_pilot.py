@@ -46,7 +46,8 @@ def coverage(stated, true) -> tuple[float, float]:
     ok = np.isfinite(stated) & np.isfinite(true)
     stated, true = stated[ok], true[ok]
     nz = true > 0
-    return float(np.mean(stated >= true)), float(np.median(stated[nz] / true[nz]))
+    med = float(np.median(stated[nz] / true[nz])) if nz.any() else 0.0
+    return float(np.mean(stated >= true)), med
 
 
 def covers(stated, true, share=0.95, ratio=5.0) -> bool:
@@ -302,21 +303,21 @@ def test_odd_and_even_azimuth_counts(n_rays):
         assert true.max() < 1e-5
 
 
-def test_local_pilot_where_the_lobe_leaves_the_monitor():
-    """Pixels whose lobe hangs over the monitor's edge take their own pilot (the envelope
-    would carry a smooth field across the step): a monitor shifted so that its edge crosses
-    the view; the statement there still bounds the error against 4096 nodes."""
+def test_statement_where_the_lobe_leaves_the_monitor():
+    """Pixels whose lobe hangs over the monitor's edge (a step in the integrand, where a
+    rule and the one 4 x finer can agree to 1/30 of their error) add the edge's bound: a
+    monitor narrowed so that its edge crosses the view; the statement there bounds the
+    error against 1024 nodes, and is zero where the lobe is whole."""
     def shifted(n):
         d = fig3(n_rays=n)
         d["monitor"]["resolution"] = [900, 1080]
         return d
 
     _, fr = render(shifted(64))
-    assert fr.sampling["pilot"]["local_pixels"] > 0
     _, ref = render(shifted(1024))
     true = wrapped(decoded_phase(fr) - decoded_phase(ref))
     with np.errstate(invalid="ignore"):
-        edge = (1 - fr.f_hit / fr.f_total) > pl.OFF_MONITOR_SMOOTH
+        edge = (1 - fr.f_hit / fr.f_total) > 1e-12
     st = fr.phase_error()
     assert edge.any()
     for di in range(2):

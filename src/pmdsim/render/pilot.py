@@ -15,12 +15,14 @@ fixed rule. The pilot measures that error where it is cheap and carries it to ev
 - **envelope**: every pixel's statement is :data:`SAFETY` times the largest measured error
   over the 3 x 3 grid pixels around its block (the block's own and its eight neighbours':
   every pixel of the block lies between them);
-- **local fallback** where the field need not be smooth: pixels whose 3 x 3 grid pixels
-  are not all valid (the surface's or the mask's edge, a grid pixel off the monitor) or
-  whose lobe or a grid pixel's lobe is cut by the monitor's edge (a share of the weight
-  above :data:`OFF_MONITOR_SMOOTH` off the monitor: a step in the integrand): there the
+- **local fallback** where the grid says nothing: pixels whose 3 x 3 grid pixels are not
+  all valid (the surface's or the mask's edge, a grid pixel off the monitor): there the
   two rules are rendered at the pixel itself and the statement is :data:`SAFETY` times
   their own difference;
+- **the monitor's edge**: where it cuts a lobe the integrand has a step, across which the
+  rules converge only erratically (a rule and the one 4 x finer can agree to 1/30 of
+  their error): each pixel adds the bound :func:`edge_bound` of what misplacing the weight
+  beyond the edge can do (zero where the whole lobe is on the monitor);
 - **floors** that do not shrink with the order, added: the images' float32 storage
   (``2^-24 sum_k |I_k| / |Z|`` per pixel: every image rounded to nearest, a bound) and the
   kernels' arithmetic (:data:`~pmdsim.render.results.ROUNDOFF_PHASE`).
@@ -57,9 +59,6 @@ FINE_FACTOR = 4
 SAFETY = 2.0
 #: Rules below this many nodes state no error (pi: the phase is known to within pi).
 MIN_NODES = 16
-#: Share of a lobe's weight off the monitor from which the integrand has a step there
-#: (the envelope is not trusted; the pixel's own pilot is rendered).
-OFF_MONITOR_SMOOTH = 1e-9
 #: Relative rounding of a float32 image value (round to nearest).
 F32_EPS = 2.0**-24
 
@@ -96,17 +95,26 @@ class Layout:
     coef: np.ndarray | None = None
     g: np.ndarray | None = None
 
+    @property
+    def lmax(self) -> float:
+        """The largest luminance the display shows (the weight's worth at most)."""
+        if self.g is not None:
+            return float(np.max(np.abs(self.g)))
+        return float(max(abs(self.black), abs(self.white)))
+
     def phasors(self, out: np.ndarray, norm: np.ndarray):
-        """``(Z, floor, mod)`` (B, P) of raw sums ``out`` (P, C) normalised by ``norm`` (P,):
+        """``(Z, floor, mod, edge)`` (B, P) of raw sums ``out`` (P, C) normalised by ``norm`` (P,):
         ``Z = sum_k I_k exp(-i delta_k)`` whose argument the decoder returns (on a linear
         display the fringe sum itself), the images' float32 floor (:func:`image_floor`) and the
         fringe's modulation ``B / A`` as the decoder sees it (``2 |Z| / K`` over the images'
-        mean)."""
+        mean) and the phase change per unit share of the weight misplaced
+        (:func:`edge_bound`)."""
         f_hit = out[:, kb.OUT_FHIT] * norm
         nb = len(self.cols)
         z = np.empty((nb, out.shape[0]), np.complex128)
         floor = np.empty((nb, out.shape[0]))
         mod = np.empty((nb, out.shape[0]))
+        edge = np.empty((nb, out.shape[0]))
         span = self.white - self.black
         with np.errstate(divide="ignore", invalid="ignore"):
             for b, c in enumerate(self.cols):
@@ -131,7 +139,10 @@ class Layout:
                     mod[b] = 2.0 * np.abs(0.25 * span * k * z[b]) / k / (sum(imgs) / k)
                 else:
                     mod[b] = 2.0 * np.abs(z[b]) / k / (sum(imgs) / k)
-        return z, floor, mod
+                ftot = np.abs(out[:, kb.OUT_FTOTAL] * norm)
+                zi = sum(im * np.exp(-1j * d) for im, d in zip(imgs, self.deltas))
+                edge[b] = k * ftot * self.lmax / np.abs(zi)
+        return z, floor, mod, edge
 
 
 def image_floor(images: np.ndarray, deltas) -> np.ndarray:
@@ -168,6 +179,24 @@ def _f32_floor(imgs, deltas) -> np.ndarray:
         var = var + (u * u / 12.0) * np.sin(phi + d) ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
         return F32_SIGMAS * np.sqrt(var) / np.abs(z)
+
+
+def edge_bound(images: np.ndarray, deltas, f_total, off, lmax: float) -> np.ndarray:
+    """(nd, nw, H, W) rad: a bound of the phase error a step in the integrand at the
+    monitor's edge can add where a share ``off`` of the lobe's weight ``f_total`` falls
+    beyond it: the rule can misplace at most twice that weight (its own share and the true
+    one), each image then moves by at most that weight times the display's largest
+    luminance ``lmax``, and the decoded ``Z = sum_k I_k exp(-i delta_k)`` by K times it."""
+    k = images.shape[2]
+    rot = np.exp(-1j * np.asarray(deltas))
+    w = 2.0 * np.nan_to_num(np.asarray(off, np.float64), nan=1.0).clip(0.0, 1.0) * np.abs(f_total)
+    out = np.empty(images.shape[:2] + images.shape[3:])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for di in range(images.shape[0]):
+            for wi in range(images.shape[1]):
+                z = sum(images[di, wi, j].astype(np.float64) * rot[j] for j in range(k))
+                out[di, wi] = np.where(w > 0, k * w * lmax / np.abs(z), 0.0)
+    return out
 
 
 def render_pixels(sim, samp, rows, cols, mode, ncols, patterns) -> np.ndarray:
@@ -234,12 +263,14 @@ def normalise(out: np.ndarray, estimator: str, n_rays: int) -> np.ndarray:
 @dataclass
 class Probe:
     """One rule's phasors at the pilot pixels: ``z`` (B, P) complex, ``floor`` (B, P) its
-    float32 floor, ``mod`` (B, P) the fringe's modulation, ``off`` (P,) the share of each lobe's weight off the monitor and
+    float32 floor, ``mod`` (B, P) the fringe's modulation, ``edge`` (B, P) the phase
+    change per unit of the lobe's weight share misplaced (:func:`edge_bound`), ``off`` (P,) the share of each lobe's weight off the monitor and
     ``nodes`` per pixel."""
 
     z: np.ndarray
     floor: np.ndarray
     mod: np.ndarray
+    edge: np.ndarray
     off: np.ndarray
     nodes: int
 
@@ -283,11 +314,11 @@ class Pilot:
         samp = self.sampling(n_rays)
         out = render_pixels(self.sim, samp, rows, cols, self.mode, self.ncols, self.patterns)
         norm = normalise(out, self.sim.scene.estimator, n_rays)
-        z, floor, mod = self.layout.phasors(out, norm)
+        z, floor, mod, edge = self.layout.phasors(out, norm)
         with np.errstate(divide="ignore", invalid="ignore"):
             ft = np.abs(out[:, kb.OUT_FTOTAL])
             off = np.where(ft > 0, 1.0 - np.abs(out[:, kb.OUT_FHIT]) / ft, 0.0)
-        p = Probe(z, floor, mod, off, samp.rule(self.sim._lobe).n)
+        p = Probe(z, floor, mod, edge, off, samp.rule(self.sim._lobe).n)
         if grid:
             self.probes[n_rays] = p
         return p
@@ -302,13 +333,6 @@ class Pilot:
         e[~(np.isfinite(a.z) & np.isfinite(b.z) & (np.abs(a.z) > 0) & (np.abs(b.z) > 0))] = np.nan
         return e.reshape(e.shape[0], self.rows.size, self.cols.size)
 
-    def smooth_nodes(self, n_rays: int) -> np.ndarray:
-        """(gh, gw) grid pixels whose lobe lies on the monitor (both rules)."""
-        a, b = self.probe(n_rays), self.probe(FINE_FACTOR * n_rays)
-        ok = (np.nan_to_num(a.off, nan=1.0) <= OFF_MONITOR_SMOOTH) & (
-            np.nan_to_num(b.off, nan=1.0) <= OFF_MONITOR_SMOOTH)
-        return ok.reshape(self.rows.size, self.cols.size)
-
     # ------------------------------------------------------------------ statements
     def envelope(self, n_rays: int) -> tuple[np.ndarray, np.ndarray]:
         """``(env, trusted)``: (B, gh, gw) :data:`SAFETY` times the largest measured error
@@ -317,7 +341,7 @@ class Pilot:
         from scipy.ndimage import maximum_filter, minimum_filter
 
         e = self.measured(n_rays)
-        good = np.isfinite(e).all(axis=0) & self.smooth_nodes(n_rays)
+        good = np.isfinite(e).all(axis=0)
         trusted = minimum_filter(good.astype(np.uint8), size=3, mode="nearest") > 0
         env = np.stack([maximum_filter(np.where(np.isfinite(x), x, 0.0), size=3, mode="nearest")
                         for x in e])
@@ -330,27 +354,28 @@ class Pilot:
         env, trusted = self.envelope(n_rays)
         own = SAFETY * self.measured(n_rays)
         p = self.probe(n_rays)
-        floor = p.floor.reshape(own.shape) + ROUNDOFF_PHASE
+        floor = (p.floor + 2.0 * np.nan_to_num(p.off, nan=1.0) * p.edge).reshape(own.shape)
+        floor = floor + ROUNDOFF_PHASE
         out = np.where(trusted[None], env, own) + floor
         if p.nodes < MIN_NODES:
             out = np.where(np.isfinite(out), math.pi, out)
         return out
 
     def statement(self, n_rays: int, sums_ok: np.ndarray, images: np.ndarray, deltas,
-                  off: np.ndarray) -> tuple[np.ndarray, int]:
+                  off: np.ndarray, f_total: np.ndarray) -> tuple[np.ndarray, int]:
         """(B, H, W) rad: the stated phase error of the rendered rule of ``n_rays`` at every
         pixel (module docstring), and the number of pixels that took their own pilot.
         ``sums_ok`` (H, W): pixels with a valid render; ``images`` (nd, nw, K, H, W) the
         rendered images (their float32 floor); ``off`` (H, W) the share of each lobe's
-        weight off the monitor in the render."""
+        weight off the monitor in the render and ``f_total`` (H, W) its weight
+        (:func:`edge_bound`)."""
         h, w = self.shape
         s = self.stride
         env, trusted = self.envelope(n_rays)
         bi = np.minimum(np.arange(h) // s, self.rows.size - 1)
         bj = np.minimum(np.arange(w) // s, self.cols.size - 1)
         stated = env[:, bi][:, :, bj]
-        local = sums_ok & ~(trusted[bi][:, bj]) | (
-            sums_ok & (np.nan_to_num(off, nan=1.0) > OFF_MONITOR_SMOOTH))
+        local = sums_ok & ~(trusted[bi][:, bj])
         rr, cc = np.nonzero(local)
         if rr.size:
             a = self.probe(n_rays, rr, cc)
@@ -361,7 +386,8 @@ class Pilot:
             stated[:, rr, cc] = SAFETY * e
         nd, nw = images.shape[:2]
         stated = stated.reshape(nd, nw, h, w)
-        stated = stated + image_floor(images, deltas) + ROUNDOFF_PHASE
+        stated = (stated + image_floor(images, deltas) + ROUNDOFF_PHASE
+                  + edge_bound(images, deltas, f_total, off, self.layout.lmax))
         if self.probe(n_rays).nodes < MIN_NODES:
             stated = np.where(np.isfinite(stated), math.pi, stated)
         stated = np.minimum(stated, math.pi)

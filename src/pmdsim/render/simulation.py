@@ -530,7 +530,7 @@ class Simulation:
         with np.errstate(divide="ignore", invalid="ignore"):
             off = 1.0 - np.abs(fr.f_hit) / np.abs(fr.f_total)
         ok = np.isfinite(fr.f_total) & np.isfinite(fr.f_hit)
-        stated, n_local = pilot.statement(n, ok, fr.images, fr.shifts, off)
+        stated, n_local = pilot.statement(n, ok, fr.images, fr.shifts, off, fr.f_total)
         info = main.describe_sampling(True)
         rule = main.scene.sampling.rule(self._lobe)
         fine = pilot.sampling(pl.FINE_FACTOR * n).rule(self._lobe)
