@@ -520,24 +520,36 @@ class Simulation:
         widths = tuple(float(w) for w in widths)
         lay, ku, kv, ncols = self._harmonic_layout(widths, tuple(directions), shifts)
         pilot = pl.Pilot(self, lay, kb.MODE_HARMONIC, ncols, {"k_u": ku, "k_v": kv}, self.shape)
-        tried = None
+        tried, renders = None, 0
         n = samp.n_rays
         if samp.target_error is not None:
             n, _, tried = pl.choose_order(pilot, samp.n_rays, samp.target_error, samp.max_rays)
-        main = self.with_sampling(replace(samp, n_rays=n, error_estimate=False,
-                                          target_error=None, max_rays=max(samp.max_rays, n)))
-        fr = main._fringes_once(widths, directions, shifts, progress)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            off = 1.0 - np.abs(fr.f_hit) / np.abs(fr.f_total)
-        ok = np.isfinite(fr.f_total) & np.isfinite(fr.f_hit)
-        stated, n_local = pilot.statement(n, ok, fr.images, fr.shifts, off, fr.f_total)
+        while True:
+            main = self.with_sampling(replace(samp, n_rays=n, error_estimate=False,
+                                              target_error=None, max_rays=max(samp.max_rays, n)))
+            fr = main._fringes_once(widths, directions, shifts, progress)
+            renders += 1
+            with np.errstate(divide="ignore", invalid="ignore"):
+                off = 1.0 - np.abs(fr.f_hit) / np.abs(fr.f_total)
+            ok = np.isfinite(fr.f_total) & np.isfinite(fr.f_hit)
+            stated, n_local = pilot.statement(n, ok, fr.images, fr.shifts, off, fr.f_total)
+            if samp.target_error is None or 2 * n > samp.max_rays:
+                break
+            worst = worst_phase_error(replace(fr, stated_phase_error=stated))
+            if worst is not None and worst <= samp.target_error:
+                break
+            # the grid did not see what the whole camera states (its local pixels, the
+            # monitor's edge): the next order the pilot accepts from twice this one
+            n, _, more = pl.choose_order(pilot, 2 * n, samp.target_error, samp.max_rays)
+            tried += more
         info = main.describe_sampling(True)
         rule = main.scene.sampling.rule(self._lobe)
         fine = pilot.sampling(pl.FINE_FACTOR * n).rule(self._lobe)
         info.update(error="pilot", passes=1, pilot={
             "grid_step_px": pilot.stride, "grid_pixels": int(pilot.rows.size * pilot.cols.size),
             "finer_rule": fine.describe(), "safety": pl.SAFETY, "local_pixels": n_local,
-            "orders_tried": None if tried is None else [t[0] for t in tried]})
+            "orders_tried": None if tried is None else [t[0] for t in tried],
+            "camera_renders": renders})
         fr = replace(fr, stated_phase_error=stated, sums_err=None, convergence=None,
                      sampling=info)
         if rule.n < pl.MIN_NODES:
