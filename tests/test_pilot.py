@@ -446,3 +446,37 @@ def test_budget_sensor_p95_moves_less_than_its_error_between_targets(targets):
         a, b = lo[("surface", d)], hi[("surface", d)]
         for q in ("mrad", "px", "urad"):
             assert abs(a[f"p95_{q}"] - b[f"p95_{q}"]) <= a[f"p95_{q}_err"], (d, q)
+
+
+def test_lobe_width_of_the_box_rule_is_a_lower_bound_across_the_gate():
+    """The lobe width that decides the box rule (pmdsim.render.control.lobe_widths, from a
+    12 x 12 grid of pixels) is a lower bound of every whole lobe's width on the monitor
+    (weighted std. of its rays' monitor coordinates), on a camera whose lobes lie on both
+    sides of the 3 px gate: the box rule is then not taken."""
+    from conftest import make_config
+
+    from pmdsim.render import control
+
+    sim = Simulation.from_config(make_config(
+        brdf={"alpha_x": 0.03, "alpha_y": 0.0105}, monitor={"pixel_model": "nearest"},
+        sampling={"estimator": "radiometric", "mode": "rule", "n_rays": 64}))
+    h, w = sim.shape
+    rr, cc = np.mgrid[0:h, 0:w]
+    u, v, wt, _, _, f_total = sim.transport(rr.ravel(), cc.ravel(), directions=False,
+                                             totals=True)
+    ok = (wt > 0) & np.isfinite(u) & np.isfinite(v)
+    wt = np.where(ok, wt, 0.0)
+    tot = wt.sum(axis=1)
+    # whole lobes (the monitor's edge has its own bound, control.edge_bound)
+    use = (tot > 0) & (tot >= (1 - 1e-9) * f_total)
+    widths = {}
+    for name, c in (("x", u), ("y", v)):
+        c = np.where(ok, c, 0.0)[use]
+        ww = wt[use] / tot[use, None]
+        mean = (ww * c).sum(axis=1)
+        widths[name] = np.sqrt((ww * (c - mean[:, None]) ** 2).sum(axis=1))
+    assert widths["y"].min() < control.BOX_SIGMA_MIN < widths["y"].max()
+    sig = control.lobe_widths(sim)
+    for name in ("x", "y"):
+        assert sig[name] <= widths[name].min(), name
+    assert control.box_plan(sim, [20.0], True)[0] is None
