@@ -114,6 +114,12 @@ def physical_estimator(cfg: "RunConfig") -> "RunConfig":
 def with_sampling(cfg: "RunConfig", **changes) -> "RunConfig":
     """``cfg`` with ``changes`` to ``[sampling]``, validated; the fields the configuration
     set explicitly stay marked as set (:func:`physical_estimator` reads them)."""
+    from .sampling import DEFAULT_TARGET_MRAD, DEFAULT_TARGET_START
+
+    s = cfg.sampling
+    if ("n_rays" in changes and "target_error_mrad" not in changes
+            and s.n_rays == DEFAULT_TARGET_START and s.target_error_mrad == DEFAULT_TARGET_MRAD):
+        changes = {**changes, "target_error_mrad": None}  # the default target: n_rays alone
     given = set(cfg.sampling.model_fields_set) | set(changes)
     full = type(cfg).model_validate({**cfg.model_dump(), "sampling": {**cfg.sampling.model_dump(),
                                                                       **changes}})

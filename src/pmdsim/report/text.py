@@ -31,7 +31,15 @@ def summary_text(stats: dict, timings: dict | None = None) -> str:
             line += f"; numerical error from the embedded {smp.get('embedded_rule')}"
         elif smp.get("error") == "replicates":
             line += f"; numerical error from {smp.get('passes')} replicates"
+        elif smp.get("error") == "pilot":
+            pil = smp.get("pilot") or {}
+            line += (f"; numerical error measured against the {pil.get('finer_rule')} on "
+                     f"{pil.get('grid_pixels')} pilot pixels (every {pil.get('grid_step_px')}th "
+                     f"row and column) and {pil.get('local_pixels')} local ones, times "
+                     f"{pil.get('safety')}, plus float32 floors")
         line += ")"
+        if smp.get("rays_traced") is not None:
+            line += f"; {smp['rays_traced']:,} rays traced, pilot included"
         if smp.get("target_error_mrad") is not None:
             line += (f"; target {smp['target_error_mrad']:g} mrad "
                      f"{'met' if smp.get('target_met') else 'NOT met'} at n_rays = "
@@ -140,6 +148,7 @@ def diagnostics_text(name: str, d: dict) -> str:
                      f"min {_fmt(d['ess_min'], '.1f')} of {d['n_rays']} rays")
     if "phase_se_rad" in d:
         how = {"seeds": "spread over independent rotations of the sample set",
+               "pilot": "the render's statement: the rule against a 4 x finer one on a pilot grid",
                "rule": "the stated error of the rule rendered (embedded rules or replicates)",
                }.get(d["phase_se_method"], "N independent rays, an upper bound for the lattice")
         lines.append(f"phase standard error ({d['phase_se_method']} method: {how}), mrad, "

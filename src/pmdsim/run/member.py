@@ -101,9 +101,26 @@ def render(m: Member) -> None:
     dots, _, levels, n_tiles = m.inputs
     fr_cfg = cfg.patterns.fringes
     if fr_cfg is not None:
+        import warnings
+
+        from ..render.simulation import RuleTooSmall, TargetNotMet
+
         base = steps.done
-        m.fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
-                                       progress=steps.tiles(n_tiles))
+        with warnings.catch_warnings(record=True) as caught:  # a note each, no source path
+            warnings.simplefilter("always", TargetNotMet)
+            warnings.simplefilter("always", RuleTooSmall)
+            m.fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
+                                           progress=steps.tiles(n_tiles))
+        for w in caught:
+            if issubclass(w.category, (TargetNotMet, RuleTooSmall)):
+                m.notes.append(str(w.message))
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        smp = m.fringes.sampling or {}
+        if smp.get("n_rays") not in (None, sim.scene.sampling.n_rays):
+            # a target's pick: the rule rendered is what the rest of the run speaks of
+            m.sim = sim = sim.with_sampling(replace(sim.scene.sampling, n_rays=smp["n_rays"],
+                                                    target_error=None))
         steps.finish_render(base, n_tiles)
     if dots:
         base = steps.done
@@ -114,6 +131,8 @@ def render(m: Member) -> None:
         base = steps.done
         m.images = sim.render_images(levels, progress=steps.tiles(n_tiles))
         steps.finish_render(base, n_tiles)
+    if m.fringes is not None and m.fringes.sampling is not None:  # every ray, pilot included
+        m.fringes.sampling["rays_traced"] = sim.rays_traced
     # nothing empty is written as if it were a result; bundles off the monitor are flagged
     coverage.check_rendered(None if m.fringes is None else m.fringes.images, m.dot_images)
     m.off_monitor = None if m.fringes is None else coverage.off_monitor_mask(
@@ -139,6 +158,15 @@ def capture(m: Member) -> None:
 def describe_error(sampling: dict | None) -> str:
     """How a render's numerical error was estimated, in words."""
     s = sampling or {}
+    if s.get("error") == "pilot":
+        p = s.get("pilot") or {}
+        return (f"{s.get('rule')}: its phase difference to the {p.get('finer_rule')} on a grid "
+                f"of every {p.get('grid_step_px')}th row and column, times {p.get('safety')}, "
+                "carried to each pixel by the largest over the 3 x 3 grid pixels around it "
+                f"(the pixel's own difference at {p.get('local_pixels')} pixels where a lobe "
+                "leaves the monitor or the grid is incomplete), plus the float32 storage of "
+                "the images (3 sigma) and the kernels' round-off; pi for rules of fewer than "
+                "16 nodes")
     if s.get("error") == "embedded":
         return (f"{s.get('rule')} against the embedded {s.get('embedded_rule')}: the phase "
                 "difference to the first embedded rule plus 0.1 |dS|/|S| (its error, a bound), "
@@ -354,40 +382,19 @@ def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder
     return result(m), m.ds
 
 
-def _passes_share(sim, smooth: bool, mask) -> float:
-    """The rays of all the sample sets of one render call (:meth:`Simulation.plan`) per
-    ``n_rays`` and surface pixel (``mask``): 1 + about 0.56 for a rule with its embedded
-    rule, + 0.25 for the second embedded rule on every pixel (on a large camera only on a
-    grid of them: :func:`pmdsim.render.rows.convergence_stride`), else 1."""
-    from ..render.rows import convergence_stride, grid_share
-
-    passes = sim.plan(smooth)
-    if sim.scene.brdf.is_delta or passes[0].mode != "rule":
-        return 1.0
-    cam = sim.scene.camera
-    return sum(p.rule(sim._lobe).n * grid_share(mask, convergence_stride(p, cam))
-               for p in passes) / max(sim.scene.rays_per_pixel, 1)
-
-
 def result(m: Member) -> RunResult:
     """The :class:`RunResult` of a finished member."""
     sim = m.sim
-    # every pass of a call: a rule's embedded rules add their nodes (rqmc's replicates
-    # share n_rays; the other modes render one set)
-    from ..render import control
-
     mask = m.geometry.surface_mask
-    fringe_share = (control.rays_share(sim, m.fringes.sampling["mode"])
-                    if m.fringes is not None and control.applies(sim)
-                    else _passes_share(sim, sim.fringes_smooth(), mask))
-    n_calls = ((m.cfg.patterns.fringes is not None) * fringe_share
-               + (bool(m.dots) + (m.inputs[2] is not None)) * _passes_share(sim, False, mask))
-    rays = sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel
+    # the rule rendered (a target's pick) and every ray the kernels traced, pilot included
+    nodes = (m.fringes.sampling.get("nodes") if m.fringes is not None and m.fringes.sampling
+             else None) or sim.scene.rays_per_pixel
+    rays = int(nodes) * sim.scene.camera.rays_per_pixel
     surface_pixels = int(mask.sum())
     return RunResult(
         outdir=m.folder, dataset_path=m.folder / DATASET_NAME,
         image_paths=tuple(m.image_paths), figure_paths=tuple(m.figure_paths),
         exposure=m.exposure, shape=sim.shape, surface_pixels=surface_pixels,
-        rays_per_pixel=rays, rays_traced=int(round(surface_pixels * rays * n_calls)),
+        rays_per_pixel=rays, rays_traced=sim.rays_traced,
         timings=m.timings, config=m.cfg, statistics=m.statistics, notes=tuple(m.notes),
         warnings=() if m.diagnosed is None else m.diagnosed.warnings)

@@ -574,18 +574,19 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             if num is not None and exceeds(r["rms_px"], num["rms_px"]):
                 notes.append(f"{r['effect']} {r['direction'].upper()}: the numerical error "
                              f"({num['rms_px']:.2g} px RMS) is more than 10 % of the row "
-                             f"({r['rms_px']:.2g} px): raise sampling.n_rays or set "
-                             "sampling.target_error_mrad")
+                             f"({r['rms_px']:.2g} px): " + ("lower sampling.target_error_mrad" if target
+                             is not None else "raise sampling.n_rays or set sampling.target_error_mrad"))
         if target is not None:
             for name, smp in sampling.items():
                 worst_mrad = max(r["p95_mrad"] for r in rows if r["effect"] == f"numerical_{name}")
                 if smp.get("target_met") is False or (smp.get("target_met") is None
                                                       and not worst_mrad <= target):
-                    msg = (f"sampling.target_error_mrad = {target:g}: the {name} row's numerical "
-                           f"error is {worst_mrad:.3g} mrad (P95 of its rows) at n_rays = "
-                           f"{smp['n_rays']}: raise sampling.max_rays or accept the error")
+                    msg = (f"sampling.target_error_mrad = {target:g} not met: the {name} row's "
+                           f"numerical error is {worst_mrad:.3g} mrad (P95 of its rows) with the "
+                           f"rule of n_rays = {smp['n_rays']}, the largest sampling.max_rays = "
+                           f"{cfg.sampling.max_rays} allows: raise it or accept the error")
                     notes.append(msg)
-                    warnings.warn(msg, RuntimeWarning, stacklevel=2)
+                    warnings.warn(msg, UserWarning, stacklevel=2)  # a note, no source path
     settings = {"truth": kind, "estimator": estimator_label(cfg.sampling),
                 "brdf": cfg.brdf.model, "removed": spec.describe(), "sampling": sampling,
                 "target_error_mrad": target, "warnings": notes}
