@@ -115,7 +115,10 @@ class CameraConfig(_Model):
 
     def _check_field_of_view(self) -> None:
         """A pinhole's diagonal field of view beyond :data:`MAX_FIELD_OF_VIEW_DEG` is a unit
-        slip (a pitch in um given as mm, a focal length in m), not a PMD camera."""
+        slip (a pitch in um given as mm, a focal length in m), not a PMD camera. A
+        telecentric camera has no angular field (its field is mm on the part)."""
+        if self.projection == "telecentric":
+            return
         w, h = self.resolution
         if self.camera_matrix is not None:
             fx, fy = self.camera_matrix[0][0], self.camera_matrix[1][1]

@@ -104,8 +104,12 @@ def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
     if reference_rec is not None and reference_rec[1].height_nm.shape == err.height_nm.shape:
         maps.append((reference_rec[1].height_nm, "reference_height_error", "nm", None))
     for z, name, unit, dz in maps:
+        # the bound for any signs of the node errors: the pilot's stated errors are an
+        # envelope (blocks of 8 x 8 pixels), not a smooth signed field, and the signed map's
+        # spectrum missed the repeated reconstruction's by 5x at high frequencies
+        # (tests/test_reconstruct.py)
         st, p = areal.describe(z, dx, dy, unit, error=None if dz is None else np.abs(dz),
-                               bands=bands, error_maps=None if dz is None else [dz])
+                               bands=bands)
         stats[f"{name}_{unit}"] = st
         if p is None:
             continue
@@ -136,21 +140,10 @@ def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
 def moved_errors(cfg, scene, rec, u, v, ex, ey, valid):
     """The :class:`~pmdsim.measure.reconstruct.SurfaceErrors` of the reconstruction ``rec``
     of (``u``, ``v``) with every coordinate moved by its numerical error (``ex``, ``ey``):
-    carried linearly (:func:`pmdsim.measure.reconstruct_error.moved_reconstruction`), or,
-    for a monitor model it does not know, the reconstruction repeated with the moved
-    coordinates from the reconstructed height (their fixed point is next to it)."""
-    from ..measure.reconstruct_error import moved_reconstruction
-
-    rc = cfg.reconstruct
-    prior = scene.surface
-    if rc.prior is not None:
-        from ..scene.surfaces import surface_from_config
-
-        prior = surface_from_config(rc.prior)
-    moved = moved_reconstruction(rec, scene.camera, scene.monitor, prior, u, v, ex, ey,
-                                 order=rc.order, anchor=rc.anchor)
-    if moved is not None:
-        return surface_errors(moved, scene.surface, rc.remove, tables=False)
+    the reconstruction repeated with the moved coordinates from the reconstructed height
+    (their fixed point is next to it). A linear carry through the reconstruction's
+    linearisation was measured 40 % cheaper but disagreed with this repetition at the rim
+    fit's nodes by more than the change itself (docs/performance.md)."""
     _, err, _ = reconstruct_coords(cfg, scene, u + np.nan_to_num(ex), v + np.nan_to_num(ey),
                                    valid, start=rec.height_mm, tables=False)
     return err
