@@ -167,7 +167,8 @@ def test_halo_table_approximates_the_exact_brdf_near_the_specular_direction():
     """The rendered halo (a tabulated slope density built for theta_0 = 25 deg) against the
     exact Rayleigh-Rice BRDF at theta_0 out to 0.1 rad from the specular direction, both
     axes: within 4 % (the cell size, cos factors and Q's angular change); the halo's
-    reflectance is R (4 pi sigma cos / lambda)^2 times the share of the PSD in the table."""
+    reflectance is R (1 - exp(-(4 pi sigma cos / lambda)^2)) (R g^2 to first order; with
+    the peak's R exp(-g^2) never more than R) times the share of the PSD in the table."""
     eps = rr.permittivity(ALUMINIUM)
     exact = rr.RayleighRice(PSD, PSD.sigma, LAM, eps)
     th0 = math.radians(25.0)
@@ -183,7 +184,7 @@ def test_halo_table_approximates_the_exact_brdf_near_the_specular_direction():
     assert np.all(np.abs(np.array(ratios) - 1) < 0.04), ratios
     r0 = float(rr.fresnel_unpolarised(eps, math.cos(th0)))
     g2 = (4 * math.pi * PSD.sigma * math.cos(th0) / LAM) ** 2
-    assert model.halo_reflectance == pytest.approx(r0 * g2 * model.table_share, rel=1e-12)
+    assert model.halo_reflectance == pytest.approx(r0 * -math.expm1(-g2) * model.table_share, rel=1e-12)
     assert 0.9 < model.table_share <= 1.0
 
 

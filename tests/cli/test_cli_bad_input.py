@@ -89,7 +89,8 @@ def test_output_naming_a_file_is_refused_first(tmp_path, config_file, command):
 
 def test_budget_of_a_huge_camera_is_refused_naming_the_resolution(tmp_path):
     cfg = tmp_path / "big.toml"
-    cfg.write_text(_toml(merge(base_dict(), {"camera": {"resolution": [20000, 16000]}})))
+    cfg.write_text(_toml(merge(base_dict(), {"camera": {"resolution": [20000, 16000],
+                                                        "focal_length_px": 40000.0}})))
     result = _invoke("budget", cfg, "-o", tmp_path / "b")
     assert result.exit_code == 2, result.output
     assert "camera.resolution" in result.output and not (tmp_path / "b").exists()

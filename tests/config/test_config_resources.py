@@ -34,7 +34,8 @@ def test_memory_grows_with_the_camera_pixels_and_the_fringe_images():
 
 
 def test_a_huge_camera_is_refused_naming_its_resolution():
-    cfg = make_config(camera={"resolution": [60000, 60000]})
+    # the focal length grows with the sensor: a huge camera, not a 180 deg field of view
+    cfg = make_config(camera={"resolution": [60000, 60000], "focal_length_px": 120000.0})
     with pytest.raises(ConfigError) as info:
         check_resources(cfg, available_bytes=64 * GB)
     msg = str(info.value)

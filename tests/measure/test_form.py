@@ -239,3 +239,126 @@ def test_zernike_tables_in_blocks_equal_a_direct_fit(block):
     # fewer points than terms: no table, the other still fitted
     few, more = zernike_tables(b[:20], u[:20], v[:20], (("noll", 37), ("noll", 6)), block=block)
     assert few == [] and len(more) == 6
+
+
+# ------------------------------------------------------------ on a surface that is not a sphere
+def _asphere(x, y):
+    """An even asphere (mm): a conic (R 800 mm, k = -0.6) with a 4th-order term, decentred."""
+    xc, yc = x - 0.7, y + 0.4
+    r2 = xc * xc + yc * yc
+    c, k = 1.0 / 800.0, -0.6
+    return c * r2 / (1.0 + np.sqrt(1.0 - (1.0 + k) * c * c * r2)) + 3e-8 * r2 * r2
+
+
+def _direct_sphere(x, y, z):
+    """A least-squares sphere written here, independently of form.py: centre (a, b) in x, y,
+    vertex height zv and signed radius R (> 0 concave towards +z, as form.py signs it), the
+    branch through the vertex z = zv + rho^2 / (R + s sqrt(R^2 - rho^2)), rho^2 = (x-a)^2 +
+    (y-b)^2, s = sign(R) (no cancellation); vertical residuals; started from a paraboloid
+    fit. Returns (R, the fitted heights)."""
+    from scipy.optimize import least_squares
+
+    a_mat = np.stack([np.ones_like(x), x, y, x * x + y * y], axis=1)
+    p = np.linalg.lstsq(a_mat, z, rcond=None)[0]
+    rad0 = 1.0 / (2.0 * p[3])
+    a0, b0 = -p[1] * rad0, -p[2] * rad0
+    zv0 = p[0] - (a0 * a0 + b0 * b0) / (2.0 * rad0)
+
+    def heights(q):
+        a, b, zv, rad = q
+        rho2 = (x - a) ** 2 + (y - b) ** 2
+        return zv + rho2 / (rad + np.sign(rad) * np.sqrt(rad * rad - rho2))
+
+    sol = least_squares(lambda q: heights(q) - z, [a0, b0, zv0, rad0], method="lm",
+                        x_scale=[1.0, 1.0, 1e-3, 10.0], xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                        max_nfev=5000)
+    return sol.x[3], heights(sol.x)
+
+
+@pytest.mark.parametrize("change_mm", [0.0, 0.4])
+def test_best_fit_sphere_removal_on_an_asphere_equals_a_direct_fit(change_mm):
+    """The true surface an asphere (not a sphere), the measured one that asphere plus a
+    radius change, decentre, tilt, piston and 40 nm of coma: what is left after the
+    best-fit-sphere removal equals (z_meas - S_meas) - (z_true - S_true) of spheres fitted
+    here, and so do the radii. Catches a removal that fits only one of the surfaces, fits
+    the error alone, takes the sphere of the truth for both, or drops z_true - S_true."""
+    x, y, m = _grid()
+    true = _asphere(x, y)
+    rho2 = (x - 0.3) ** 2 + (y + 0.2) ** 2
+    err = (change_mm * rho2 / (2 * 800.0**2)  # about a radius change of change_mm
+           + 2e-5 * x - 1e-5 * y + 3e-4 + 4e-5 * (3 * (rho2 / 22**2) - 2) * (x - 0.3) / 22)
+    res = remove_form(np.where(m, err, np.nan), m, x, y, FormSpec.of("sphere"), true_height=true)
+    xm, ym = x[m], y[m]
+    r_meas, s_meas = _direct_sphere(xm, ym, true[m] + err[m])
+    r_true, s_true = _direct_sphere(xm, ym, true[m])
+    want = (true[m] + err[m] - s_meas) - (true[m] - s_true)
+    got = res.residual[m]
+    assert res.mask.sum() == m.sum()
+    # mm: 1e-3 nm against a residual of ~1e-5 mm (the two fits' least squares agree to all
+    # digits; the flat minimum leaves their spheres ~3e-11 mm apart)
+    assert np.abs(got - want).max() < 1e-9
+    assert np.abs(want).max() > 5e-6
+    assert res.sphere["radius_true_mm"] == pytest.approx(r_true, rel=1e-8)
+    assert res.sphere["radius_measured_mm"] == pytest.approx(r_meas, rel=1e-8)
+    assert res.sphere["radius_change_mm"] == pytest.approx(r_meas - r_true, abs=1e-6)
+    # the asphere is no sphere: the true surface's own departure is large, so each
+    # shortcut above would be far off
+    naive = true[m] + err[m] - s_meas  # z_true - S_true dropped
+    assert np.abs(naive - want).max() > 1e3 * 1e-9
+    _, s_err = _direct_sphere(xm, ym, err[m] + 1e-3 * (xm * xm + ym * ym))  # the error alone
+    assert np.abs((err[m] + 1e-3 * (xm * xm + ym * ym) - s_err) - want).max() > 1e3 * 1e-9
+
+
+@pytest.mark.parametrize("level", ["piston", "tilt", "power", "astigmatism"])
+def test_linear_removal_on_an_asphere_equals_a_direct_fit(level):
+    """piston / tilt / power (x^2 + y^2) / astigmatism removal on an asphere's height error
+    (the measured surface minus the true asphere: an error with power, astigmatism, coma and
+    a fourth-order part): the residual equals a direct least-squares fit of the columns
+    written here (np.linalg.lstsq), on a decentred disc with dx != dy."""
+    x, y, m = _grid()
+    true = _asphere(x, y)
+    measured = _asphere(1.001 * x, 0.998 * y) + 1e-5 * x**2 * y / 22**2 + 2e-4 - 3e-6 * y
+    err = measured - true
+    res = remove_form(np.where(m, err, np.nan), m, x, y, FormSpec.of(level), true_height=true)
+    xm, ym = x[m], y[m]
+    cols = {"piston": [np.ones_like(xm)], "tilt": [np.ones_like(xm), xm, ym],
+            "power": [np.ones_like(xm), xm, ym, xm**2 + ym**2],
+            "astigmatism": [np.ones_like(xm), xm, ym, xm**2 + ym**2, xm**2 - ym**2, 2 * xm * ym]}[level]
+    a = np.stack(cols, axis=1)
+    want = err[m] - a @ np.linalg.lstsq(a, err[m], rcond=None)[0]
+    assert np.abs(res.residual[m] - want).max() < 1e-9 * np.abs(err[m]).max()
+    assert np.abs(want).max() > 1e-3 * np.abs(err[m]).max()  # something is left to compare
+
+
+def test_surface_errors_remove_the_best_fit_sphere_of_an_aspheric_truth():
+    """Through the run's path (measure.reconstruct.surface_errors, the true surface a conic
+    scene surface, R 800 mm, k = -1: a paraboloid): the height error after ``remove =
+    "sphere"`` equals the direct fit's (z_meas - S_meas) - (z_true - S_true), in nm: the
+    true heights reach the removal (without them it fits a sphere to the error alone).
+    (The nominal sphere in their place would be a second-order change only: for small
+    errors the removal is nearly linear in them, whatever sphere it starts from.)"""
+    from test_reconstruct import parse_config, scene_dict
+
+    from pmdsim.measure.reconstruct import Reconstruction, surface_errors
+    from pmdsim.scene.surfaces import surface_from_config
+
+    ap = {"shape": "circular", "radius_mm": 20.0, "centre_mm": [1.0, -0.5]}
+    truth = surface_from_config(parse_config(scene_dict({"type": "conic", "radius_mm": 800.0,
+                                                         "conic": -1.0, "aperture": ap})).surface)
+    xs = np.arange(-19.0, 21.01, 0.5)
+    ys = np.arange(-20.5, 19.51, 0.4)
+    x, y = np.meshgrid(xs, ys)
+    z = truth.sag(x, y)[0]
+    m = np.hypot(x - 1.0, y + 0.5) <= 20.0
+    err = 1e-6 * (3 + 2 * x / 20 - (x * x + y * y) / 400) + 2e-5 * ((x - 1) / 20) ** 3
+    nan = np.where(m, 1.0, np.nan)
+    r2 = x * x + y * y
+    nominal = r2 / (800.0 + np.sqrt(800.0**2 - r2))  # the nominal sphere, not the truth
+    rec = Reconstruction(xs, ys, m, (z + err) * nan, nan, nan, nominal * nan, 1, (0.0,), True)
+    e = surface_errors(rec, truth, "sphere", tables=False)
+    _, s_meas = _direct_sphere(x[m], y[m], z[m] + err[m])
+    _, s_true = _direct_sphere(x[m], y[m], z[m])
+    want = ((z[m] + err[m] - s_meas) - (z[m] - s_true)) * 1e6  # nm
+    assert np.abs(e.height_nm[m] - want).max() < 1e-3
+    assert np.abs(want).max() > 1.0
+    assert np.abs((z[m] - s_true) * 1e6).max() > 5.0  # the paraboloid is not a sphere

@@ -185,6 +185,16 @@ def test_run_writes_surface_errors(tmp_path):
     assert np.isclose(np.sqrt(np.nanmean((h - np.nanmean(h)) ** 2)), kin["height_error_nm"]["rms"])
     assert (out / "kinematic" / "figures" / "surface_errors.png").is_file()
     assert "height error" in (out / "kinematic" / "summary.txt").read_text()
+    # every aperture node is reported or excluded and counted, with the reason, in
+    # statistics.json, summary.txt and the dataset (which the figure draws grey)
+    ex = kin["excluded_nodes"]
+    status = ds["reconstruction_node_status"].values
+    assert ex["aperture_nodes"] == int((status >= 0).sum()) == kin["grid_points"] + ex["total"]
+    assert ex["total"] == sum(ex[k] for k in kin["excluded_definitions"])
+    assert kin["rim_fit_nodes"] == int((status == 1).sum())
+    assert np.array_equal(np.isfinite(h), (status == 0) | (status == 1))
+    assert f"not reported: {ex['total']} of the aperture's {ex['aperture_nodes']} nodes" in (
+        out / "kinematic" / "summary.txt").read_text()
 
 
 def test_surface_errors_terms_name_a_known_aberration():
@@ -324,7 +334,7 @@ def test_nearest_valid_pixel_matches_the_distance_transform():
     nearest valid pixel's distance equals SciPy's exact Euclidean distance transform."""
     from scipy import ndimage
 
-    from pmdsim.measure.reconstruct import _nearest_valid
+    from pmdsim.measure.interpolate import _nearest_valid
 
     rng = np.random.default_rng(5)
     for frac in (0.01, 0.3):
@@ -338,25 +348,39 @@ def test_nearest_valid_pixel_matches_the_distance_transform():
         np.testing.assert_allclose(got, want, atol=1e-12)
 
 
-def test_support_cells_kernel_matches_numpy():
-    """kernels.reconstruct.support_cells against the plain test: the fractional pixel's
-    2 x 2 cell lies inside the image and all four pixels are valid; NaN, inf, negative and
-    edge coordinates included."""
-    from pmdsim.kernels.reconstruct import support_cells
+@pytest.mark.parametrize("margin", [0, 2])
+def test_node_support_kernel_matches_numpy(margin):
+    """kernels.reconstruct.node_support against the plain rule: the spline serves a node
+    whose 4 x 4 support grown by ``margin`` (floor - 1 - margin .. floor + 2 + margin) lies
+    inside the image and is all valid;
+    else the node's own pixel (the nearest, round half up) decides: valid -> the rim fit,
+    invalid -> pixel_invalid, outside the image (or NaN, inf) -> outside; edge coordinates
+    included (-0.5 is pixel 0, w - 0.5 is outside)."""
+    from pmdsim.kernels import reconstruct as kr
 
     rng = np.random.default_rng(11)
-    valid = rng.random((40, 50)) > 0.2
-    cols = np.concatenate([rng.uniform(-2, 52, 3000), [np.nan, np.inf, -np.inf, 0.0, 48.999, 49.0, -1e-12]])
-    rows = np.concatenate([rng.uniform(-2, 42, 3000), [1.0, 1.0, 1.0, 0.0, 38.5, 3.0, 2.0]])
-    ok = np.ones(len(cols), bool)
-    ok[5] = False  # stays False
-    want = np.zeros(len(cols), bool)
+    valid = rng.random((40, 50)) > (0.1 if margin == 0 else 0.01)
+    cols = np.concatenate([rng.uniform(-2, 52, 4000),
+                           [np.nan, np.inf, -np.inf, 0.0, 48.999, 49.0, -0.5, 49.5, -0.5000001, 1.0]])
+    rows = np.concatenate([rng.uniform(-2, 42, 4000), [1.0, 1.0, 1.0, 0.0, 38.5, 3.0, 2.0, 2.0, 2.0, 1.0]])
+    want = np.empty(len(cols), np.int8)
     for k, (c, r) in enumerate(zip(cols, rows)):
-        if k != 5 and np.isfinite(c) and np.isfinite(r) and 0 <= c < 49 and 0 <= r < 39:
-            c0, r0 = int(np.floor(c)), int(np.floor(r))
-            want[k] = valid[r0:r0 + 2, c0:c0 + 2].all()
-    support_cells(valid, cols, rows, ok)
-    np.testing.assert_array_equal(ok, want)
+        if not (np.isfinite(c) and np.isfinite(r) and -0.5 <= c < 49.5 and -0.5 <= r < 39.5):
+            want[k] = kr.SUPPORT_OUTSIDE
+            continue
+        cn, rn = int(np.floor(c + 0.5)), int(np.floor(r + 0.5))
+        c0, r0 = int(np.floor(c)) - 1 - margin, int(np.floor(r)) - 1 - margin
+        n = 4 + 2 * margin
+        if not valid[rn, cn]:
+            want[k] = kr.SUPPORT_PIXEL_INVALID
+        elif c0 >= 0 and r0 >= 0 and c0 + n <= 50 and r0 + n <= 40 and valid[r0:r0 + n, c0:c0 + n].all():
+            want[k] = kr.SUPPORT_SPLINE
+        else:
+            want[k] = kr.SUPPORT_RIM
+    got = np.empty(len(cols), np.int8)
+    kr.node_support(valid, cols, rows, margin, got)
+    np.testing.assert_array_equal(got, want)
+    assert {kr.SUPPORT_SPLINE, kr.SUPPORT_RIM, kr.SUPPORT_PIXEL_INVALID, kr.SUPPORT_OUTSIDE} <= set(got)
 
 
 def test_run_states_the_reconstructions_numerical_error(tmp_path):
@@ -395,20 +419,55 @@ def test_run_states_the_reconstructions_numerical_error(tmp_path):
     scene = Simulation.from_config(vcfg).scene
     _, moved, _ = reconstruct_coords(vcfg, scene, coord["x"] - err["x"], coord["y"] - err["y"],
                                      valid)
+    # the baseline: the same stored (float32) coordinates unmoved, so that the comparison
+    # is of the move alone (the float32 rounding of the stored coordinates, up to 1e-4 px,
+    # can exceed a Gauss rule's stated error of a few 1e-5 px)
+    _, base, _ = reconstruct_coords(vcfg, scene, coord["x"], coord["y"], valid)
     for key, attr in (("height_error_nm", "height_nm"), ("slope_error_x_urad", "slope_x_urad"),
                       ("slope_error_y_urad", "slope_y_urad")):
         st = stats[key]
-        a = getattr(moved, attr)
-        a = a[np.isfinite(a)]
-        dev = a - a.mean()
-        got = {"rms": np.sqrt(np.mean(dev * dev)), "p95": np.percentile(np.abs(dev), 95),
-               "pv": np.ptp(a)}
+
+        def stats_of(r):
+            a = getattr(r, attr)
+            a = a[np.isfinite(a)]
+            dev = a - a.mean()
+            return {"rms": np.sqrt(np.mean(dev * dev)), "p95": np.percentile(np.abs(dev), 95),
+                    "pv": np.ptp(a)}, a
+
+        got, a = stats_of(moved)
+        ref, _ = stats_of(base)
         for stat, value in got.items():
             assert st[stat + "_err"] >= 0
-            assert abs(value - st[stat]) <= 1.05 * st[stat + "_err"] + 1e-9 * abs(st[stat]), (
-                key, stat, value, st[stat], st[stat + "_err"])
+            assert abs(value - ref[stat]) <= 1.05 * st[stat + "_err"] + 1e-9 * abs(st[stat]), (
+                key, stat, value, ref[stat], st[stat + "_err"])
         if key != "height_error_nm":  # the slopes' RMS about zero, as the figure shows
             assert st["rms_about_zero_err"] >= 0
             z = np.sqrt(np.mean(a * a))
             assert abs(z - st["rms_about_zero"]) <= 1.05 * st["rms_about_zero_err"] + 1e-9 * z
     assert "± " in (out / "kinematic" / "summary.txt").read_text().split("height error")[1]
+    # the areal parameters and PSDs of the same maps, with errors that cover the same move
+    from pmdsim.measure import areal
+
+    ar = stats["areal"]
+    dx, dy = (float(np.diff(ds[c].values[:2])[0]) for c in ("surface_x", "surface_y"))
+    for key, attr, var in (("height_error_nm", "height_nm", "height_error"),
+                           ("slope_error_x_urad", "slope_x_urad", "slope_error_x"),
+                           ("slope_error_y_urad", "slope_y_urad", "slope_error_y")):
+        st = ar[key]
+        assert st["sq"] == pytest.approx(stats[key]["rms"], rel=1e-9)
+        assert st["sq_err"] == pytest.approx(stats[key]["rms_err"], rel=1e-9)
+        assert st["n"] == stats[key]["n"]
+        bands = {b: (lo, np.inf if hi is None else hi)
+                 for b, (lo, hi) in st["psd"]["bands_per_mm"].items()}
+        p2 = areal.power_spectrum(getattr(moved, attr), dx, dy, bands=bands)
+        p0 = areal.power_spectrum(getattr(base, attr), dx, dy, bands=bands)  # the baseline
+        psd, err = p0.psd_radial, ds[f"{var}_psd_err"].values
+        np.testing.assert_allclose(ds[f"{var}_psd"].values, psd, rtol=1e-3, atol=1e-6 * psd.max())
+        assert np.all(np.abs(p2.psd_radial - psd) <= 1.05 * err + 1e-9 * psd.max())
+        for b in st["psd"]["band_rms"]:
+            v = p0.band_rms[b]
+            assert abs(p2.band_rms[b] - v) <= 1.05 * st["psd"]["band_rms_err"][b] + 1e-9 * v
+        assert ds[f"{var}_psd_2d"].dims == ("psd_fy", "psd_fx")
+        assert ds[f"{var}_psd"].attrs["units"].endswith("^2 mm")
+    assert "reference_height_error_psd" in ds and "sq" in ar["reference_height_error_nm"]
+    assert (out / "kinematic" / "figures" / "surface_psd.png").is_file()

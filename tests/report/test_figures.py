@@ -56,7 +56,7 @@ def decoded_run(tmp_path_factory):
 def test_default_figures_are_the_summary(decoded_run):
     # the summary: set-up, overview and (the run reconstructs the surface) its errors
     assert sorted(p.name for p in (decoded_run.outdir / "figures").iterdir()) == [
-        "overview.png", "setup.png", "surface_errors.png"]
+        "overview.png", "setup.png", "surface_errors.png", "surface_psd.png"]
 
 
 def test_report_redraws_any_figure_from_the_run_folder(decoded_run, tmp_path):
@@ -68,7 +68,7 @@ def test_report_redraws_any_figure_from_the_run_folder(decoded_run, tmp_path):
     res = runner.invoke(app, ["report", str(decoded_run.outdir), "--all", "--workers", "1",
                               "-o", str(tmp_path / "b")])
     assert res.exit_code == 0, res.output
-    assert len(list((tmp_path / "b").iterdir())) == 10
+    assert len(list((tmp_path / "b").iterdir())) == 11
     bad = runner.invoke(app, ["report", str(decoded_run.outdir), "--figure", "nonsense"])
     assert bad.exit_code == 2 and "unknown figure" in bad.output
     missing = runner.invoke(app, ["report", str(tmp_path)])
@@ -171,13 +171,13 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
     res = pipeline.run_simulation(parse_config(d), tmp_path / "run")
     drawn = [e for e in events if e[0] == "figures" and e[1]]
     assert events.index(("figures", ("overview",))) < events.index(("reconstruction",)) \
-        < events.index(("figures", ("surface_errors",))) < events.index(("diagnostics",))
-    assert [e[1] for e in drawn] == [("setup",), ("overview",), ("surface_errors",)]
+        < events.index(("figures", ("surface_errors", "surface_psd"))) < events.index(("diagnostics",))
+    assert [e[1] for e in drawn] == [("setup",), ("overview",), ("surface_errors", "surface_psd")]
     stats = json.loads((res.outdir / "statistics.json").read_text())
     assert "reconstruction" in stats and "diagnostics" in stats
     assert json.loads(schema.load_run(res.outdir).attrs["statistics_json"]) == stats
     assert sorted(p.name for p in res.figure_paths) == [
-        "overview.png", "setup.png", "surface_errors.png"]
+        "overview.png", "setup.png", "surface_errors.png", "surface_psd.png"]
 
     d["decode"] = {"enabled": False}  # no chain: the fringe figures only
     res = pipeline.run_simulation(parse_config(d), tmp_path / "plain")

@@ -235,14 +235,14 @@ def test_run_convergence_writes_table_and_figure(tmp_path):
     assert tuple(rows[0].keys()) == COLUMNS and len(rows) == len(res.rows)
     assert (out / "convergence.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     meta = json.loads((out / "convergence.json").read_text())
-    assert meta["converged"] == "radiometric, N = 64" and meta["camera_size"] == [20, 16]
+    assert meta["reference"]["run"] == "radiometric, N = 64" and meta["camera_size"] == [20, 16]
     # The values themselves are checked against a recomputation from the fringe sums and
     # against closed forms in test_convergence_independent.py; here: the table on disk holds
     # the study's rows (6 significant digits), one per estimator, theta, N, direction, width.
     for disk, mem in zip(rows, res.rows):
         assert disk["estimator"] == mem["estimator"] and int(disk["n_rays"]) == mem["n_rays"]
         for col in ("phase_rms_rad", "phase_p95_rad", "modulation_median",
-                    "phase_rms_vs_converged_rad"):
+                    "phase_rms_vs_reference_rad"):
             assert float(disk[col]) == pytest.approx(mem[col], rel=1e-5, abs=1e-12)
     key = lambda r: (r["estimator"], r["theta_max_deg"], r["n_rays"], r["direction"],  # noqa: E731
                      r["width_px"])

@@ -91,7 +91,7 @@ def test_the_run_forks_its_figures_only_after_the_reference_thread(tmp_path, mon
     assert slow_done == [True]
     assert alive_at_fork and not any(alive_at_fork)
     assert sorted(p.name for p in res.figure_paths) == [
-        "overview.png", "setup.png", "surface_errors.png"]
+        "overview.png", "setup.png", "surface_errors.png", "surface_psd.png"]
 
 
 def test_a_failed_run_leaves_no_reference_thread_behind(tmp_path, monkeypatch):

@@ -146,7 +146,7 @@ def test_writing_runs_behind_the_chain_and_the_manifest_comes_last(tmp_path, mon
     assert any(v.startswith("diag_") for v in seen["variables"])
     assert {"run.zarr", "config.json", "statistics.json", "summary.txt", "fringes",
             "figures"} <= set(seen["files"]) and "pmdsim-run.json" not in seen["files"]
-    assert seen["figures"] == ["overview.png", "setup.png", "surface_errors.png"]
+    assert seen["figures"] == ["overview.png", "setup.png", "surface_errors.png", "surface_psd.png"]
     assert seen["images"] and len(res.image_paths) == 2 * 3 * 4
     assert json.loads(final.attrs["statistics_json"]) == json.loads(
         (res.outdir / "statistics.json").read_text())

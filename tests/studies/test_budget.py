@@ -118,7 +118,7 @@ def test_cli_budget(tmp_path):
     res = CliRunner().invoke(app, ["budget", str(cfg_path), "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert "cover glass" in res.output and "all system effects" in res.output
-    for f in ("budget.csv", "budget.json", "budget.png"):
+    for f in ("budget.csv", "budget.json", "budget.png", "areal.csv", "budget_psd.png"):
         assert (out / f).is_file()
     rows = json.loads((out / "budget.json").read_text())["rows"]
     assert not any(r["part"] == "surface" for r in rows)  # a mirror has no surface part
@@ -186,6 +186,42 @@ def test_height_rows_in_nm_with_calibration(result):
     assert len(h["camera_position_mm"]["components"]) == 3
     assert "sensitivity x uncertainty" in h["camera_position_mm"]["how"]
     assert result.settings["removed"] == "piston removed"
+
+
+def test_height_rows_carry_areal_parameters_and_psds(result):
+    """Every height row with maps states the ISO 25178 parameters and PSDs of its height and
+    slope errors: Sq is the row's height RMS (the same map), and for the surface rows Sq's
+    numerical error is the row's RMS error (the same rule); the mirror's rows state 0; the
+    bands' RMS add up to the window-weighted mean square; the text table shows them."""
+    from pmdsim.report.budget import budget_text
+    from pmdsim.studies.budget_areal import areal_rows
+
+    with_maps = [r for r in result.height_rows if r["effect"] != "calibration_total"
+                 and r["part"] != "calibration" and not r["effect"].startswith("numerical")]
+    assert with_maps
+    for r in with_maps:
+        ar = r["areal"]
+        assert set(ar) == {"height_error_nm", "slope_error_x_urad", "slope_error_y_urad"}
+        h = ar["height_error_nm"]
+        assert h["sq"] == pytest.approx(r["height_rms_nm"], rel=1e-9)
+        assert h["sz"] == pytest.approx(r["height_pv_nm"], rel=1e-9)
+        assert h["n"] == r["n_nodes"] and h["unit"] == "nm" and h["sdq"] > 0
+        psd = h["psd"]
+        assert sum(v * v for v in psd["band_rms"].values()) == pytest.approx(psd["mean_square"])
+        assert len(psd["radial"]) == len(psd["frequency_per_mm"]) > 5
+        if r["part"] == "surface":
+            assert h["sq_err"] == pytest.approx(r["height_rms_nm_err"], rel=1e-9)
+            assert all(v > 0 for v in psd["band_rms_err"].values())
+            assert len(psd["radial_err"]) == len(psd["radial"])
+        else:
+            assert h["sq_err"] == 0 and all(v == 0 for v in psd["band_rms_err"].values())
+    comp = next(r for r in result.height_rows if r["effect"] == "camera_position_mm")
+    assert comp["components"][0]["areal"]["height_error_nm"]["sq"] == pytest.approx(
+        comp["components"][0]["height_rms_nm"], rel=1e-9)
+    table = areal_rows(result.height_rows)
+    assert {(t["effect"], t["map"]) for t in table} >= {("surface", "height_error_nm"),
+                                                         ("ideal", "slope_error_y_urad")}
+    assert "band-limited RMS" in budget_text(result.rows, result.height_rows, result.settings)
 
 
 def _write_toml(path: Path, data: dict) -> None:

@@ -133,7 +133,7 @@ def test_every_column_equals_a_recomputation_from_the_fringe_sums(study):
                 assert row["modulation_median"] == pytest.approx(
                     float(np.median(mod[di, wi][ok])), rel=2e-5)
                 vs = _wrap(ph[di, wi] - conv_ph[di, wi])[ok]
-                assert row["phase_rms_vs_converged_rad"] == pytest.approx(ns.rms(vs), abs=2e-5)
+                assert row["phase_rms_vs_reference_rad"] == pytest.approx(ns.rms(vs), abs=2e-5)
     # the 20 px fringes with few rays have phases all round the circle: the unwrapped
     # difference would be off by 2 pi somewhere, so the wrap is exercised
     ph, _, ref, mask = _recompute(cfg, "radiometric", None, 16, widths, dirs)
@@ -218,7 +218,7 @@ def test_study_settings_meta_and_timings(study):
     cfg, res = study
     m = res.meta
     assert m["n_values"] == [16, 48, 256] and m["theta_values_deg"] == [1.0, 2.0]
-    assert m["converged"] == "radiometric, N = 256" and m["camera_size"] == [20, 16]
+    assert m["reference"]["run"] == "radiometric, N = 256" and m["camera_size"] == [20, 16]
     assert m["widths_px"] == [20.0, 160.0] and m["directions"] == ["x", "y"] and m["shifts"] == 4
     # rows: 2 thetas x 3 N x 2 cone estimators + 3 radiometric, x 2 directions x 2 widths
     assert len(res.rows) == (2 * 3 * 2 + 3) * 4

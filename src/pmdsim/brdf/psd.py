@@ -14,6 +14,24 @@ import math
 from dataclasses import dataclass
 import numpy as np
 
+#: Sq (mm) at or below which a levelled map is flat: 0.1 pm, far below any instrument's
+#: noise (the rounding residue of levelling a constant or tilted map is ~1e-16 of its heights).
+FLAT_SQ_MM = 1e-10
+#: A K-correlation fit with C - 1 below this, or a correlation length B / (2 pi) above
+#: this many times the map's extent, is not resolved by the map (the ABC model runs off
+#: to a power law or a knee beyond the data: a periodic groove, white noise).
+KC_MIN_C_MINUS_1 = 1e-3
+KC_MAX_EXTENTS = 100.0
+
+
+class FlatTopography(ValueError):
+    """The map has no height variation left (Sq <= :data:`FLAT_SQ_MM` after levelling)."""
+
+
+class KCorrelationUnresolved(ValueError):
+    """The K-correlation (ABC) model does not describe the map's periodogram."""
+
+
 
 # =========================================================================== PSD models
 @dataclass(frozen=True)
@@ -115,6 +133,9 @@ def fit_k_correlation(fx, fy, s, c0: float = 2.0, effective_fraction: float = 1.
     fxx, fyy, p = fxx[keep], fyy[keep], s[keep]
     dfa = (fx[1] - fx[0]) * (fy[1] - fy[0])
     var = float(s.sum() * dfa)
+    if not (math.isfinite(var) and var > FLAT_SQ_MM**2 and np.all(np.isfinite(p))):
+        raise FlatTopography(f"the periodogram holds no variance (Sq^2 = {var:.3g} mm^2): "
+                             "a flat map has no PSD to fit")
     # start: the knee at a tenth of the band along each axis
     b0 = [10.0 / max(np.abs(fx).max(), 1e-30), 10.0 / max(np.abs(fy).max(), 1e-30)]
     f2x, f2y = fxx * fxx, fyy * fyy
@@ -135,9 +156,20 @@ def fit_k_correlation(fx, fy, s, c0: float = 2.0, effective_fraction: float = 1.
         w = 1 - r
         return float(np.mean(lm + r)), np.array([np.mean(w * gi) for gi in g])
 
+    extent = max(1.0 / (fx[1] - fx[0]), 1.0 / (fy[1] - fy[0]))  # the map's larger side
+
     def model(x):
-        a, bx, by, c = math.exp(x[0]), math.exp(x[1]), math.exp(x[2]), 1 + math.exp(x[3])
-        return KCorrelation(math.sqrt(2 * math.pi * a / (bx * by * (c - 1))), bx, by, c)
+        # sigma^2 = 2 pi A / (Bx By (C - 1)) in logarithms: no product under- or overflows
+        bx, by, cm1 = math.exp(min(x[1], 700)), math.exp(min(x[2], 700)), math.exp(min(x[3], 700))
+        if not (cm1 >= KC_MIN_C_MINUS_1 and
+                max(bx, by) / (2 * math.pi) <= KC_MAX_EXTENTS * extent and min(bx, by) > 0):
+            raise KCorrelationUnresolved(
+                f"the K-correlation (ABC) model does not describe this map's PSD: the fit runs "
+                f"to C - 1 = {cm1:.3g} and correlation lengths {bx / (2 * math.pi) * 1e3:.3g} / "
+                f"{by / (2 * math.pi) * 1e3:.3g} um against a map of {extent * 1e3:.3g} um "
+                "(a periodic groove, white noise or a power law: no knee inside the map)")
+        sigma = math.sqrt(2 * math.pi) * math.exp(0.5 * (x[0] - x[1] - x[2] - x[3]))
+        return KCorrelation(sigma, bx, by, 1 + cm1)
 
     starts = []
     for k in (1.0, 0.1):

@@ -215,7 +215,9 @@ def specular_halo(exact: RayleighRice, theta0: float, sigma_band: float | None =
     i0 = np.array([math.sin(theta0), 0.0, c0])
     r0 = float(exact.q(i0, i0 * np.array([-1, -1, 1.0])))
     g2 = (4 * math.pi * sigma_band * c0 / lam) ** 2
-    halo = SlopeDensityBRDF(table, r0 * g2 * share, smith=False, name="rayleigh_rice")
+    # R (1 - exp(-g^2)): first order R g^2, and peak + halo never reflect more than R
+    halo = SlopeDensityBRDF(table, r0 * -math.expm1(-g2) * share, smith=False,
+                            name="rayleigh_rice")
     return SpecularHaloBRDF(exact, halo, float(exact.specular(c0)), theta0, share)
 
 
@@ -230,6 +232,54 @@ def _extent(psd, lam, c0, axis):
     below = np.nonzero(s[peak:] < 1e-4 * s[peak])[0]
     fe = f[peak + below[0]] if below.size else fmax
     return float(fe / kappa)
+
+
+# =========================================================================== validity
+#: The largest Rayleigh parameter g = 4 pi sigma cos(theta_i) / lambda the first-order halo
+#: is rendered at (the topography model's switch, :data:`pmdsim.brdf.topography.HALO_MAX_G`):
+#: above it the perturbation series does not converge and the surface is geometric.
+MAX_RAYLEIGH = 1.0
+#: Reflectance at the build incidence below which the substrate reflects nothing useful.
+MIN_REFLECTANCE = 1e-6
+
+
+def rayleigh_parameter(sigma: float, wavelength: float, theta0: float) -> float:
+    return 4 * math.pi * sigma * math.cos(theta0) / wavelength
+
+
+def check_validity(sigma: float, wavelength: float, theta0: float, eps, rho_s: float,
+                   sigma_field: str = "brdf.sigma_nm") -> None:
+    """ConfigError (naming the fields) when the first-order Rayleigh-Rice halo does not hold:
+    a Rayleigh parameter above :data:`MAX_RAYLEIGH`, or a substrate that reflects nothing."""
+    from ..config import ConfigError
+
+    g = rayleigh_parameter(sigma, wavelength, theta0)
+    if not g <= MAX_RAYLEIGH:
+        raise ConfigError(
+            f"{sigma_field}: sigma = {sigma * 1e6:.4g} nm at brdf.wavelength_nm = "
+            f"{wavelength * 1e6:.4g} nm and {math.degrees(theta0):.3g} deg incidence has the "
+            f"Rayleigh parameter 4 pi sigma cos / lambda = {g:.3g}, above the smooth-surface "
+            f"limit {MAX_RAYLEIGH:g} of the first-order Rayleigh-Rice halo (the surface is not "
+            f"optically smooth: its specular peak is gone and the first-order halo does not "
+            f"describe what it scatters); keep sigma below "
+            f"{MAX_RAYLEIGH * wavelength / (4 * math.pi * math.cos(theta0)) * 1e6:.3g} nm (or "
+            "check the wavelength's unit: nm), or describe the surface by its slopes: model = 'topography' with regime = "
+            "'geometric' (a height map), 'slope_density', 'ward' or 'beckmann'")
+    r = float(fresnel_unpolarised(eps, math.cos(theta0))) if eps is not None else float(rho_s)
+    if not r >= MIN_REFLECTANCE:
+        n = cmath_sqrt(eps)
+        raise ConfigError(
+            f"brdf.refractive_index = ({n.real:g}, {n.imag:g}): the substrate reflects "
+            f"{r:.3g} of the light at {math.degrees(theta0):.3g} deg (n = 1, k = 0 is the "
+            "surrounding air itself): nothing to measure; give the substrate's (n, k) at "
+            "brdf.wavelength_nm (aluminium at 545 nm: (0.96, 6.69); glass: (1.5, 0)), or leave "
+            "refractive_index unset (Q = rho_s)")
+
+
+def cmath_sqrt(z) -> complex:
+    import cmath
+
+    return cmath.sqrt(complex(z))
 
 
 # =========================================================================== configuration
@@ -250,5 +300,7 @@ def from_config(cfg: RayleighRiceConfig, incidence_deg: float = 0.0) -> Specular
     psd = KCorrelation(cfg.sigma_nm * 1e-6, 2 * math.pi * cfg.correlation_length_tangential_um * 1e-3,
                        2 * math.pi * cfg.correlation_length_radial_um * 1e-3, cfg.exponent_c)
     lam = cfg.wavelength_nm * 1e-6
-    exact = RayleighRice(psd, psd.sigma, lam, permittivity(cfg.refractive_index), cfg.rho_s)
+    eps = permittivity(cfg.refractive_index)
+    check_validity(psd.sigma, lam, theta0, eps, cfg.rho_s)
+    exact = RayleighRice(psd, psd.sigma, lam, eps, cfg.rho_s)
     return specular_halo(exact, theta0, bins=cfg.halo_bins)

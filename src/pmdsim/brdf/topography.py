@@ -36,13 +36,20 @@ import numpy as np
 
 from ..config import TopographyConfig
 from .slope_density import TabulatedSlopes
-from .psd import TabulatedPSD, fit_k_correlation, periodogram, window_fraction
+from .psd import FLAT_SQ_MM, FlatTopography, KCorrelationUnresolved, TabulatedPSD, fit_k_correlation, periodogram, window_fraction
 
 #: Rayleigh parameter below which a surface is optically smooth, above which geometric.
 SMOOTH_MAX_G = 0.5
 GEOMETRIC_MIN_G = 1.5
 #: The topography model's switch between the halo and the slope density.
 HALO_MAX_G = 1.0
+def check_not_flat(sq_mm: float, what: str = "the map") -> None:
+    """:class:`FlatTopography` when ``sq_mm`` (Sq after levelling) is 0 within rounding."""
+    if not (math.isfinite(sq_mm) and sq_mm > FLAT_SQ_MM):
+        raise FlatTopography(
+            f"{what} is flat (Sq = {sq_mm * 1e6:.3g} nm after levelling): it has no texture to "
+            "scatter light; check the file's height column and unit, the levelling (a tilted "
+            "plane levels to 0), or use [brdf] model = 'mirror' for an ideal mirror")
 
 
 def autocorrelation_lengths(heights, dx: float, dy: float) -> tuple[float, float]:
@@ -109,6 +116,7 @@ class TopographyAnalysis:
     regime: str
     regime_reason: str
     model: str  # what [brdf] model = "topography" renders: rayleigh_rice or slope_density
+    kc_note: str = ""  # why the K-correlation fields are NaN (the model does not fit the map)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -140,9 +148,15 @@ def analyse(heights, dx: float, dy: float, wavelength_nm: float = 545.0,
     rq_t = float(np.sqrt(np.mean(np.var(h, axis=1))))  # profiles along x (rows)
     rq_r = float(np.sqrt(np.mean(np.var(h, axis=0))))
     sq = float(h.std())
+    check_not_flat(sq, "the map")
     fx, fy, s = periodogram(h, dx, dy, window)
-    fit = fit_k_correlation(fx, fy, s, effective_fraction=window_fraction(window))
-    kc = fit.model
+    nan = float("nan")
+    try:
+        fit = fit_k_correlation(fx, fy, s, effective_fraction=window_fraction(window))
+        kc_values, kc_note = (fit.model.sigma, *fit.model.correlation_lengths, fit.model.c,
+                              fit.rel_err), ""
+    except KCorrelationUnresolved as err:
+        kc_values, kc_note = (nan, nan, nan, nan, (nan,) * 4), str(err)
     lt, lr = autocorrelation_lengths(h, dx, dy)
     lam = wavelength_nm * 1e-6
     g = 4 * math.pi * sq * math.cos(math.radians(incidence_deg)) / lam
@@ -155,13 +169,19 @@ def analyse(heights, dx: float, dy: float, wavelength_nm: float = 545.0,
     return TopographyAnalysis(
         source, h.shape, (dx * 1e3, dy * 1e3), sq * 1e3, rq_t * 1e3, rq_r * 1e3,
         float(np.sqrt(np.mean(gx**2 + gy**2))), st, sr, math.sqrt(2) * st, math.sqrt(2) * sr,
-        kc.sigma * 1e3, kc.correlation_lengths[0] * 1e3, kc.correlation_lengths[1] * 1e3, kc.c, fit.rel_err,
+        kc_values[0] * 1e3, kc_values[1] * 1e3, kc_values[2] * 1e3, kc_values[3], kc_values[4],
         lt * 1e3, lr * 1e3, wavelength_nm, incidence_deg, g, math.exp(-g * g), g_band**2,
-        name, why, model)
+        name, why, model, kc_note)
 
 
 def format_analysis(a: TopographyAnalysis) -> str:
     """A plain-text table of :class:`TopographyAnalysis`."""
+    kc = ([("K-correlation fit", f"not reported: {a.kc_note}")] if a.kc_note else [
+        ("K-correlation sigma / C", (f"{a.kc_sigma_um * 1e3:.4g} nm +- {_pc(a.kc_rel_err[0])} / "
+                                     f"{a.kc_exponent:.3g} +- {_pc(a.kc_rel_err[3])}")),
+        ("correlation length tang. / rad.", (f"{a.kc_correlation_tangential_um:.4g} +- "
+                                             f"{_pc(a.kc_rel_err[1])} / {a.kc_correlation_radial_um:.4g}"
+                                             f" +- {_pc(a.kc_rel_err[2])} um (B / 2 pi)"))])
     rows = [
         ("file", a.source or "(array)"),
         ("grid (ny, nx) / spacing dx, dy", f"{a.shape[0]} x {a.shape[1]} / {a.spacing_um[0]:.4g}, "
@@ -173,11 +193,7 @@ def format_analysis(a: TopographyAnalysis) -> str:
         ("RMS slope tangential / radial", f"{a.rms_slope_tangential:.4g} / {a.rms_slope_radial:.4g}"),
         ("Ward/Beckmann alpha_tangential", f"{a.alpha_tangential:.4g}"),
         ("Ward/Beckmann alpha_radial", f"{a.alpha_radial:.4g}"),
-        ("K-correlation sigma / C", f"{a.kc_sigma_um * 1e3:.4g} nm +- {_pc(a.kc_rel_err[0])} / "
-                                    f"{a.kc_exponent:.3g} +- {_pc(a.kc_rel_err[3])}"),
-        ("correlation length tang. / rad.", f"{a.kc_correlation_tangential_um:.4g} +- "
-                                            f"{_pc(a.kc_rel_err[1])} / {a.kc_correlation_radial_um:.4g}"
-                                            f" +- {_pc(a.kc_rel_err[2])} um (B / 2 pi)"),
+        *kc,
         ("ACF 1/e length tang. / rad.", f"{a.acf_length_tangential_um:.4g} / "
                                         f"{a.acf_length_radial_um:.4g} um"),
         ("wavelength / incidence", f"{a.wavelength_nm:g} nm / {a.incidence_deg:g} deg"),
@@ -210,6 +226,7 @@ def from_config(cfg: TopographyConfig, incidence_deg: float = 0.0):
     """The ``topography`` model: the slope density (geometric) or the specular peak plus the
     Rayleigh-Rice halo of the map's PSD (smooth), by ``cfg.regime`` (``auto``: the
     Rayleigh parameter at the configured or the set-up's incidence, :func:`regime`)."""
+    from ..config import ConfigError
     from . import rayleigh_rice as rr
     from .slope_density import SlopeDensityBRDF
 
@@ -218,18 +235,29 @@ def from_config(cfg: TopographyConfig, incidence_deg: float = 0.0):
     h = h - h.mean()
     lam = cfg.wavelength_nm * 1e-6
     sq = float(h.std())
+    try:
+        check_not_flat(sq, f"brdf.file: {cfg.file}: the map")
+    except FlatTopography as err:
+        raise ConfigError(str(err)) from None
     g = 4 * math.pi * sq * math.cos(math.radians(inc)) / lam
     use = cfg.regime if cfg.regime != "auto" else ("smooth" if regime(g)[2] == "rayleigh_rice"
                                                     else "geometric")
     if use == "geometric":
         return SlopeDensityBRDF(slope_table(h, dx, dy, cfg.bins), cfg.rho_s,
                                 cfg.shadowing == "smith", name="topography")
+    eps = rr.permittivity(cfg.refractive_index)
+    rr.check_validity(sq, lam, math.radians(inc), eps, cfg.rho_s,
+                      sigma_field=f"brdf.regime = 'smooth' with brdf.file {cfg.file}")
     fx, fy, s = periodogram(h, dx, dy, "hann")
     if cfg.psd == "k_correlation":
-        psd = fit_k_correlation(fx, fy, s, effective_fraction=window_fraction("hann")).model
+        try:
+            psd = fit_k_correlation(fx, fy, s, effective_fraction=window_fraction("hann")).model
+        except KCorrelationUnresolved as err:
+            raise ConfigError(f"brdf.psd = 'k_correlation': {err} ({cfg.file}); use psd = "
+                              "'tabulated' (the measured periodogram)") from None
     else:
         psd = TabulatedPSD(fx, fy, s)
-    exact = rr.RayleighRice(psd, sq, lam, rr.permittivity(cfg.refractive_index), cfg.rho_s)
+    exact = rr.RayleighRice(psd, sq, lam, eps, cfg.rho_s)
     model = rr.specular_halo(exact, math.radians(inc), bins=cfg.halo_bins)
     return rr.SpecularHaloBRDF(model.exact, model.halo, model.specular_reflectance, model.theta0,
                                model.table_share, name="topography")

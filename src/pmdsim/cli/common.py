@@ -4,9 +4,19 @@ one red line (exit 2) and interrupts (exit 130/143)."""
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
 
 import typer
+import typer.rich_utils
 from rich.console import Console
+
+#: Width of ``--help`` when it does not go to a terminal (a pipe, a file, a test): Rich's
+#: default of 80 columns cut option help into narrow columns and ellipsised long names.
+#: A terminal keeps its own width; ``TERMINAL_WIDTH`` or ``COLUMNS`` override both.
+HELP_WIDTH = 120
+if not (os.environ.get("TERMINAL_WIDTH") or os.environ.get("COLUMNS")) and not sys.stdout.isatty():
+    typer.rich_utils.MAX_WIDTH = HELP_WIDTH
 
 app = typer.Typer(
     name="pmdsim",
@@ -51,6 +61,31 @@ def _guard():
         raise typer.Exit(EXIT_TERMINATED if term else EXIT_INTERRUPTED) from None
 
 
+def _warnings_as_messages() -> None:
+    """pmdsim's own warnings (a stale temporary folder removed, a target not met) as one
+    line each, "note: ..." / "warning: ...", instead of Python's format with the source
+    file and line; other libraries' warnings keep Python's format."""
+    import os
+    import warnings
+
+    if getattr(warnings.showwarning, "_pmdsim", False):
+        return
+    original = warnings.showwarning
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the package
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        ours = (category.__module__.startswith("pmdsim")
+                or os.path.abspath(str(filename)).startswith(here + os.sep))
+        if not ours:
+            return original(message, category, filename, lineno, file, line)
+        note = category.__name__ == "StaleTemporaryWarning"
+        _console(stderr=True).print(f"{'note' if note else 'warning'}: {message}",
+                                    style="yellow", markup=False)
+
+    show._pmdsim = True
+    warnings.showwarning = show
+
+
 def _version_callback(value: bool) -> None:
     if value:
         from .._version import __version__
@@ -66,6 +101,10 @@ def _main(
 ) -> None:
     """Simulate Phase Measuring Deflectometry (PMD) of scattering surfaces by reverse ray
     tracing with a BRDF-weighted ray bundle per camera pixel."""
+    from . import interrupt
+
+    interrupt.release()  # the start-up is over: SIGINT unwinds the command (KeyboardInterrupt)
+    _warnings_as_messages()
 
 
 def _console(stderr: bool = False) -> Console:

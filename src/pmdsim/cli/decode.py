@@ -50,14 +50,13 @@ def decode(
     """Decode phase-shifted fringe images (real camera images or a simulation's) to absolute
     phase, monitor coordinate, modulation and reliability flags; writes OUT/decode.zarr,
     statistics.json and PNG maps."""
-    from ..run.decode_run import decode_files, make_setup
-
     import math
-
-    from ..config import InputError
 
     console = _console()
     with _guard():
+        from ..config import InputError
+        from ..run.decode_run import decode_files, make_setup
+
         # the options first, before any image is read
         if not (math.isfinite(max_order_residual) and 0 < max_order_residual <= 0.5):
             raise InputError(f"--max-order-residual must lie in (0, 0.5] (0.5 = ambiguous "

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from .common import _console, _fail
+from .common import _console, _guard
 
 
 def export(
@@ -19,14 +19,15 @@ def export(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace existing files."),
 ) -> None:
     """Export the reconstructed surface's maps (height error, slope errors X/Y and the
-    reconstructed height) for surface-metrology software (docs/reconstruction.md)."""
-    from ..config import InputError
+    reconstructed height) for surface-metrology software (docs/reconstruction.md); X3P
+    holds the heights only (its z axis is a length)."""
     from ..store.export import export_run
 
     console = _console()
-    try:
-        files = export_run(run, fmt, output, overwrite)
-    except (InputError, FileNotFoundError) as err:
-        _fail(str(err))
+    notes: list[str] = []
+    with _guard():
+        files = export_run(run, fmt, output, overwrite, notes)
+    for n in notes:
+        _console(stderr=True).print(f"note: {n}", style="yellow", markup=False)
     for f in files:
-        console.print(f"wrote {f}")
+        console.print(f"wrote {f}", markup=False)

@@ -74,7 +74,7 @@ def simulate(
     target_error_mrad: float | None = typer.Option(
         None, "--target-error-mrad",
         help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
-        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "error (P95 over pixels, every fringe) is below this (the same as [sampling] target_error_mrad); "
         "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Render the configured patterns and write a run folder (images, run.zarr, figures);
@@ -88,18 +88,11 @@ def simulate(
         check_free(output)
     except OutputBusy as err:
         _fail(str(err))
-    from ..config import load_config
-
     console = _console()
     with _guard():
-        cfg = load_config(config)
-        if target_error_mrad is not None:
-            from ..config import ConfigError
+        from ..config import load_config, with_target_error
 
-            if not target_error_mrad > 0:
-                raise ConfigError(f"--target-error-mrad must be > 0, got {target_error_mrad}")
-            cfg = cfg.model_validate({**cfg.model_dump(), "sampling": {
-                **cfg.sampling.model_dump(), "target_error_mrad": target_error_mrad}})
+        cfg = with_target_error(load_config(config), target_error_mrad)  # field-named errors
         from ..report.text import warning_text
         from ..run import run_simulation
         from ..store.folder import check_output_dir

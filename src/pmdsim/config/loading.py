@@ -31,9 +31,23 @@ def _error_path(loc) -> list:
             if not (k > 0 and isinstance(loc[k - 1], str) and p in _UNION_TAGS.get(loc[k - 1], ()))]
 
 
+def _member_tag(p) -> bool:
+    """A location part that names a member of a union in pydantic's own notation
+    (``tuple[...]``, ``literal['auto']``, ``function-after[...]``): not a field."""
+    return isinstance(p, str) and "[" in p
+
+
 def _format_errors(err: ValidationError, source: str) -> str:
     lines = [f"invalid configuration ({source}):"]
-    for e in err.errors():
+    errors = err.errors()
+    # a union (e.g. camera.roi: a tuple or "auto"): pydantic reports every member's error
+    # under its own tag; keep the errors of the members the input got furthest into
+    plain = [tuple(p for p in e["loc"] if not _member_tag(p)) for e in errors]
+    deeper = {loc[:k] for loc in plain for k in range(1, len(loc))}
+    for e, bare in zip(errors, plain):
+        if len(bare) < len(e["loc"]) and bare in deeper:
+            continue  # the member the input's shape did not fit (e.g. "should be 'auto'")
+        e = dict(e, loc=bare)
         path = _error_path(e["loc"])
         msg = e["msg"].removeprefix("Value error, ")
         if e["type"] in ("union_tag_not_found", "union_tag_invalid"):
@@ -49,8 +63,14 @@ def _format_errors(err: ValidationError, source: str) -> str:
         text = repr(inp)
         text = text if len(text) <= 80 else text[:77] + "..."
         shown = "" if e["type"] in ("missing",) or isinstance(inp, dict) else f" (got {text})"
-        lines.append(f"  {loc}: {msg}{shown}")
-    return "\n".join(lines)
+        hint = _HINTS.get(".".join(str(p) for p in path[:2]), "")
+        lines.append(f"  {loc}: {msg}{shown}{hint}")
+    return "\n".join(dict.fromkeys(lines))
+
+
+#: What a field holds, said after its error where the bare message does not.
+_HINTS = {"camera.roi": "; camera.roi = [col0, row0, width, height] in sensor px (from 0), "
+                        "or 'auto'"}
 
 
 def parse_config(data: dict, source: str = "<dict>") -> RunConfig:

@@ -123,18 +123,29 @@ def _member_estimate(cfg: "RunConfig", n_px: float, width: int) -> tuple[dict, f
 
 #: Rays of a Gauss rule plus its two embedded rules (about 3/4 and 1/2 of the order in
 #: each of two dimensions: ~0.56 + 0.25 more nodes), rounded up: the error-estimating
-#: passes of mode "rule".
+#: passes of mode "rule" where the integrand is not smooth.
 RULE_WITH_EMBEDDED = 1.85
+#: Mode "rule" on a continuous monitor: the rule once, and its pilot (a rule 4 x finer on
+#: 1/64 of the pixels, the local pilots where a lobe leaves the monitor), rounded up.
+RULE_WITH_PILOT = 1.15
+#: The rule a target is expected to pick, per node it starts from, for the estimate (the
+#: pilot picks it; Fig. 3's 0.1 mrad: 64-128 nodes from 16), and at least this many nodes.
+TARGET_TYPICAL_NODES = 256
 
 
 def rays_per_bundle(sampling, pixel_model: str = "continuous") -> float:
-    """Rays per vision ray over all the sample sets of one render: ``n_rays`` (or, with
-    ``target_error_mrad``, up to ``max_rays``); mode ``rule`` with its error estimate adds
-    the embedded rules on a smooth (continuous-monitor) integrand, elsewhere it runs as
-    ``rqmc`` (R sets of n_rays / R: n_rays in all)."""
-    n = float(sampling.max_rays if sampling.target_error_mrad is not None else sampling.n_rays)
-    if (sampling.mode == "rule" and sampling.error_estimate and pixel_model == "continuous"):
-        return RULE_WITH_EMBEDDED * n
+    """Rays per vision ray over all the sample sets of one render: ``n_rays`` (with
+    ``target_error_mrad``: :data:`TARGET_TYPICAL_NODES`, at least ``n_rays`` and at most
+    ``max_rays``, and the doubling renders of a target on a nearest-pixel monitor); mode
+    ``rule`` with its error estimate adds its pilot on a smooth (continuous-monitor)
+    integrand and the embedded rules elsewhere (its ``rqmc`` replicates share n_rays)."""
+    n = float(sampling.n_rays)
+    if sampling.target_error_mrad is not None:
+        n = float(min(sampling.max_rays, max(sampling.n_rays, TARGET_TYPICAL_NODES)))
+        if pixel_model != "continuous":
+            n *= 2.0  # the doubling full renders (1 + 1/2 + 1/4 ...)
+    if sampling.mode == "rule" and sampling.error_estimate:
+        return (RULE_WITH_PILOT if pixel_model == "continuous" else RULE_WITH_EMBEDDED) * n
     return n
 
 
@@ -147,7 +158,7 @@ def estimate_resources(cfg: "RunConfig") -> ResourceEstimate:
     cam = cfg.camera
     # vision rays per pixel (sub-pixels x thin-lens aperture samples): every one carries a
     # bundle of scattered rays
-    vision = cam.subpixels ** 2 * (cam.aperture_samples if cam.f_number is not None else 1)
+    vision = cam.vision_rays_per_pixel
     # the vision-ray geometry of the whole camera (25 float64 per vision ray and the
     # specular monitor coordinates), the masks and the dataset's copies of the maps
     parts = {"camera.resolution": n_px * (25 * 8 + 16 + 64)}
@@ -179,7 +190,7 @@ def estimate_resources(cfg: "RunConfig") -> ResourceEstimate:
 
 def _vision_field(cam) -> str:
     """The camera setting that multiplies the vision rays per pixel most."""
-    lens = cam.aperture_samples if cam.f_number is not None else 1
+    lens = cam.aperture_samples if cam.has_aperture else 1
     return "camera.aperture_samples" if lens >= cam.subpixels ** 2 else "camera.subpixels"
 
 
@@ -278,7 +289,7 @@ def check_resources(cfg: "RunConfig", available_bytes: int | None = None,
     limit = cfg.compute.max_cpu_hours if max_cpu_hours is None else max_cpu_hours
     if est.cpu_seconds > limit * 3600:
         cam = cfg.camera
-        vision = cam.subpixels ** 2 * (cam.aperture_samples if cam.f_number is not None else 1)
+        vision = cam.vision_rays_per_pixel
         field = ("sampling.n_rays" if cfg.sampling.n_rays > 1 and cfg.sampling.n_rays >= vision
                  else _vision_field(cam) if vision > 1 else "camera.resolution")
         raise ConfigError(

@@ -133,6 +133,12 @@ def physical_estimator(cfg: "RunConfig") -> "RunConfig":
 def with_sampling(cfg: "RunConfig", **changes) -> "RunConfig":
     """``cfg`` with ``changes`` to ``[sampling]``, validated; the fields the configuration
     set explicitly stay marked as set (:func:`physical_estimator` reads them)."""
+    from .sampling import DEFAULT_TARGET_MRAD, DEFAULT_TARGET_START
+
+    s = cfg.sampling
+    if ("n_rays" in changes and "target_error_mrad" not in changes
+            and s.n_rays == DEFAULT_TARGET_START and s.target_error_mrad == DEFAULT_TARGET_MRAD):
+        changes = {**changes, "target_error_mrad": None}  # the default target: n_rays alone
     given = set(cfg.sampling.model_fields_set) | set(changes)
     full = type(cfg).model_validate({**cfg.model_dump(), "sampling": {**cfg.sampling.model_dump(),
                                                                       **changes}})
@@ -151,7 +157,8 @@ def with_target_error(cfg: "RunConfig", target_error_mrad: float | None) -> "Run
     try:
         return with_sampling(cfg, target_error_mrad=float(target_error_mrad))
     except ValueError as err:
-        why = "; ".join(e["msg"] for e in err.errors()) if hasattr(err, "errors") else str(err)
+        why = ("; ".join(e["msg"].removeprefix("Value error, ") for e in err.errors())
+               if hasattr(err, "errors") else str(err))
         raise ConfigError(f"--target-error-mrad: {why}") from None
 
 def _check_variation_model(brdf, where: str) -> None:

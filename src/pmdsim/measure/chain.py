@@ -130,7 +130,8 @@ def surface_to_monitor_mm(sim, geometry) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class SlopeGeometry:
     """What the 3-D slope conversion needs: the surface point of every pixel (H, W, 3) mm,
-    the camera centre (3,) and the monitor (``pixel_to_world``)."""
+    the camera centre (3,) or homogeneous viewpoint (4,) (:attr:`pmdsim.scene.Camera.
+    viewpoint`: a telecentric camera's is at infinity) and the monitor (``pixel_to_world``)."""
 
     points_mm: np.ndarray
     camera_position: np.ndarray
@@ -377,12 +378,16 @@ def statistics(chain: ChainResult, name: str) -> dict:
 DOT_COLUMNS = ("variant", "dot", "dot_u_px", "dot_v_px", "dot_size_px", "centroid_col",
                "centroid_row",
                "sigma_major_px", "sigma_minor_px", "elongation", "angle_deg", "peak",
-               "total", "threshold")
+               "total", "threshold", "centroid_col_err", "centroid_row_err",
+               "sigma_major_px_err", "sigma_minor_px_err", "elongation_err", "angle_deg_err")
 
 
 def dot_table(dot_images: np.ndarray, dots, variant: str = "",
-              threshold_fraction: float = DOT_THRESHOLD_FRACTION) -> list[dict]:
-    """Second moments of every dot image (:func:`pmdsim.measure.deviation.image_moments`).
+              threshold_fraction: float = DOT_THRESHOLD_FRACTION,
+              dot_errors: np.ndarray | None = None) -> list[dict]:
+    """Second moments of every dot image (:func:`pmdsim.measure.deviation.image_moments`)
+    and their numerical error (:func:`~pmdsim.measure.deviation.moments_error`, the
+    ``*_err`` columns; NaN without ``dot_errors``, the images' numerical error).
 
     The background threshold is ``threshold_fraction`` x the image's maximum; centroid in
     camera px (col, row), sigmas in camera px, angle of the major axis from +col towards
@@ -394,6 +399,11 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
         peak = float(np.nanmax(img)) if np.isfinite(img).any() else float("nan")
         thr = threshold_fraction * peak if np.isfinite(peak) and peak > 0 else 0.0
         m = analysis.image_moments(img, thr)
+        errs = dict.fromkeys(analysis.MOMENT_ERRORS, float("nan"))
+        if dot_errors is not None and np.isfinite(peak):
+            e = np.asarray(dot_errors[q], np.float64)
+            at_peak = e[np.unravel_index(np.nanargmax(img), img.shape)]
+            errs = analysis.moments_error(img, e, thr, threshold_fraction * float(at_peak))
         rows.append({
             "variant": variant, "dot": q, "dot_u_px": float(dot.u), "dot_v_px": float(dot.v),
             "dot_size_px": float(dot.size),
@@ -401,6 +411,10 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
             "sigma_major_px": m.sigma_major, "sigma_minor_px": m.sigma_minor,
             "elongation": m.elongation, "angle_deg": float(np.degrees(m.angle)),
             "peak": peak, "total": m.total, "threshold": thr,
+            "centroid_col_err": errs["centroid_col"], "centroid_row_err": errs["centroid_row"],
+            "sigma_major_px_err": errs["sigma_major"], "sigma_minor_px_err": errs["sigma_minor"],
+            "elongation_err": errs["elongation"],
+            "angle_deg_err": float(np.degrees(errs["angle"])),
         })
     return rows
 

@@ -22,8 +22,7 @@ def scene_geometry_rows(scene: Scene, row0: int, row1: int, buffers=None):
     """
     if not scene.camera.is_simple_pinhole:
         rows, cols = np.mgrid[row0:row1, 0 : scene.camera.width]
-        o = np.broadcast_to(scene.camera.position, (rows.size, 3))
-        d = scene.camera.ray_directions(rows.ravel(), cols.ravel())
+        o, d = scene.camera.chief_rays(rows.ravel(), cols.ravel())
         return _rays_geometry(scene, o, d)
     n = (row1 - row0) * scene.camera.width
     if buffers is not None and buffers[0].shape[0] >= n:
@@ -56,6 +55,9 @@ def vision_geometry_rows(scene: Scene, row: int):
     of camera row ``row``, pixel-major."""
     cam = scene.camera
     w = cam.width
+    if cam.telecentric:  # parallel rays from the entrance plane: explicit rays
+        o, d = cam.vision_rays(np.full(w, row), np.arange(w))
+        return _rays_geometry(scene, o.reshape(-1, 3), d.reshape(-1, 3))
     chief, aperture, focus = cam.lens_inputs(np.full(w, row), np.arange(w))
     n = w * cam.rays_per_pixel
     geo = np.empty((n, kb.G_SIZE))

@@ -164,10 +164,16 @@ def convergence_of_ratios(ratio: np.ndarray, a1: np.ndarray, exponent: float) ->
     return out
 
 
+#: Pixels with more of their lobe's weight off the monitor are left out of a target's P95
+#: (the chain never counts them valid: ``diagnostics.max_off_monitor_fraction``' default).
+MAX_OFF = 0.05
+
+
 def worst_phase_error(fr, min_modulation: float = 0.05) -> float | None:
     """The largest over fringes of the P95 over pixels of the stated phase error (rad),
     over the pixels whose fringe keeps a modulation ``|S| / f_hit >= min_modulation``
-    (washed-out fringes cannot be decoded at any order); None without an estimate."""
+    (washed-out fringes cannot be decoded at any order) and whose lobe has at most
+    :data:`MAX_OFF` of its weight off the monitor; None without an estimate."""
     pe = fr.phase_error()
     if pe is None:
         return None
@@ -179,6 +185,9 @@ def worst_phase_error(fr, min_modulation: float = 0.05) -> float | None:
                                     np.moveaxis(fr.images.astype(np.float64), 2, 0), axes=1))
             k = len(fr.shifts)
             mod = 2 * z / k / (np.sum(fr.images.astype(np.float64), axis=2) / k)
+    with np.errstate(divide="ignore", invalid="ignore"):  # never valid in the chain
+        off = 1.0 - np.abs(fr.f_hit) / np.abs(fr.f_total)
+    mod = np.where(off > MAX_OFF, 0.0, mod)
     worst = None
     for di in range(pe.shape[0]):
         for wi in range(pe.shape[1]):

@@ -158,10 +158,11 @@ def _draw_scene(ax, sim, bundle, vision, pixel, full: bool):
     if full:
         reach = 0.12 * float(np.linalg.norm(surf.outline()[:-1].mean(axis=0) - c))
         corner_px = np.array([[0, 0], [0, w - 1], [h - 1, w - 1], [h - 1, 0]], float)
-        cdirs = cam.ray_directions(corner_px[:, 0], corner_px[:, 1])
-        far = c + cdirs * (reach / (cdirs @ cam.rotation[:, 2]))[:, None]
-        for p in far:
-            _line(ax, c, p, color="k", linewidth=0.8)
+        corigins, cdirs = cam.chief_rays(corner_px[:, 0], corner_px[:, 1])
+        # a telecentric camera's field: parallel rays from its entrance plane's corners
+        far = corigins + cdirs * (reach / (cdirs @ cam.rotation[:, 2]))[:, None]
+        for o, p in zip(corigins, far):
+            _line(ax, o, p, color="k", linewidth=0.8)
         ax.add_collection3d(Poly3DCollection([far], facecolor="0.3", alpha=0.25,
                                              edgecolor="k", linewidth=0.8))
         ax.scatter(*c, color="k", s=18)
@@ -171,10 +172,10 @@ def _draw_scene(ax, sim, bundle, vision, pixel, full: bool):
         ax.text(*outline[1], "  surface", color="0.2", fontsize=8)
 
     def start(s):
-        if full:
-            return c
-        d = c - s
-        return s + cut * d / np.linalg.norm(d)
+        d = cam.directions_to_camera(s)
+        if full:  # the projection centre, or the entrance plane of a telecentric camera
+            return c if not cam.telecentric else s + d * ((s - c) @ cam.rotation[:, 2])
+        return s + cut * d
 
     # one collection per kind of ray (a 3-D line per ray costs ~3 ms to create and draw)
     _lines(ax, [(start(s), s) for s, _, _ in vision], color="#2171b5", linewidth=0.6,

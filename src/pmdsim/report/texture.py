@@ -173,17 +173,21 @@ def plot_topography(analysis, heights, dx: float, dy: float, path) -> Path:
     ax0.set_ylabel("y (radial), um")
     ax0.set_title(f"Sq {a.sq_um * 1e3:.3g} nm, Sdq {a.sdq:.3g}")
     fx, fy, s = periodogram(h, dx, dy, "hann")
-    kc = KCorrelation(a.kc_sigma_um * 1e-3, 2 * math.pi * a.kc_correlation_tangential_um * 1e-3,
-                         2 * math.pi * a.kc_correlation_radial_um * 1e-3, a.kc_exponent)
+    kc = None if a.kc_note else KCorrelation(
+        a.kc_sigma_um * 1e-3, 2 * math.pi * a.kc_correlation_tangential_um * 1e-3,
+        2 * math.pi * a.kc_correlation_radial_um * 1e-3, a.kc_exponent)
     ix, iy = nx // 2, ny // 2  # zero frequency after fftshift
-    for f, row, fit, colour, name in (
-            (fx[ix + 1:], s[iy, ix + 1:], kc(fx[ix + 1:], 0.0), "tab:blue", "fx (tangential)"),
-            (fy[iy + 1:], s[iy + 1:, ix], kc(0.0, fy[iy + 1:]), "tab:orange", "fy (radial)")):
+    for f, row, colour, name, at in (
+            (fx[ix + 1:], s[iy, ix + 1:], "tab:blue", "fx (tangential)", lambda f: (f, 0.0)),
+            (fy[iy + 1:], s[iy + 1:, ix], "tab:orange", "fy (radial)", lambda f: (0.0, f))):
         ax1.loglog(f * 1e-3, row * 1e12, ".", ms=2, color=colour, alpha=0.5, label=f"periodogram, {name}")
-        ax1.loglog(f * 1e-3, fit * 1e12, "-", color=colour, lw=1.5, label=f"K-correlation fit, {name}")
+        if kc is not None:
+            ax1.loglog(f * 1e-3, kc(*at(f)) * 1e12, "-", color=colour, lw=1.5,
+                       label=f"K-correlation fit, {name}")
     ax1.set_xlabel("spatial frequency, 1/um")
     ax1.set_ylabel("PSD, um^4")
-    ax1.set_title(f"correlation lengths {a.kc_correlation_tangential_um:.3g} / "
+    ax1.set_title("K-correlation model: no fit (no knee inside the map)" if kc is None else
+                  f"correlation lengths {a.kc_correlation_tangential_um:.3g} / "
                   f"{a.kc_correlation_radial_um:.3g} um, C = {a.kc_exponent:.3g}", fontsize=9)
     ax1.legend(fontsize=7)
     gy, gx = np.gradient(h, dy, dx)

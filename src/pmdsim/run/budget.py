@@ -2,8 +2,10 @@
 
 OUT/budget.csv (per effect and fringe direction), heights.csv (per effect: slope errors
 X/Y and height error after the removal, the calibration rows among them), zernike.csv (the
-Noll and Fringe tables of every height row, after removal), budget.json (all rows, the
-settings, the configuration) and budget.png; the folder is created atomically (:func:`pmdsim.store.folder.atomic_run_dir`, marker ``pmdsim-budget.json``).
+Noll and Fringe tables of every height row, after removal), areal.csv (per height row and
+map: ISO 25178 areal parameters and band-limited RMS, :mod:`pmdsim.studies.budget_areal`),
+budget.json (all rows with their radial PSDs, the settings, the configuration), budget.png
+and budget_psd.png (the height rows' radial PSDs); the folder is created atomically (:func:`pmdsim.store.folder.atomic_run_dir`, marker ``pmdsim-budget.json``).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from ..config import RunConfig, check_resources
+from ..config import ConfigError, RunConfig, check_resources
 from .simulate import resolve_roi
 from ..studies.budget_error import HEIGHT_COLUMNS, TABLE_COLUMNS
 from ..studies.budget import budget
@@ -55,6 +57,34 @@ def zernike_rows(height_rows) -> list[dict]:
     return out
 
 
+def _check_height_rows(cfg: RunConfig, rows) -> list[str]:
+    """Refuse height rows without a node (every statistic NaN: not a result), naming what
+    removed the nodes: the rim band (``budget.rim_exclusion_mm`` / ``_percent``) or the
+    view; a note instead with ``diagnostics.allow_no_valid_pixels``."""
+    empty = [r for r in rows or () if int(r.get("n_nodes", 1)) == 0]
+    if not empty:
+        return []
+    b = cfg.budget
+    labels = [r.get("label", r.get("effect", "?")) for r in empty]
+    names = "; ".join(labels[:3]) + (f"; and {len(labels) - 3} more" if len(labels) > 3 else "")
+    rim = max(int(r.get("rim_excluded") or 0) for r in empty)
+    if rim:
+        field = ("budget.rim_exclusion_mm = " f"{b.rim_exclusion_mm:g}" if b.rim_exclusion_mm
+                 else f"budget.rim_exclusion_percent = {b.rim_exclusion_percent:g}")
+        text = (f"{field}: the rim band takes every one of the {rim} nodes of the measured area "
+                f"in {len(empty)} of {len(rows)} height rows ({names}), so their height and "
+                "slope statistics are undefined; lower it below the measured area's inscribed "
+                "radius (or use budget.rim_exclusion_percent)")
+    else:
+        field = (f"camera.roi = {list(cfg.camera.roi)}" if isinstance(cfg.camera.roi, tuple)
+                 else "reconstruct")
+        text = (f"{field}: no reconstructed node in {len(empty)} of {len(rows)} height rows "
+                f"({names}); the camera sees too little of the part to reconstruct it")
+    if cfg.diagnostics.allow_no_valid_pixels:
+        return [f"budget: {text} (kept because diagnostics.allow_no_valid_pixels = true)"]
+    raise ConfigError(f"invalid set-up:\n  {text}; nothing was written")
+
+
 @single_blas
 def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrite: bool = False,
                progress: Callable[[str], None] | None = None, truth: str = "centre") -> BudgetResult:
@@ -69,16 +99,27 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     from ..studies.physics_checks import check_physics
 
     check_physics(cfg, Scene.from_config(cfg))  # a sensor/display that leaves no signal
-    result = budget(cfg, progress, truth)
+    try:
+        result = budget(cfg, progress, truth)
+    except ValueError as err:
+        if isinstance(cfg.camera.roi, tuple) and "no valid decoded pixel" in str(err):
+            raise ConfigError(f"invalid set-up:\n  camera.roi = {list(cfg.camera.roi)}: {err}: "
+                              "the window (col0, row0, width, height) sees no decodable part "
+                              "of the surface; widen it or set camera.roi = 'auto'") from None
+        raise
     rows = result.rows
     notes = check_rows(rows, cfg.diagnostics.allow_no_valid_pixels, "budget",
                        lambda r: f"{r['effect']} {r['direction']}")  # 0 valid: not a result
+    notes += _check_height_rows(cfg, result.height_rows)
     with atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
         _csv(tmp / "budget.csv", rows, TABLE_COLUMNS)
         if result.height_rows:
             _csv(tmp / "heights.csv", result.height_rows, HEIGHT_COLUMNS)
             _csv(tmp / "zernike.csv", zernike_rows(result.height_rows),
                  ("effect", "part", "order", "index", "n", "m", "coefficient", "removed"))
+            from ..studies.budget_areal import AREAL_COLUMNS, areal_rows
+
+            _csv(tmp / "areal.csv", areal_rows(result.height_rows), AREAL_COLUMNS)
         write_json(tmp / "budget.json", {
             "name": cfg.name, "truth": truth, "settings": result.settings,
             "units": "every statistic X has its numerical error X_err (null: not stated)",
@@ -91,6 +132,11 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
             plot_budget(rows, tmp / "budget.png", title=f"{cfg.name}: error budget",
                         height_rows=result.height_rows, settings=result.settings)
             fig = final / "budget.png"
+            if result.height_rows:
+                from ..report.psd import plot_budget_psd
+
+                plot_budget_psd(result.height_rows, tmp / "budget_psd.png",
+                                title=f"{cfg.name}: error budget")
         (tmp / MARKER).write_text(json.dumps({"name": cfg.name, "kind": "budget"}) + "\n")
     return BudgetResult(rows, final, final / "budget.csv", fig, result.height_rows, result.settings,
                         tuple(notes))

@@ -40,6 +40,7 @@ class ConvergenceResult:
     warnings: list = field(default_factory=list)
     diagnostics: dict = field(default_factory=dict)
     notes: tuple = ()
+    reference: dict | None = None
 
 
 
@@ -92,4 +93,5 @@ def run_convergence(
             fig_path = final / "convergence.png"
         write_json(tmp / MARKER, study.meta)
     return ConvergenceResult(study.rows, final, final / "convergence.csv", fig_path,
-                             study.warnings, study.diagnostics, tuple(notes))
+                             study.warnings, study.diagnostics, tuple(notes),
+                             study.meta.get("reference"))

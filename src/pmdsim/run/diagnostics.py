@@ -112,7 +112,7 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
         variables["diag_theta_needed_deg"] = (dims, e.theta_needed_deg, {
             "units": "deg", "description": f"smallest cone half angle about P holding "
             f"{100 * e.target:g} % of the lobe's reflected energy" + where})
-    if diag.rays is not None:
+    if diag.rays is not None and not diag.summary.get("deterministic_rule"):  # no noise
         variables["diag_effective_sample_size"] = (dims, diag.rays.ess, {
             "units": "rays", "description": "effective sample size (sum w)^2 / sum w^2 of the "
             f"weights of the monitor-hitting rays, of N = {diag.n_rays}" + where})

@@ -45,8 +45,9 @@ FIGURES = {
     "modulation_ratio": ("modulation_ratio.png", "chain"),
     "masks": ("masks.png", "chain"),
     "surface_errors": ("surface_errors.png", "reconstruction"),
+    "surface_psd": ("surface_psd.png", "psd"),
 }
-SUMMARY_DECODED = ("setup", "overview", "surface_errors")
+SUMMARY_DECODED = ("setup", "overview", "surface_errors", "surface_psd")
 SUMMARY = ("setup", "fringes", "modulation")
 
 
@@ -57,6 +58,8 @@ def _has(ds, needs: str | None) -> bool:
         return "fringes" in ds
     if needs == "reconstruction":
         return "height_error_nm" in ds
+    if needs == "psd":
+        return "height_error_psd" in ds
     return "phase_deviation" in ds
 
 
@@ -104,6 +107,11 @@ def draw_one(ds, name: str, folder: Path, run_name: str, description: str = "",
         from ..report.scene import _save
 
         return _save(plot_surface_errors(ds, run_name, description), path)
+    if name == "surface_psd":
+        from ..report.psd import plot_surface_psd
+        from ..report.scene import _save
+
+        return _save(plot_surface_psd(ds, run_name, description), path)
     fn = {"phase": plot_phase, "deviation": plot_deviation,
           "histograms": plot_histograms,
           "modulation_ratio": plot_modulation_ratio,
@@ -337,7 +345,7 @@ class Drawing:
 #: Rough drawing cost of each figure (CPU-s on the Fig. 3 run), to share them out.
 _COST = {"overview": 1.5, "deviation": 1.2, "phase": 1.2, "masks": 0.8, "histograms": 0.6,
          "modulation_ratio": 0.8, "fringes": 0.5, "modulation": 0.6, "setup": 0.5,
-         "surface_errors": 0.4}
+         "surface_errors": 0.4, "surface_psd": 0.5}
 
 
 def start_drawings(names, folder: Path, run_name: str, description: str, ds, sim,

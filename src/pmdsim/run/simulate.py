@@ -170,7 +170,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         geometry = plan.sim.geometry()
         # a set-up that sees nothing stops here, before any scattered ray is traced
         view = coverage.check_view(geometry.surface_mask, geometry.monitor_mask,
-                                   cfg.diagnostics.min_view_fraction)
+                                   cfg.diagnostics.min_view_fraction, roi=cfg.camera.roi)
         if view.warning:
             plan.notes.append(view.warning)
         t_geometry = time.perf_counter() - t
@@ -224,6 +224,26 @@ def _check_valid(cfg: RunConfig, result: RunResult) -> tuple[str, ...]:
     return tuple(notes)
 
 
+def _check_rule_size(cfg: RunConfig, sim) -> None:
+    """Refuse fringes of a Gauss rule (mode ``rule``) of fewer nodes than its error
+    statement needs (:data:`pmdsim.render.pilot.MIN_NODES`): its phase is known only to
+    within pi, and its widths' phases disagree (the decoding would flag every pixel)."""
+    from ..render.pilot import MIN_NODES
+
+    samp = sim.scene.sampling
+    if (cfg.patterns.fringes is None or sim.scene.brdf.is_delta or samp.mode != "rule"
+            or samp.target_error is not None):
+        return
+    nodes = samp.rule(sim._lobe).n
+    if nodes < MIN_NODES:
+        raise ConfigError(
+            f"invalid configuration:\n  sampling.n_rays: {samp.n_rays} gives a Gauss rule of "
+            f"{nodes} nodes, too few to state its numerical error or to decode the fringes "
+            f"(their phases are known only to within pi); raise sampling.n_rays to >= "
+            f"{MIN_NODES}, or set sampling.target_error_mrad instead (or mode = 'stratified' "
+            "for the paper's sample set)")
+
+
 def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
              decode: bool | None, diagnostics: bool) -> RunPlan:
     """Resolve and check the inputs of a run (variant names, dots, monitor images, whether
@@ -239,6 +259,8 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
     dots = resolve_dots(cfg.patterns.dots, cfg.monitor.resolution)
     image_files, levels = resolve_images(cfg.patterns.images, cfg.monitor.resolution)
     decoding, notes = chain_mode(cfg, decode)
+    for _, c, s in members:  # a rule too small to state its error: refused before any work
+        _check_rule_size(c, s)
     for _, c, s in members:  # sensor, display and BRDF that leave no signal: refused here
         notes += [n for n in check_physics(c, s.scene) if n not in notes]
     n_calls = (cfg.patterns.fringes is not None) + bool(dots) + (levels is not None)

@@ -83,6 +83,7 @@ class Member:
 
     fringes: FringeResult | None = None
     dot_images: np.ndarray | None = None  # (dots, H, W)
+    dot_errors: np.ndarray | None = None  # (dots, H, W) numerical error of the rendered dot images
     images: np.ndarray | None = None      # (monitor images, H, W)
     off_monitor: np.ndarray | None = None  # (H, W) bundles that partly miss the monitor
     phase_error: dict | None = None  # direction -> (H, W) numerical phase error, finest width
@@ -118,18 +119,38 @@ def render(m: Member) -> None:
     dots, _, levels, n_tiles = m.inputs
     fr_cfg = cfg.patterns.fringes
     if fr_cfg is not None:
+        import warnings
+
+        from ..render.simulation import RuleTooSmall, TargetNotMet
+
         base = steps.done
-        m.fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
-                                       progress=steps.tiles(n_tiles))
+        with warnings.catch_warnings(record=True) as caught:  # a note each, no source path
+            warnings.simplefilter("always", TargetNotMet)
+            warnings.simplefilter("always", RuleTooSmall)
+            m.fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
+                                           progress=steps.tiles(n_tiles))
+        for w in caught:
+            if issubclass(w.category, (TargetNotMet, RuleTooSmall)):
+                m.notes.append(str(w.message))
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        smp = m.fringes.sampling or {}
+        if smp.get("n_rays") not in (None, sim.scene.sampling.n_rays):
+            # a target's pick: the rule rendered is what the rest of the run speaks of
+            m.sim = sim = sim.with_sampling(replace(sim.scene.sampling, n_rays=smp["n_rays"],
+                                                    target_error=None))
         steps.finish_render(base, n_tiles)
     if dots:
         base = steps.done
-        m.dot_images = sim.render_dots(dots, progress=steps.tiles(n_tiles))
+        m.dot_images, m.dot_errors = sim.render_dots(dots, progress=steps.tiles(n_tiles),
+                                                     with_error=True)
         steps.finish_render(base, n_tiles)
     if levels is not None:
         base = steps.done
         m.images = sim.render_images(levels, progress=steps.tiles(n_tiles))
         steps.finish_render(base, n_tiles)
+    if m.fringes is not None and m.fringes.sampling is not None:  # every ray, pilot included
+        m.fringes.sampling["rays_traced"] = sim.rays_traced
     # nothing empty is written as if it were a result; bundles off the monitor are flagged
     coverage.check_rendered(None if m.fringes is None else m.fringes.images, m.dot_images)
     m.off_monitor = None if m.fringes is None else coverage.off_monitor_mask(
@@ -147,6 +168,7 @@ def capture(m: Member) -> None:
         m.fringes = replace(m.fringes, images=capture_dn(sensor, m.fringes.images, 0))
     if m.dot_images is not None:
         m.dot_images = capture_dn(sensor, m.dot_images, 2)
+        m.dot_errors = None  # in digital numbers, with the sensor's noise: not the render's
     if m.images is not None:
         m.images = capture_dn(sensor, m.images, 3)
 
@@ -154,6 +176,15 @@ def capture(m: Member) -> None:
 def describe_error(sampling: dict | None) -> str:
     """How a render's numerical error was estimated, in words."""
     s = sampling or {}
+    if s.get("error") == "pilot":
+        p = s.get("pilot") or {}
+        return (f"{s.get('rule')}: its phase difference to the {p.get('finer_rule')} on a grid "
+                f"of every {p.get('grid_step_px')}th row and column, times {p.get('safety')}, "
+                "carried to each pixel by the largest over the 3 x 3 grid pixels around it "
+                f"(the pixel's own difference at {p.get('local_pixels')} pixels where a lobe "
+                "leaves the monitor or the grid is incomplete), plus the float32 storage of "
+                "the images (3 sigma) and the kernels' round-off; pi for rules of fewer than "
+                "16 nodes")
     if s.get("error") == "embedded":
         return (f"{s.get('rule')} against the embedded {s.get('embedded_rule')}: the phase "
                 "difference to the first embedded rule plus 0.1 |dS|/|S| (its error, a bound), "
@@ -231,7 +262,7 @@ def compare(m: Member) -> None:
     m.measured = chain.compare(
         m.decoded, reference.decoded, geometry, reference.distance_mm,
         cfg.monitor.pixel_pitch_mm, cfg.decode, len(m.fringes.shifts),
-        slope_geometry=chain.SlopeGeometry(geometry.points, m.sim.scene.camera.position,
+        slope_geometry=chain.SlopeGeometry(geometry.points, m.sim.scene.camera.viewpoint,
                                            m.sim.scene.monitor),
         off_monitor=m.off_monitor, phase_error=m.phase_error)
     m.decoded = None
@@ -254,7 +285,7 @@ def reconstruct(m: Member) -> None:
                                      m.reference.reconstruction)
     m.stats.update(rstats)
     coords = {}
-    for name in ("surface_x_mm", "surface_y_mm"):
+    for name in ("surface_x_mm", "surface_y_mm", *recon.PSD_COORDS):
         if name in rvars:
             dims, data, attrs = rvars.pop(name)
             coords[dims[0]] = (dims, data, attrs)
@@ -266,7 +297,7 @@ def dots(m: Member) -> None:
     """The dot images' second moments: ``dot_*`` variables and ``dots.csv``."""
     if m.dot_images is None:
         return
-    m.dot_table = chain.dot_table(m.dot_images, m.dots, m.cfg.name)
+    m.dot_table = chain.dot_table(m.dot_images, m.dots, m.cfg.name, dot_errors=m.dot_errors)
     m.ds = m.ds.assign(dot_dataset_variables(m.dot_table))
     write_dot_csv(m.folder / "dots.csv", m.dot_table)
 
@@ -369,40 +400,19 @@ def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder
     return result(m), m.ds
 
 
-def _passes_share(sim, smooth: bool, mask) -> float:
-    """The rays of all the sample sets of one render call (:meth:`Simulation.plan`) per
-    ``n_rays`` and surface pixel (``mask``): 1 + about 0.56 for a rule with its embedded
-    rule, + 0.25 for the second embedded rule on every pixel (on a large camera only on a
-    grid of them: :func:`pmdsim.render.convergence_grid.convergence_stride`), else 1."""
-    from ..render.convergence_grid import convergence_stride, grid_share
-
-    passes = sim.plan(smooth)
-    if sim.scene.brdf.is_delta or passes[0].mode != "rule":
-        return 1.0
-    cam = sim.scene.camera
-    return sum(p.rule(sim._lobe).n * grid_share(mask, convergence_stride(p, cam))
-               for p in passes) / max(sim.scene.rays_per_pixel, 1)
-
-
 def result(m: Member) -> RunResult:
     """The :class:`RunResult` of a finished member."""
     sim = m.sim
-    # every pass of a call: a rule's embedded rules add their nodes (rqmc's replicates
-    # share n_rays; the other modes render one set)
-    from ..render import control_variate as control
-
     mask = m.geometry.surface_mask
-    fringe_share = (control.rays_share(sim, m.fringes.sampling["mode"])
-                    if m.fringes is not None and control.applies(sim)
-                    else _passes_share(sim, sim.fringes_smooth(), mask))
-    n_calls = ((m.cfg.patterns.fringes is not None) * fringe_share
-               + (bool(m.dots) + (m.inputs[2] is not None)) * _passes_share(sim, False, mask))
-    rays = sim.scene.rays_per_pixel * sim.scene.camera.rays_per_pixel
+    # the rule rendered (a target's pick) and every ray the kernels traced, pilot included
+    nodes = (m.fringes.sampling.get("nodes") if m.fringes is not None and m.fringes.sampling
+             else None) or sim.scene.rays_per_pixel
+    rays = int(nodes) * sim.scene.camera.rays_per_pixel
     surface_pixels = int(mask.sum())
     return RunResult(
         outdir=m.folder, dataset_path=m.folder / DATASET_NAME,
         image_paths=tuple(m.image_paths), figure_paths=tuple(m.figure_paths),
         exposure=m.exposure, shape=sim.shape, surface_pixels=surface_pixels,
-        rays_per_pixel=rays, rays_traced=int(round(surface_pixels * rays * n_calls)),
+        rays_per_pixel=rays, rays_traced=sim.rays_traced,
         timings=m.timings, config=m.cfg, statistics=m.statistics, notes=tuple(m.notes),
         warnings=() if m.diagnosed is None else m.diagnosed.warnings)

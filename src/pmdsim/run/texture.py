@@ -39,7 +39,7 @@ def run_texture(outdir=None, *, figure: bool = True, wavelengths_nm=(610.0, 545.
 
 @dataclass(frozen=True)
 class TopographyRun:
-    analysis: "object"
+    analysis: object
     text: str
     json: Path | None
     figure: Path | None
@@ -54,20 +54,30 @@ def run_topography(path, outdir=None, *, figure: bool = True, spacing_mm=None,
     local frame (:func:`pmdsim.brdf.topography.analyse`) and write topography.json,
     topography.txt and topography.png to ``outdir`` if given."""
     from ..brdf import topography as tp
+    from ..config import InputError
     from ..report.texture import plot_topography
     from ..topofile import read_topography
 
     t = read_topography(path, "--from", spacing_mm=spacing_mm, height_unit=height_unit,
                         level=level, fill=fill, outlier_sigma=outlier_sigma)
     h, dx, dy = tp.to_local(t.heights, t.dx, t.dy, radial_axis)
-    a = tp.analyse(h, dx, dy, wavelength_nm, incidence_deg, source=str(path))
-    text = tp.format_analysis(a)
+    try:
+        a = tp.analyse(h, dx, dy, wavelength_nm, incidence_deg, source=str(path))
+    except tp.FlatTopography as err:
+        raise InputError(f"--from {path}: {err}") from None
+    n = t.heights.size
+    outliers = t.invalid - t.not_measured
+    text = tp.format_analysis(a) + (
+        f"\nfilled {t.invalid} of {n} points ({fill}): {t.not_measured} not measured (NaN/inf "
+        f"or the file's marker), {outliers} outliers" if t.invalid else
+        f"\nfilled 0 of {n} points: every point measured and finite")
     js = fig = None
     if outdir is not None:
         out = Path(outdir)
         out.mkdir(parents=True, exist_ok=True)
         js = out / "topography.json"
         write_json(js, a.as_dict() | {"reader": t.reader, "invalid_points": t.invalid,
+                                      "not_measured_points": t.not_measured,
                                       "radial_axis": radial_axis})
         (out / "topography.txt").write_text(text + "\n")
         if figure:

@@ -147,7 +147,8 @@ def set_up_incidence_deg(camera, surface) -> float:
     """Angle (deg) between the surface normal at its centre and the direction to the camera."""
     centre = np.asarray(getattr(surface, "centre", np.zeros(3)), np.float64)
     normal = np.asarray(getattr(surface, "normal", np.array([0.0, 0.0, 1.0])), np.float64)
-    d = np.asarray(camera.position, np.float64) - centre
+    d = camera.directions_to_camera(centre) if hasattr(camera, "directions_to_camera") else (
+        np.asarray(camera.position, np.float64) - centre)
     c = abs(float(d @ normal)) / max(float(np.linalg.norm(d) * np.linalg.norm(normal)), 1e-300)
     return float(np.degrees(np.arccos(min(c, 1.0))))
 

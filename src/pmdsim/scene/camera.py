@@ -20,6 +20,17 @@ and their mirror images through the lens centre, so that a blur that is linear i
 has its centroid exactly at the chief ray; an odd count adds the centre) through the
 in-focus point
 ``F = s_f (x', y', 1)``: all rays of a sensor point meet again at ``F``.
+
+An object-side **telecentric** camera (``telecentric = True``) projects orthographically:
+``(col, row) = (fx x'' + cx, fy y'' + cy)`` with ``(x', y') = (X_c, Y_c)`` in mm (no division
+by ``Z_c``; fx, fy in px per mm on the part = magnification / pixel pitch; the distortion
+polynomial acts on mm, so k1 is in mm^-2). A sensor point's chief ray starts on the entrance
+plane ``Z_c = 0`` at ``C + R (x', y', 0)`` and runs along the optical axis ``R e_z``. With an
+object-side numerical aperture NA, a pixel integrates the cone of directions whose sines
+``(l, m)`` fill the disk of radius NA (the same antithetic lattice as the thin lens's
+aperture), all through the in-focus point ``F = (x', y', s_f)``. Its homogeneous
+:attr:`Camera.viewpoint` is ``(-R e_z, 0)``: the direction to the camera is the same at every
+surface point, which is what the slope conversions use.
 """
 
 from __future__ import annotations
@@ -69,6 +80,8 @@ class Camera:
     focus_distance_mm: float | None = None
     aperture_samples: int = 16
     aperture_seed: int = 0
+    telecentric: bool = False
+    numerical_aperture: float | None = None
 
     @classmethod
     def from_config(cls, cfg: CameraConfig) -> "Camera":
@@ -92,6 +105,16 @@ class Camera:
             y = np.cross(z, x)
             rot = np.stack([x, y, z], axis=1)
         aperture = None if cfg.f_number is None else float(cfg.focal_length_mm / cfg.f_number)
+        if cfg.projection == "telecentric":
+            na = cfg.numerical_aperture
+            return cls(
+                w, h, float(fx), (float(pp[0]), float(pp[1])), pos, rot,
+                focal_px_y=None if fy == fx else float(fy), distortion=cfg.distortion,
+                subpixels=cfg.subpixels, focus_distance_mm=cfg.focus_distance_mm,
+                aperture_samples=cfg.aperture_samples if na is not None else 1,
+                aperture_seed=cfg.aperture_seed, telecentric=True,
+                numerical_aperture=None if na is None else float(na),
+            )
         return cls(
             w, h, float(fx), (float(pp[0]), float(pp[1])), pos, rot,
             focal_px_y=None if fy == fx else float(fy), distortion=cfg.distortion,
@@ -120,12 +143,54 @@ class Camera:
         """One undistorted pinhole ray through each pixel centre, fx = fy (the compiled
         per-pixel tracer :func:`pmdsim.kernels.primary.geometry_tile`)."""
         return (self.subpixels == 1 and self.aperture_mm is None and not self.has_distortion
-                and self.fy == self.focal_px)
+                and self.fy == self.focal_px and not self.telecentric)
+
+    @property
+    def has_aperture(self) -> bool:
+        """A pixel integrates over an aperture: a thin lens, or a telecentric lens with a
+        numerical aperture."""
+        return self.aperture_mm is not None or self.numerical_aperture is not None
 
     @property
     def rays_per_pixel(self) -> int:
         """Vision rays (sub-pixel x aperture samples) per pixel."""
-        return self.subpixels**2 * (self.aperture_samples if self.aperture_mm is not None else 1)
+        return self.subpixels**2 * (self.aperture_samples if self.has_aperture else 1)
+
+    @property
+    def axis(self) -> np.ndarray:
+        """Unit optical axis (viewing direction) in world coordinates."""
+        return self.rotation[:, 2].copy()
+
+    @property
+    def viewpoint(self) -> np.ndarray:
+        """Homogeneous (4,) camera point: ``(C, 1)`` for a projection centre C, ``(-axis, 0)``
+        for a telecentric camera (the point at infinity up its axis). The unit direction
+        from a surface point S to the camera is ``normalize(v[:3] - v[3] S)``."""
+        if self.telecentric:
+            return np.concatenate([-self.rotation[:, 2], [0.0]])
+        return np.concatenate([np.asarray(self.position, np.float64), [1.0]])
+
+    def directions_to_camera(self, points) -> np.ndarray:
+        """Unit directions (..., 3) from world points (..., 3) to the camera."""
+        v = self.viewpoint
+        return normalize(v[:3] - v[3] * np.asarray(points, np.float64))
+
+    @property
+    def depth_of_field_mm(self) -> float:
+        """Half depth of field (mm) about the plane in focus: the defocus at which the blur
+        of a point (its cone of rays) spans one pixel's footprint on the part. Infinite for a
+        pinhole and for an ideal (NA-free) telecentric camera; a thin lens: the pixel at the
+        focus distance, ``s_f^2 / (f_px D)`` (the footprint over the aperture's angle)."""
+        if self.telecentric:
+            if self.numerical_aperture is None:
+                return float("inf")
+            na = self.numerical_aperture
+            footprint = 1.0 / min(self.focal_px, self.fy)
+            return footprint / (2.0 * na / np.sqrt(1.0 - na * na))
+        if self.aperture_mm is None or self.focus_distance_mm is None:
+            return float("inf")
+        footprint = self.focus_distance_mm / min(self.focal_px, self.fy)
+        return footprint * self.focus_distance_mm / self.aperture_mm
 
     def kernel_params(self) -> np.ndarray:
         """Parameter vector for :mod:`pmdsim.kernels.primary` (layout ``CAM_*``; pinhole)."""
@@ -180,8 +245,9 @@ class Camera:
 
     # ------------------------------------------------------------------ rays
     def chief_directions_camera(self, rows, cols) -> np.ndarray:
-        """Unnormalised chief-ray directions (x', y', 1) (..., 3) in camera coordinates of
-        sensor points (rows, cols) (fractional pixels allowed)."""
+        """Undistorted normalised sensor points as (x', y', 1) (..., 3) in camera coordinates
+        (fractional pixels allowed): the unnormalised chief-ray directions of a perspective
+        camera; (mm, mm, 1) of a telecentric one."""
         xd = (np.asarray(cols, np.float64) - self.principal_point[0]) / self.focal_px
         yd = (np.asarray(rows, np.float64) - self.principal_point[1]) / self.fy
         x, y = self.undistort(xd, yd)
@@ -189,15 +255,34 @@ class Camera:
 
     def ray_directions(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Unit world directions (..., 3) of the chief rays through sensor points (rows, cols)."""
+        if self.telecentric:
+            shape = np.broadcast_shapes(np.shape(rows), np.shape(cols)) + (3,)
+            return np.broadcast_to(self.rotation[:, 2], shape).copy()
         return normalize(self.chief_directions_camera(rows, cols) @ self.rotation.T)
+
+    def chief_rays(self, rows, cols) -> tuple[np.ndarray, np.ndarray]:
+        """Origins and unit directions (..., 3) of the chief rays through sensor points
+        (rows, cols): from the projection centre (perspective) or from the entrance plane
+        along the axis (telecentric)."""
+        if self.telecentric:
+            xy = self.chief_directions_camera(rows, cols)
+            xy[..., 2] = 0.0
+            o = self.position + xy @ self.rotation.T
+            return o, np.broadcast_to(self.rotation[:, 2], o.shape).copy()
+        d = self.ray_directions(rows, cols)
+        return np.broadcast_to(self.position, d.shape), d
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (..., 2) = (col, row) of world points (mm), OpenCV's model."""
         # einsum, not matmul: OpenBLAS takes ~10x longer for an (N, 3) @ (3, 3) product
         pc = np.einsum("...j,jk->...k", np.asarray(points, np.float64) - self.position, self.rotation)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = pc[..., 0] / pc[..., 2]
-            y = pc[..., 1] / pc[..., 2]
+        if self.telecentric:  # orthographic: behind the entrance plane nothing is seen
+            behind = np.where(pc[..., 2] > 0, 1.0, np.nan)
+            x, y = pc[..., 0] * behind, pc[..., 1] * behind
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x = pc[..., 0] / pc[..., 2]
+                y = pc[..., 1] / pc[..., 2]
         xd, yd = self.distort(x, y) if self.has_distortion else (x, y)  # distort is the identity then
         out = np.empty(x.shape + (2,))
         out[..., 0] = self.focal_px * xd + self.principal_point[0]
@@ -212,9 +297,10 @@ class Camera:
         return np.stack([dc.ravel(), dr.ravel()], axis=-1)
 
     def aperture_points(self, row: int, width: int) -> np.ndarray:
-        """(width, m, 2) aperture points (mm, camera x and y) of the pixels of camera row
-        ``row``; (width, 1, 2) zeros for a pinhole."""
-        if self.aperture_mm is None:
+        """(width, m, 2) aperture points of the pixels of camera row ``row``: mm, camera x
+        and y (thin lens); direction sines (l, m) in the disk of radius NA (telecentric);
+        (width, 1, 2) zeros without an aperture."""
+        if not self.has_aperture:
             return np.zeros((width, 1, 2))
         m = self.aperture_samples
         half = m // 2
@@ -227,7 +313,8 @@ class Camera:
         x, y = concentric_disk(s1, s2)
         pts = np.stack([x, y], axis=-1)[:, :half]
         parts = [pts, -pts] + ([np.zeros((width, 1, 2))] if m % 2 else [])
-        return 0.5 * self.aperture_mm * np.concatenate(parts, axis=1)
+        scale = self.numerical_aperture if self.telecentric else 0.5 * self.aperture_mm
+        return scale * np.concatenate(parts, axis=1)
 
     def vision_rays(self, rows, cols):
         """Origins and unit directions (P, S, 3) of every pixel's S vision rays (sub-pixels
@@ -236,6 +323,8 @@ class Camera:
         rows = np.asarray(rows, np.int64).ravel()
         cols = np.asarray(cols, np.int64).ravel()
         sub = self.subpixel_offsets()  # (n2, 2)
+        if self.telecentric:
+            return self._telecentric_rays(rows, cols, sub)
         chief = self.chief_directions_camera(rows[:, None] + sub[None, :, 1],
                                              cols[:, None] + sub[None, :, 0])  # (P, n2, 3)
         if self.aperture_mm is None:
@@ -256,6 +345,32 @@ class Camera:
         o = (self.position + a3 @ self.rotation.T)  # (P, m, 3)
         o = np.broadcast_to(o[:, None], (rows.size, sub.shape[0], self.aperture_samples, 3))
         return o.reshape(rows.size, -1, 3).copy(), d
+
+    def _telecentric_rays(self, rows, cols, sub):
+        """:meth:`vision_rays` of a telecentric camera: per sensor point its chief ray (no
+        aperture) or its m aperture rays through the in-focus point."""
+        pts = self.chief_directions_camera(rows[:, None] + sub[None, :, 1],
+                                           cols[:, None] + sub[None, :, 0])  # (P, n2, 3)
+        pts[..., 2] = 0.0
+        if self.numerical_aperture is None:
+            o = self.position + pts @ self.rotation.T
+            return o.reshape(rows.size, -1, 3), np.broadcast_to(
+                self.rotation[:, 2], (rows.size, sub.shape[0], 3)).reshape(rows.size, -1, 3).copy()
+        if self.focus_distance_mm is None:
+            raise ValueError("camera.focus_distance_mm: not resolved; build the camera through "
+                             "Scene.from_config or Camera.focused_on(surface)")
+        sines = np.empty((rows.size, self.aperture_samples, 2))
+        for r in np.unique(rows):
+            sel = rows == r
+            sines[sel] = self.aperture_points(int(r), self.width)[cols[sel]]
+        lz = np.sqrt(1.0 - np.sum(sines * sines, axis=-1, keepdims=True))
+        dcam = np.concatenate([sines, lz], axis=-1)  # (P, m, 3) unit
+        sf = self.focus_distance_mm
+        focus = pts + np.array([0.0, 0.0, sf])  # (P, n2, 3)
+        ocam = focus[:, :, None, :] - (sf / dcam[:, None, :, 2:3]) * dcam[:, None, :, :]
+        o = (self.position + ocam @ self.rotation.T).reshape(rows.size, -1, 3)
+        d = np.broadcast_to((dcam @ self.rotation.T)[:, None], ocam.shape).reshape(rows.size, -1, 3)
+        return o, d.copy()
 
     def lens_inputs(self, rows, cols):
         """Inputs of :func:`pmdsim.kernels.primary.geometry_lens` for pixels (rows[k], cols[k]):
@@ -280,11 +395,11 @@ class Camera:
     def focused_on(self, surface) -> "Camera":
         """This camera with ``focus_distance_mm`` resolved: unchanged when given or pinhole;
         otherwise the depth (Z_c) of the surface point the image centre's chief ray sees."""
-        if self.aperture_mm is None or self.focus_distance_mm is not None:
+        if not self.has_aperture or self.focus_distance_mm is not None:
             return self
         r, c = (self.height - 1) / 2.0, (self.width - 1) / 2.0
-        d = self.ray_directions(np.array([r]), np.array([c]))
-        _, p, _, hit = surface.intersect(self.position[None], d)
+        o, d = self.chief_rays(np.array([r]), np.array([c]))
+        _, p, _, hit = surface.intersect(np.ascontiguousarray(o), d)
         if not bool(hit[0]):
             from ..config import ConfigError
 

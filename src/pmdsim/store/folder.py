@@ -36,13 +36,15 @@ def check_output_dir(final: str | Path, overwrite: bool = False, marker: str = M
     final = Path(final)
     if not final.exists() and not final.is_symlink():
         return
+    if final.is_symlink() or not final.is_dir():
+        what = "a link" if final.is_symlink() else "a file, not a folder"
+        raise FileExistsError(f"output folder {final} exists and is {what}: choose another "
+                              "output folder (-o); --overwrite replaces only a run folder")
     if not overwrite:
         raise FileExistsError(
             f"output folder {final} exists: choose another folder or pass --overwrite "
             "(overwrite=True) to replace it"
         )
-    if final.is_symlink() or not final.is_dir():
-        raise FileExistsError(f"{final} exists and is not a folder: refusing to replace it")
     if not is_run_dir(final, marker) and any(final.iterdir()):
         kind = "pmdsim run folder" if marker == MANIFEST else "pmdsim output folder"
         raise FileExistsError(

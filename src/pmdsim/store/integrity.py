@@ -70,16 +70,25 @@ def _listed_arrays(root_meta: dict) -> list[str]:
                   if isinstance(v, dict) and v.get("node_type") == "array" and "/" not in k)
 
 
-def check_arrays(store: Path, root_meta: dict) -> None:
-    """Every listed variable exists; every chunk of every array decodes."""
+def check_arrays(store: Path, root_meta: dict, names: list[str] | None = None) -> None:
+    """Every listed variable exists; every chunk of every array (of ``names`` only, if
+    given) decodes."""
     import zarr
 
     for name in _listed_arrays(root_meta):
+        if names is not None and name not in names:
+            continue
         if not (store / name / "zarr.json").is_file():
             raise InputError(f"{store / name}: the variable {name!r} of the run's dataset is "
                              f"missing (listed in {store / 'zarr.json'}); {_AGAIN}")
-    group = zarr.open_group(store, mode="r")
+    try:
+        group = zarr.open_group(store, mode="r")
+    except Exception as err:  # noqa: BLE001 - zarr raises many kinds
+        raise InputError(f"{store}: cannot be opened as a Zarr store ({type(err).__name__}: "
+                         f"{err}); {_AGAIN}") from None
     for name, arr in sorted(group.arrays()):
+        if names is not None and name not in names:
+            continue
         grid = arr.cdata_shape
         import itertools
 

@@ -300,4 +300,13 @@ def dot_dataset_variables(table: list[dict]) -> dict:
         "dot_angle": (("dot",), col("angle_deg"), {
             "units": "deg", "description": "major axis angle from +col towards +row, (-90, 90]"}),
         "dot_peak": (("dot",), col("peak"), {"description": "maximum camera value of the dot image"}),
+        **{f"dot_{name}_error": (("dot",), col(key), {
+            "units": units, "description": f"numerical error of dot_{name} (first-order bound "
+            "from the rendered images' error; NaN without one, e.g. after a sensor)"})
+           for name, key, units in (("centroid_col", "centroid_col_err", "camera px"),
+                                    ("centroid_row", "centroid_row_err", "camera px"),
+                                    ("sigma_major", "sigma_major_px_err", "camera px"),
+                                    ("sigma_minor", "sigma_minor_px_err", "camera px"),
+                                    ("elongation", "elongation_err", "1"),
+                                    ("angle", "angle_deg_err", "deg"))},
     }

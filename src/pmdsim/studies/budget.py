@@ -51,6 +51,7 @@ from ..measure.numerical import exceeds
 from ..render import Simulation
 from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
+from .budget_areal import areal_of
 from .budget_error import (HEIGHT_STATS, ROW_STATS, at_order, difference_error, error_stats, estimator_label,
                            height_error_bounds, node_errors, second_estimate, stat_error,
                            unknown_share)
@@ -81,7 +82,7 @@ def _copy_fields(section: str, fields: tuple[str, ...]):
 
 
 _RESPONSE = ("gamma", "response_lut", "bit_depth", "precompensate_gamma", "black_level", "white_level")
-_LENS = ("f_number", "focus_distance_mm", "aperture_samples", "aperture_seed")
+_LENS = ("f_number", "numerical_aperture", "focus_distance_mm", "aperture_samples", "aperture_seed")
 
 EFFECTS: tuple[Effect, ...] = (
     Effect("monitor_pixels", "monitor pixel grid (flat square emitters)",
@@ -89,7 +90,7 @@ EFFECTS: tuple[Effect, ...] = (
     Effect("footprint", "pixel footprint (sub-pixel rays)",
            lambda c: c.camera.subpixels > 1, _copy_fields("camera", ("subpixels",))),
     Effect("defocus", "lens aperture (monitor out of focus)",
-           lambda c: c.camera.f_number is not None, _copy_fields("camera", _LENS)),
+           lambda c: c.camera.has_aperture, _copy_fields("camera", _LENS)),
     Effect("display_response", "display response (gamma/LUT, drive bits, black level)",
            lambda c: (c.monitor.gamma != 1.0 or c.monitor.response_lut is not None
                       or c.monitor.bit_depth is not None or c.monitor.black_level != 0.0),
@@ -115,7 +116,7 @@ def ideal_config(cfg: RunConfig) -> RunConfig:
     glass, bow or falloff, noise-free sensor; surface, BRDF, sampling and patterns kept."""
     d = cfg.model_dump()
     cam = d["camera"]
-    cam.update(subpixels=1, f_number=None, focus_distance_mm=None)
+    cam.update(subpixels=1, f_number=None, numerical_aperture=None, focus_distance_mm=None)
     mon = d["monitor"]
     mon.update(pixel_model="continuous", gamma=1.0, response_lut=None, bit_depth=None,
                precompensate_gamma=False, black_level=0.0, white_level=1.0,
@@ -206,7 +207,7 @@ def ground_truth(cfg: RunConfig, truth: str = "centre") -> Truth:
         coord = {"x": u, "y": v}
     return Truth(coord, dist, float(cfg.monitor.pixel_pitch_mm),
                  float(min(cfg.patterns.fringes.widths_px)), geo,
-                 SlopeGeometry(geo.points, sim.scene.camera.position, sim.scene.monitor))
+                 SlopeGeometry(geo.points, sim.scene.camera.viewpoint, sim.scene.monitor))
 
 
 def _unit_maps(direction: str, dev_px: np.ndarray, truth: Truth) -> dict:
@@ -334,9 +335,9 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             rows.append(_row(name, label, "system", d, dec.coord[d] - truth.coord[d], ok, truth, dec.seconds))
         if heights:
             rec, sec = rec_of(name, dec)
-            r = height_row(name, label, "system",
-                           height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc),
-                           dec.seconds + sec, "reconstruction minus the true surface")
+            herr = height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc)
+            r = height_row(name, label, "system", herr, dec.seconds + sec, "reconstruction minus the true surface")
+            r["areal"] = areal_of(herr, rec.spacing, exact=True)  # the mirror's render: exact
             hrows.append({**r, **{f"{k}_err": 0.0 for k in HEIGHT_STATS}})
         return dec
 
@@ -370,6 +371,7 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
                                 dec.valid, 0.0)
                 rm = reconstruct_decoded(cfg, scene, moved)
                 shifted.append(height_error(SurfaceMaps.of(rm), base, spec, disc))
+            row["areal"] = areal_of(herr, rec.spacing, shifted)  # areal parameters and PSDs
             hrows.append({**row, **height_error_bounds(herr, shifted)})
             ne = node_errors(herr, shifted)
             numerical_h[name] = HeightError(ne["slope_x_urad"], ne["slope_y_urad"], ne["height_nm"],
@@ -429,18 +431,19 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             if num is not None and exceeds(r["rms_px"], num["rms_px"]):
                 notes.append(f"{r['effect']} {r['direction'].upper()}: the numerical error "
                              f"({num['rms_px']:.2g} px RMS) is more than 10 % of the row "
-                             f"({r['rms_px']:.2g} px): raise sampling.n_rays or set "
-                             "sampling.target_error_mrad")
+                             f"({r['rms_px']:.2g} px): " + ("lower sampling.target_error_mrad" if target
+                             is not None else "raise sampling.n_rays or set sampling.target_error_mrad"))
         if target is not None:
             for name, smp in sampling.items():
                 worst_mrad = max(r["p95_mrad"] for r in rows if r["effect"] == f"numerical_{name}")
                 if smp.get("target_met") is False or (smp.get("target_met") is None
                                                       and not worst_mrad <= target):
-                    msg = (f"sampling.target_error_mrad = {target:g}: the {name} row's numerical "
-                           f"error is {worst_mrad:.3g} mrad (P95 of its rows) at n_rays = "
-                           f"{smp['n_rays']}: raise sampling.max_rays or accept the error")
+                    msg = (f"sampling.target_error_mrad = {target:g} not met: the {name} row's "
+                           f"numerical error is {worst_mrad:.3g} mrad (P95 of its rows) with the "
+                           f"rule of n_rays = {smp['n_rays']}, the largest sampling.max_rays = "
+                           f"{cfg.sampling.max_rays} allows: raise it or accept the error")
                     notes.append(msg)
-                    warnings.warn(msg, RuntimeWarning, stacklevel=2)
+                    warnings.warn(msg, UserWarning, stacklevel=2)  # a note, no source path
     settings = {"truth": kind, "estimator": estimator_label(cfg.sampling),
                 "brdf": cfg.brdf.model, "removed": spec.describe(), "sampling": sampling,
                 "target_error_mrad": target, "warnings": notes}

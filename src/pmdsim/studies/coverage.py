@@ -75,13 +75,14 @@ class Coverage:
 
 
 def check_view(surface_mask: np.ndarray, monitor_mask: np.ndarray,
-               min_view_fraction: float = 0.01) -> Coverage:
+               min_view_fraction: float = 0.01, roi=None) -> Coverage:
     """Stop a set-up that cannot see anything; describe one that sees little.
 
     Raises
     ------
     ConfigError
-        No camera pixel sees the surface (``camera.look_at_mm``/``position_mm``); no surface
+        No camera pixel sees the surface (``camera.roi`` when a window is set, else
+        ``camera.look_at_mm``/``position_mm``); no surface
         pixel reflects into the monitor (``monitor.centre_mm``/``look_at_mm``); or fewer
         than ``min_view_fraction`` of the camera pixels do
         (``diagnostics.min_view_fraction``).
@@ -89,6 +90,12 @@ def check_view(surface_mask: np.ndarray, monitor_mask: np.ndarray,
     surface_mask = np.asarray(surface_mask, bool)
     monitor_mask = np.asarray(monitor_mask, bool) & surface_mask
     cov = Coverage(int(surface_mask.size), int(surface_mask.sum()), int(monitor_mask.sum()))
+    if cov.surface_pixels == 0 and isinstance(roi, tuple):
+        raise ConfigError(
+            f"invalid set-up:\n  camera.roi = {list(roi)}: the window (col0, row0, width, "
+            f"height) sees no surface: none of its {cov.pixels} pixels' vision rays hits it; "
+            "move or widen the window, or set camera.roi = 'auto' (the window that sees the "
+            "part)")
     if cov.surface_pixels == 0:
         raise ConfigError(
             "invalid set-up:\n  camera.look_at_mm: the camera sees no surface: none of its "

@@ -94,7 +94,10 @@ def check(diag: Diagnostics, min_energy_fraction: float = 0.95, max_phase_error_
             msg += " (or use sampling.estimator = 'radiometric', which samples the whole lobe)"
             out.append(DiagnosticWarning("energy_fraction", msg, "sampling.theta_max_deg", sugg))
     rays = diag.rays
-    ess_med = _pct(diag.judged(rays.ess), 50) if rays is not None else float("nan")
+    # a deterministic rule: no sampling noise, no effective sample size to judge
+    det = bool(diag.summary.get("deterministic_rule"))
+    ess_med = (_pct(diag.judged(rays.ess), 50) if rays is not None and not det
+               else float("nan"))
     few = rays is not None and math.isfinite(ess_med) and ess_med < MIN_ESS
     if few and cone:
         # The cone's rays miss the lobe (narrower than their spacing, or off to one side):
@@ -114,7 +117,7 @@ def check(diag: Diagnostics, min_energy_fraction: float = 0.95, max_phase_error_
             f"the {diag.n_rays} rays carry weight to judge the fringes' modulation or phase "
             f"error; raise sampling.n_rays to ~ {n_new}",
             "sampling.n_rays", n_new))
-    if diag.phase_se is not None and not few:
+    if (diag.phase_se is not None or det) and not few:
         worst, which = -1.0, None
         floor = 2.0 / math.sqrt(ess_med) if math.isfinite(ess_med) else 0.0
         for di, d in enumerate(diag.directions):
@@ -150,6 +153,8 @@ def check(diag: Diagnostics, min_energy_fraction: float = 0.95, max_phase_error_
                         "patterns.fringes.widths_px",
                         tuple(sorted({wider if w == wd else w for w in diag.widths})),
                     ))
+                    continue
+                if diag.phase_se is None:
                     continue
                 p95 = _pct(diag.judged(diag.phase_se[di, wi]), 95)
                 if p95 > worst:

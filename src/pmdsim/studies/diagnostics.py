@@ -132,8 +132,7 @@ def incidence(scene, rows: np.ndarray, cols: np.ndarray):
     rows = np.asarray(rows)
     cols = np.asarray(cols)
     cam = scene.camera
-    dirs = cam.ray_directions(rows, cols)
-    origins = np.broadcast_to(cam.position, dirs.shape)
+    origins, dirs = cam.chief_rays(rows, cols)
     _, point, normal, hit = scene.surface.intersect(origins, dirs)
     normal = normalize(normal)
     i = -dirs
@@ -576,7 +575,11 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
     delta = scene.brdf.is_delta
     energy = None if delta else energy_fraction(scene, pgrid, None, target_fraction, n_samples)
     rays = None if delta else ray_statistics(sim, pgrid, widths, directions)
-    if delta:
+    # a deterministic rule (mode "rule") has no sampling noise: no effective sample size,
+    # no noise floor; its phase error is the render's own statement (the pilot), not judged
+    # here again
+    deterministic = not delta and scene.sampling.mode == "rule"
+    if delta or deterministic:
         phase_se = None
     elif phase_method == "delta":
         phase_se = rays.phase_se
@@ -608,7 +611,9 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
     }
     if energy is not None:
         summary["energy"] = energy.summary()
-    if rays is not None:
+    if deterministic:
+        summary["deterministic_rule"] = True
+    elif rays is not None:
         summary["ess_median"] = _pct(judged(rays.ess), 50)
         summary["ess_min"] = float(np.nanmin(rays.ess)) if np.isfinite(rays.ess).any() else float("nan")
     if phase_se is not None:

@@ -410,7 +410,7 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
     measured = chain.compare(decoded, ref_decoded, geometry, distance,
                              cfg.monitor.pixel_pitch_mm, cfg.decode, fr_cfg.shifts,
                              slope_geometry=chain.SlopeGeometry(
-                                 geometry.points, sim.scene.camera.position, sim.scene.monitor),
+                                 geometry.points, sim.scene.camera.viewpoint, sim.scene.monitor),
                              off_monitor=off)
     dcs = [measured.directions[d] for d in fr_cfg.directions]
     per_direction = [chain.direction_quantity_stats(dc) for dc in dcs]  # once each

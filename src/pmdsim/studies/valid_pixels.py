@@ -93,9 +93,27 @@ def check_valid(statistics: dict, camera_pixels: int, allow: bool, name: str = "
                 + text]
     stage = culprit(removed_by_stage(empty[0][1], camera_pixels))
     field = next(s for n, _, s in STAGES if n == stage)
-    raise ConfigError(f"invalid set-up:\n  {field}: {who}no valid pixels to measure: {text}. "
-                      "Nothing was written; fix that stage (or set "
+    why = ""
+    if stage == "decoding" and _orders_disagree(empty[0][1]):
+        field = "patterns.fringes.widths_px"
+        why = (" The fringe orders of the widths disagree (ORDER_RESIDUAL): the finest fringe's "
+               "phase is not the mirror's plus a small deviation; most often the bundle spans "
+               "more than its period on the monitor and reverses its contrast (a cone or lobe "
+               "wider than the fringe: a phase turned by pi; sampling.scheme = 'solid_angle' "
+               "weighs the cone's rim more than 'polar'), or the sampling leaves a phase error "
+               "above decode's residual limit. Drop the finest width, widen the fringes, use "
+               "sampling.estimator = 'radiometric' (the whole lobe, no cone), or raise "
+               "sampling.n_rays.")
+    raise ConfigError(f"invalid set-up:\n  {field}: {who}no valid pixels to measure: {text}."
+                      f"{why} Nothing was written; fix that stage (or set "
                       "diagnostics.allow_no_valid_pixels = true to keep such a run)")
+
+
+def _orders_disagree(pixels: dict) -> bool:
+    """Most of the pixels the decoding flagged have disagreeing fringe orders."""
+    flags = pixels.get("decode_flags_of_considered", {})
+    flagged = int(pixels.get("decode_flagged", 0))
+    return flagged > 0 and int(flags.get("ORDER_RESIDUAL", 0)) >= 0.5 * flagged
 
 
 def check_rows(rows, allow: bool, command: str, describe) -> list[str]:

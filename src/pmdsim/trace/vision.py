@@ -54,8 +54,7 @@ def trace_pixels(scene, rows, cols) -> PrimaryHits:
 
 def _trace(scene, rows, cols, row_start, row_stop) -> PrimaryHits:
     cam = scene.camera
-    dirs = cam.ray_directions(rows, cols)
-    origins = np.broadcast_to(cam.position, dirs.shape)
+    origins, dirs = cam.chief_rays(rows, cols)
     _, point, normal, hit = scene.surface.intersect(origins, dirs)
     normal = normalize(normal)
     i = -dirs
