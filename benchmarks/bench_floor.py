@@ -117,7 +117,7 @@ def kernel_ns(rounds: int) -> tuple[dict, dict]:
     from pmdsim.config import parse_config
     from pmdsim.kernels import bundle as kb
     from pmdsim.render import Simulation
-    from pmdsim.render.rows import scene_geometry_rows
+    from pmdsim.render.geometry_rows import scene_geometry_rows
 
     raw = tomllib.loads(FIG3.read_text())
     cases, nodes = {}, {}
@@ -155,7 +155,7 @@ def fig3_rays() -> int:
     """The rays a Fig. 3 run traces (every pass), as :class:`pmdsim.run.RunResult` counts."""
     from pmdsim.config import load_config
     from pmdsim.render import Simulation
-    from pmdsim.run.member import _passes_share
+    from pmdsim.run.steps import _passes_share
 
     sim = Simulation.from_config(load_config(FIG3))
     mask = sim.geometry().surface_mask

@@ -7,7 +7,7 @@ Usage::
 Runs the configuration once (no figures) and loads its dataset, then measures in this
 process, each the best of ``--repeat``:
 
-- **writing** ``run.zarr``: this tree's :func:`pmdsim.run.dataset.write_dataset` (Blosc LZ4,
+- **writing** ``run.zarr``: this tree's :func:`pmdsim.store.writer.write_dataset` (Blosc LZ4,
   rounded and compressed one image at a time on Dask threads) against the previous way,
   kept here as the baseline (Blosc zstd level 5, the whole dataset rounded at once, then
   written): CPU-seconds of the process (all threads), wall, bytes, and the peak of NumPy
@@ -35,7 +35,7 @@ def _old_write(ds, path):
     """The writer before issue 13: zstd level 5, a rounded copy of every variable first."""
     from zarr.codecs import BloscCodec
 
-    from pmdsim.run import dataset as d
+    from pmdsim.store import writer as d
 
     enc = d._encoding(ds)
     for e in enc.values():
@@ -71,7 +71,7 @@ def main() -> None:
     from pmdsim import load_run
     from pmdsim.config import load_config
     from pmdsim.run import run_simulation
-    from pmdsim.run.dataset import write_dataset
+    from pmdsim.store.writer import write_dataset
     from pmdsim.run.figures import _simulation, draw_one, figure_names
     from pmdsim.report.text import description
 

@@ -6,7 +6,7 @@ Scene: ``examples/paper_fig3.toml`` (paper estimator, 1 deg cone, continuous mon
 the camera reduced to 160 x 128 pixels (``--camera``) over the same field of view: the
 time per ray does not depend on the camera, the error statistic is over 20 000 pixels.
 Reference: the rule at 32 x 128 = 4096 nodes (8 x 32 is within 1e-4 mrad of SciPy's
-cubature, tests/test_quadrature.py; 16 x 64 within 1e-8 mrad of 32 x 128).
+cubature, tests/scene/test_quadrature.py; 16 x 64 within 1e-8 mrad of 32 x 128).
 
 **Time to the target, defined honestly.** A sample set's error need not fall monotonically
 with N: the structured lattice's P95 went 0.65, 2.6, 0.47, 0.14, 0.20, 0.022 mrad at N =

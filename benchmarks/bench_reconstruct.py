@@ -23,7 +23,8 @@ import time
 import numpy as np
 
 from pmdsim.config import parse_config
-from pmdsim.measure.integrate import clear_operator_cache, grid_coordinates, southwell
+from pmdsim.measure.poisson import clear_operator_cache
+from pmdsim.measure.integrate import grid_coordinates, southwell
 from pmdsim.measure.reconstruct import reconstruct
 from pmdsim.scene import Scene
 from pmdsim.trace import specular_monitor_coords, trace_primary

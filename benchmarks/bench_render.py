@@ -101,7 +101,7 @@ else:
     try:  # the run's own count: each pass's nodes (a rule's embedded rules have fewer than
         # n_rays; rqmc's replicates share n_rays), a pass on a grid of pixels its grid
         import inspect
-        from pmdsim.run.member import _passes_share
+        from pmdsim.run.steps import _passes_share
         args = (sim, sim.fringes_smooth())
         if len(inspect.signature(_passes_share).parameters) > 2:
             args += (mask,)

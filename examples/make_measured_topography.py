@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import x3pio
 
-from pmdsim.brdf.topography import KCorrelation, synthesize
+from pmdsim.brdf.psd import KCorrelation, synthesize
 from pmdsim.brdf.turning import arc_profile
 
 FEED_MM, RADIUS_MM = 5e-3, 1.0

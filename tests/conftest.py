@@ -18,7 +18,12 @@ from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))  # ``import naive`` from the test modules
+#: The tests are laid out like the package (tests/render/, tests/store/, ...). ``import naive``
+#: (the slow references) and the helpers some test modules share (``from test_pipeline
+#: import tiny_config_dict``) work from a test module in any folder.
+TESTS = Path(__file__).parent
+sys.path[:0] = [str(TESTS)] + sorted(str(d) for d in TESTS.iterdir()
+                                     if d.is_dir() and any(d.glob("test_*.py")))
 
 from pmdsim.config import parse_config  # noqa: E402
 

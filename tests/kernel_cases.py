@@ -85,7 +85,7 @@ def run_case(case, w_ray=None, fn=None):
     per-ray weights), "ones", or an array; ``fn``: the kernel to call instead of
     ``kernels.bundle``'s (same signature)."""
     from pmdsim.kernels import bundle as kb
-    from pmdsim.render.simulation import scene_geometry_rows
+    from pmdsim.render.geometry_rows import scene_geometry_rows
 
     scene = _scene(case["brdf"], {"n_rays": 37, "theta_max_deg": 2.5, "seed": 9,
                                   "mode": "random" if case["random"] else "stratified",

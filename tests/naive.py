@@ -9,7 +9,6 @@ code, not physics; its distribution is tested on its own).
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

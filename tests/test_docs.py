@@ -50,13 +50,14 @@ SKIPPED = [
     (r"^\. \.venv/bin/activate", "CI's own set-up step (.ci/run activates its environment)"),
     (r"^python -m pip install ", "CI's own set-up step (.ci/run installs the package)"),
     (r"^python -m pytest", "the tests themselves"),
+    (r"^ruff check", "the linter and the tests themselves (.ci/run runs both)"),
     (r"^pmdsim warmup", "CI's own set-up step (.ci/run warms the kernel cache before the tests; "
-                        "tests/test_warmup.py runs it)"),
+                        "tests/run/test_warmup.py runs it)"),
     (r"^python benchmarks/", "a timed benchmark (run on an idle machine, not in the tests)"),
     (r"^pmdsim decode cam/", "a placeholder for the reader's camera images"),
     (r"^pmdsim converge ", "about 100 renders even on a reduced camera (its N x theta x "
-                           "estimator grid); tests/test_converge.py runs the command"),
-    (r"^pmdsim fit CONFIG IMAGES", "a synopsis with placeholders (tests/test_fit.py runs it)"),
+                           "estimator grid); tests/run/test_converge.py runs the command"),
+    (r"^pmdsim fit CONFIG IMAGES", "a synopsis with placeholders (tests/studies/test_fit.py runs it)"),
 ]
 
 

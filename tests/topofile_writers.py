@@ -1,6 +1,6 @@
 """Instrument files written here, byte by byte, after the layouts that independent open
 readers document (not after pmdsim's or surfalize's readers), for the format tests of
-``pmdsim.topofile`` (tests/test_topofile_formats.py):
+``pmdsim.topofile`` (tests/config/test_topofile_formats.py):
 
 - Sensofar ``.plu``: Gwyddion's ``modules/file/sensofar.c`` (GPL) and SurfaceTopography's
   ``IO/PLU.py`` (MIT, tested there on real instrument files): a 500-byte header (date,

@@ -55,14 +55,14 @@ SRC = ROOT / "src"
 #: Target modules (relative to src/pmdsim) and the fast test files that guard them, in the
 #: order they run (pytest -x stops at the first failure, so the most targeted file first).
 TARGETS = {
-    "measure/deviation.py": ["tests/test_deviation_independent.py", "tests/test_analysis.py"],
-    "measure/chain.py": ["tests/test_deviation_independent.py",
-                         "tests/test_geometry_independent.py",
-                         "tests/test_chain.py::test_decode_problem_names_the_widths_and_the_fix",
-                         "tests/test_chain.py::test_scattering_that_breaks_the_finest_fringes_is_flagged_not_hidden"],
+    "measure/deviation.py": ["tests/measure/test_deviation_independent.py", "tests/measure/test_analysis.py"],
+    "measure/chain.py": ["tests/measure/test_deviation_independent.py",
+                         "tests/trace/test_geometry_independent.py",
+                         "tests/measure/test_chain.py::test_decode_problem_names_the_widths_and_the_fix",
+                         "tests/measure/test_chain.py::test_scattering_that_breaks_the_finest_fringes_is_flagged_not_hidden"],
     "studies/diagnostics.py": [
-        "tests/test_diagnostics_independent.py", "tests/test_warnings_true.py",
-        *(f"tests/test_converge.py::{t}" for t in (
+        "tests/studies/test_diagnostics_independent.py", "tests/test_warnings_true.py",
+        *(f"tests/run/test_converge.py::{t}" for t in (
             "test_energy_fraction_matches_dense_quadrature",
             "test_fig3_lobe_holds_about_a_third_inside_one_degree",
             "test_energy_fraction_limits_and_monotone", "test_effective_sample_size_formula",
@@ -70,14 +70,14 @@ TARGETS = {
             "test_full_map_is_bilinear_and_fills_missing_nodes",
             "test_diagnose_and_check_name_the_fixing_setting",
             "test_check_reports_washed_out_fringes", "test_mirror_has_nothing_to_diagnose"))],
-    "studies/diagnostic_checks.py": [
-        "tests/test_diagnostics_independent.py", "tests/test_warnings_true.py",
-        "tests/test_converge.py::test_diagnose_and_check_name_the_fixing_setting",
-        "tests/test_converge.py::test_check_reports_washed_out_fringes"],
-    "studies/convergence.py": ["tests/test_convergence_independent.py",
-                               "tests/test_converge.py::test_reduced_config_keeps_the_field_of_view",
-                               "tests/test_converge.py::test_run_convergence_rejects_bad_input"],
-    "measure/decode.py": ["tests/test_decode_independent.py", "tests/test_decode.py"],
+    "studies/diagnostic_warnings.py": [
+        "tests/studies/test_diagnostics_independent.py", "tests/test_warnings_true.py",
+        "tests/run/test_converge.py::test_diagnose_and_check_name_the_fixing_setting",
+        "tests/run/test_converge.py::test_check_reports_washed_out_fringes"],
+    "studies/convergence.py": ["tests/studies/test_convergence_independent.py",
+                               "tests/run/test_converge.py::test_reduced_config_keeps_the_field_of_view",
+                               "tests/run/test_converge.py::test_run_convergence_rejects_bad_input"],
+    "measure/decode.py": ["tests/measure/test_decode_independent.py", "tests/measure/test_decode.py"],
 }
 
 _AXIS = "axis -1 -> 1 on the 2-D (pixels, rays) arrays this function works on (its documented shapes)"
@@ -96,17 +96,17 @@ EQUIVALENT: dict[str, str] = {
         "the min() never binds",
     "studies/diagnostics.py:incidence:Gt->GtE:dot(i, normal) > 0#0":
         "exactly grazing vision rays (i.n = 0 to the last bit) do not occur",
-    "studies/diagnostic_checks.py:check:float 1.0->2.0:1.0#1":
+    "studies/diagnostic_warnings.py:check:float 1.0->2.0:1.0#1":
         "worst starts at -1 or -2: below every standard error (>= 0) either way",
-    "studies/diagnostic_checks.py:check:float 1.0->2.0:1.0#2":
+    "studies/diagnostic_warnings.py:check:float 1.0->2.0:1.0#2":
         "'else 1.0' runs only with rays None and phase_se set, which diagnose never makes "
         "(rays is None only for the mirror, whose phase_se is None)",
-    "studies/diagnostic_checks.py:check:float 0.0->1.0:0.0#0":
+    "studies/diagnostic_warnings.py:check:float 0.0->1.0:0.0#0":
         "the floor's 'else 0.0' runs when no judged pixel has an ESS, and then no fringe has a "
         "modulation either (each is skipped as NaN), so the floor is never compared",
-    "studies/diagnostic_checks.py:check:float 0.25->0.5:0.25#0":
+    "studies/diagnostic_warnings.py:check:float 0.25->0.5:0.25#0":
         "a finite median ESS is >= 1 (any bundle with weight), so max(ESS, 0.25 or 0.5) = ESS",
-    "studies/diagnostic_checks.py:check:Gt->GtE:p95 > worst#0":
+    "studies/diagnostic_warnings.py:check:Gt->GtE:p95 > worst#0":
         "only ties change: the same worst error and suggested N, the message names the other "
         "of two equally bad fringes",
     "studies/diagnostics.py:full_map:drop-USub:-1#3":

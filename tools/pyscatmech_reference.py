@@ -4,7 +4,7 @@ pySCATMECH (NIST's SCATMECH library, first-order vector perturbation theory) bui
 C++ source and takes long to compile, so CI does not install it. This script evaluates its
 ``Microroughness_BRDF_Model`` at the test's points once, on a machine where it is installed,
 and stores parameters, points and values in ``tests/data/pyscatmech_rayleigh_rice.json``;
-``tests/test_rayleigh_rice.py`` compares pmdsim's BRDF with those values on every run, and
+``tests/brdf/test_rayleigh_rice.py`` compares pmdsim's BRDF with those values on every run, and
 re-evaluates pySCATMECH live (and checks the stored file against it) where it is importable.
 
     python tools/pyscatmech_reference.py            # needs pySCATMECH (pip install pySCATMECH)

@@ -7,7 +7,8 @@ Public API::
     sim = Simulation.from_config(cfg)
     result = sim.render_fringes(widths=[50], directions=["x", "y"], shifts=4)
 
-``run_simulation`` and ``load_run`` (:mod:`pmdsim.run`) are available here too; they
+``run_simulation`` (:mod:`pmdsim.run`) and ``load_run`` (:mod:`pmdsim.store.schema`) are
+available here too; they
 and their dependencies (xarray, zarr) are imported on first use. matplotlib is imported
 only when figures are drawn (:mod:`pmdsim.report`). ``pmdsim.decode`` is
 :mod:`pmdsim.measure.decode` (decoding phase-shifted images, plain arrays).
@@ -28,7 +29,7 @@ from ._version import __version__
 _LAZY = {
     "ConfigError": ".config", "RunConfig": ".config", "load_config": ".config",
     "parse_config": ".config",
-    "run_simulation": ".run", "load_run": ".run", "RunResult": ".run",
+    "run_simulation": ".run", "load_run": ".store.schema", "RunResult": ".run",
     "Simulation": ".render", "Scene": ".scene",
 }
 #: Names of modules -> the module.

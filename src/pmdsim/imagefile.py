@@ -1,7 +1,7 @@
 """The one image-file reader and PNG writer of pmdsim (tifffile for TIFF, Pillow for PNG
 and the other formats Pillow reads): monitor images (:func:`pmdsim.patterns.load_monitor_image`),
 camera images (:func:`pmdsim.measure.images.load_image_stack`) and a run's own image files
-(:func:`pmdsim.run.files.read_image`) all come through :func:`read_image_file`.
+(:func:`pmdsim.store.images.read_image`) all come through :func:`read_image_file`.
 
 Values are returned as stored (raw integer counts or floats, no rescaling); the caller
 decides what they mean.

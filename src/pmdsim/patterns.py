@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import InputError, MissingInputError
+from .config import DotConfig, ImageConfig, InputError, MissingInputError
 from .imagefile import read_image_file
 
 DIRECTIONS = ("x", "y")
@@ -102,12 +102,13 @@ def load_monitor_image(path: str | Path, monitor_shape: tuple[int, int]) -> np.n
     return np.clip(img, 0.0, 1.0)
 
 
-def resolve_dots(cfg) -> list[Dot]:
-    """The dots of ``patterns.dots``: the grid (row by row) then the explicit positions."""
-    d = cfg.patterns.dots
+def resolve_dots(dots: DotConfig | None, monitor_resolution) -> list[Dot]:
+    """The dots of ``patterns.dots`` on a monitor of ``monitor_resolution`` (width, height):
+    the grid (row by row) then the explicit positions."""
+    d = dots
     if d is None:
         return []
-    mshape = (cfg.monitor.resolution[1], cfg.monitor.resolution[0])
+    mshape = (monitor_resolution[1], monitor_resolution[0])
     dots = []
     if d.grid is not None:
         dots += dot_grid(mshape, d.grid, float(d.size_px), d.margin_px)
@@ -116,11 +117,12 @@ def resolve_dots(cfg) -> list[Dot]:
 
 
 
-def resolve_images(cfg) -> tuple[list[str], np.ndarray | None]:
-    """Load the monitor images of ``patterns.images`` as levels (Q, Hm, Wm) in [0, 1]."""
-    im = cfg.patterns.images
+def resolve_images(images: ImageConfig | None, monitor_resolution) -> tuple[list[str], np.ndarray | None]:
+    """Load the monitor images of ``patterns.images`` as levels (Q, Hm, Wm) in [0, 1], each
+    the size of a monitor of ``monitor_resolution`` (width, height)."""
+    im = images
     if im is None or not im.files:
         return [], None
-    mshape = (cfg.monitor.resolution[1], cfg.monitor.resolution[0])
+    mshape = (monitor_resolution[1], monitor_resolution[0])
     levels = np.stack([load_monitor_image(f, mshape) for f in im.files])
     return list(im.files), levels

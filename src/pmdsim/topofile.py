@@ -2,62 +2,85 @@
 
 :func:`read_topography` reads a height map with its sample spacing and returns a
 :class:`Topography` in millimetres (rows along y, columns along x), levelled and with the
-non-measured points and outliers handled as asked:
+non-measured points and outliers handled as asked. The readers (docs/texture.md, "Reading"):
 
-- ``.x3p`` (ISO 25178-72) through **x3pio** (MIT; ``pip install pmdsim[topography]``):
-  coordinates in metres in the file, spacing from its axes;
-- the instrument formats read through **surfalize** (GPL-3.0, an optional extra of its own:
-  ``pip install pmdsim[instruments]``) *that are tested* on files written by an independent
-  writer or by surfalize's own writer (values, orientation and dx != dy spacing checked,
-  ``tests/test_topography.py``, ``tests/test_topofile_formats.py``): Digital Surf
-  ``.sur``, ISO 25178-71 ``.sdf``, Alicona ``.al3d``, ``.tmd`` (TrueMap), surfalize's own
-  ``.sflz``, Keyence ``.vk4``/``.vk3`` (files written after Gwyddion's ``keyence.c``
-  layout and read alike by Gwyddion itself) and Sensofar ``.plux`` (after
-  SurfaceTopography's layout); surfalize works in micrometres;
-- Sensofar ``.plu`` and Zygo ``.datx`` by pmdsim's own readers below (:data:`OWN_SUFFIXES`),
-  because surfalize 0.19.2 misreads the first (see :func:`_read_plu`) and reads no
-  ``.datx`` at all; ``.datx`` (HDF5) needs **h5py** (``pmdsim[instruments]``);
+- the instrument formats of :data:`ST_FORMATS` through **SurfaceTopography** (MIT,
+  ``pip install pmdsim[instruments]``), each tested on a file measured on a real instrument
+  (``tests/data/instrument-samples``: grid, physical size, unit and RMS height as
+  SurfaceTopography's own tests state them, and as Gwyddion reads them where it can) or on
+  a file written after the layout independent readers document
+  (``tests/topofile_writers.py``: ``.datx``, ``.plux``, ``.vk4``/``.vk3``; ``.gwy`` by
+  gwyfile);
+- ``.x3p`` (ISO 25178-72) through **x3pio** (MIT; ``pmdsim[topography]``);
+- NanoFocus ``.nms`` by pmdsim's own reader (:func:`_read_nms`): SurfaceTopography 1.27
+  reads its spacing in millimetres where the file holds nanometres (``nms-1.nms``: a 160 um
+  confocal field read as 160 m; surfalize reads 160 um);
+- surfalize's own ``.sflz`` through **surfalize** (GPL-3.0: installed only by the user,
+  ``pip install surfalize``; no other library reads it);
 - plain arrays ``.npy``, ``.csv``/``.txt`` and float ``.tif``/``.tiff`` (no units and no
   spacing inside: the caller gives ``spacing_mm`` and ``height_unit``).
 
 Every failure is a :class:`~pmdsim.config.files.FileInputError` (an ``InputError`` and a
 ``ConfigError``: exit code 2 in the command line; a missing file a ``MissingFileError``)
 that names the configuration field and the file, raised before any long work; a truncated
-or garbled instrument file is refused, never read as shifted or scaled heights. Plain
-arrays are read by the readers of :data:`pmdsim.config.files.HEIGHT_MAP_READERS`. The
-formats of :data:`NOT_READ` are refused with the reason: no file of them could be checked
-against an independent writer or reader here (surfalize reads more of them; its ``.xyz``
-spacing is (max - min) / n instead of / (n - 1)). Export such a measurement as X3P or SDF
-from the instrument software.
+or garbled instrument file is refused, never read as shifted or scaled heights. A grid
+that a file declares larger than :data:`~pmdsim.config.files.MAX_GRID_ELEMENTS` (the plain
+loaders' limit), and a compressed part that would unpack to more than
+:data:`MAX_UNPACKED_BYTES`, are refused from the file's header before any height is read.
+The other formats SurfaceTopography reads are refused with the reason (:data:`NOT_READ`):
+no file of them could be checked here. Export such a measurement as X3P or SDF.
 """
 
 from __future__ import annotations
 
 import struct
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .config import files
+from .config.files import MAX_GRID_ELEMENTS
 from .config.files import FileInputError as InputError
-from .config.files import MissingFileError as MissingInputError
 
-#: Suffixes read by x3pio, by surfalize, by pmdsim's own readers, and as plain arrays.
-X3P_SUFFIXES = (".x3p",)
-SURFALIZE_SUFFIXES = (".sur", ".sdf", ".al3d", ".tmd", ".sflz", ".vk4", ".vk3", ".plux")
-OWN_SUFFIXES = (".plu", ".datx")
-#: Instrument formats that are refused, with the reason (module doc).
-_UNTESTED = ("surfalize reads it, but no file of it could be checked against an independent "
-             "writer or a sample file, so its values and spacing are not trusted here")
-NOT_READ = dict.fromkeys((".vk6", ".vk7", ".lext", ".oir", ".poir", ".opd", ".zon",
-                          ".nms", ".os3d", ".gwy", ".hdat", ".zmg", ".fits", ".fit", ".fts",
-                          ".dat"), _UNTESTED) | {
-    ".xyz": "surfalize 0.19.2 takes the spacing as (max - min) / n instead of / (n - 1), and "
-            "assumes metres",
+#: Instrument formats read through SurfaceTopography: suffix -> (its format id, name).
+ST_FORMATS = {
+    ".plu": ("plu", "Sensofar PLU"), ".plux": ("plux", "Sensofar PLUX"),
+    ".opd": ("opd", "Wyko OPD"), ".dat": ("metropro", "Zygo MetroPro"),
+    ".datx": ("datx", "Zygo DATX"), ".al3d": ("al3d", "Alicona AL3D"),
+    ".tmd": ("tmd", "TrueMap TMD"), ".sdf": ("sdf", "ISO 25178-71 SDF"),
+    ".sur": ("sur", "Digital Surf SUR"), ".mi": ("mi", "Molecular Imaging MI"),
+    ".frt": ("frt", "FRT MicroProf"), ".di": ("di", "Bruker Nanoscope"),
+    ".spm": ("di", "Bruker Nanoscope"), ".vk4": ("vk", "Keyence VK4"),
+    ".vk3": ("vk", "Keyence VK3"), ".gwy": ("gwy", "Gwyddion GWY"),
 }
+X3P_SUFFIXES = (".x3p",)
+OWN_SUFFIXES = (".nms",)
+SURFALIZE_SUFFIXES = (".sflz",)
 ARRAY_SUFFIXES = tuple(files.HEIGHT_MAP_READERS)
+#: Largest part of a compressed file (a ZIP member, a zlib/LZMA layer) unpacked: the bytes
+#: of MAX_GRID_ELEMENTS float64 heights.
+MAX_UNPACKED_BYTES = 8 * MAX_GRID_ELEMENTS
+_UNCHECKED = ("SurfaceTopography reads it, but no file of it was at hand to check its heights, "
+              "unit and spacing against the instrument or an independent reader")
+_GPL_ONLY = "only surfalize (GPL-3.0) reads it, and no file of it could be checked"
+#: Instrument formats that are refused, with the reason.
+NOT_READ = dict.fromkeys(
+    (".vk6", ".vk7", ".zon", ".lext", ".oir", ".poir", ".zmg", ".os3d", ".opdx",
+     ".mdt", ".ibw", ".mat", ".nc", ".h5", ".hfm", ".asc", ".xlsx", ".ezd", ".nid", ".bcr",
+     ".bcrf", ".cur", ".stp", ".tom", ".top", ".jpk", ".mnt", ".qep", ".hgt", ".apx",
+     ".001", ".002", ".003", ".004", ".005", ".zip"), _UNCHECKED) | dict.fromkeys(
+    (".hdat", ".fits", ".fit", ".fts"), _GPL_ONLY) | {
+    ".xyz": "scattered x, y, z points are not a grid with one spacing (SurfaceTopography "
+            "reads them; surfalize 0.19.2 takes the spacing as (max - min) / n)",
+    ".npz": "an archive of several arrays: save the height map alone as .npy",
+}
 HEIGHT_UNITS_MM = {"mm": 1.0, "um": 1e-3, "nm": 1e-6, "m": 1e3}
+#: Length units of SurfaceTopography's channels, in mm.
+#: ("\u00c2\u00b5m": the UTF-8 micro sign read as Latin-1, as surfalize writes it in .sur)
+_LENGTH_MM = {"m": 1e3, "mm": 1.0, "\u00b5m": 1e-3, "\u03bcm": 1e-3, "\u00c2\u00b5m": 1e-3,
+              "um": 1e-3, "nm": 1e-6, "pm": 1e-9, "\u00c5": 1e-7, "A": 1e-7, "km": 1e6}
 LEVELS = ("none", "mean", "plane")
 FILLS = ("error", "nearest", "mean")
 
@@ -66,7 +89,8 @@ FILLS = ("error", "nearest", "mean")
 class Topography:
     """A height map: ``heights`` (ny, nx) float64 mm, rows along y, columns along x,
     spacing ``dx``, ``dy`` mm. ``invalid`` counts the points that were not measured or were
-    outliers (filled as asked); ``source`` is the file, ``reader`` what read it."""
+    outliers (filled as asked), ``not_measured`` those of them the file marks as not
+    measured or holds as NaN/inf; ``source`` is the file, ``reader`` what read it."""
 
     heights: np.ndarray
     dx: float
@@ -74,6 +98,7 @@ class Topography:
     source: str = ""
     reader: str = "array"
     invalid: int = 0
+    not_measured: int = 0
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -86,9 +111,9 @@ class Topography:
 
 
 def is_instrument_file(path) -> bool:
-    """True for a format that carries its own spacing and units (X3P, surfalize's, .plu,
-    .datx)."""
-    return Path(path).suffix.lower() in X3P_SUFFIXES + SURFALIZE_SUFFIXES + OWN_SUFFIXES
+    """True for a format that carries its own spacing and units."""
+    suffix = Path(path).suffix.lower()
+    return suffix in ST_FORMATS or suffix in X3P_SUFFIXES + OWN_SUFFIXES + SURFALIZE_SUFFIXES
 
 
 def read_topography(path, field: str = "surface.file", *, spacing_mm=None,
@@ -109,22 +134,28 @@ def read_topography(path, field: str = "surface.file", *, spacing_mm=None,
         raise InputError(f"{field}: level must be one of {LEVELS}, got {level!r}")
     if fill not in FILLS:
         raise InputError(f"{field}: fill must be one of {FILLS}, got {fill!r}")
-    if not path.is_file():
-        raise MissingInputError(f"{field}: topography file not found: {path} (check the path)")
+    files.check_regular_file(path, field)
     suffix = path.suffix.lower()
-    if suffix in X3P_SUFFIXES:
+    if suffix in NOT_READ:
+        raise InputError(f"{field}: {path}: {suffix} files are not read ({NOT_READ[suffix]}); "
+                         "export the measurement as X3P (ISO 25178-72) or SDF (ISO 25178-71) "
+                         "from the instrument software")
+    known = (tuple(ST_FORMATS) + X3P_SUFFIXES + OWN_SUFFIXES + SURFALIZE_SUFFIXES
+             + ARRAY_SUFFIXES)
+    if suffix not in known:
+        raise InputError(f"{field}: {path}: unknown topography format {suffix!r}; read are "
+                         f"{', '.join(known)}")
+    if suffix in ST_FORMATS:
+        z, dx, dy, reader = _read_surfacetopography(path, field, *ST_FORMATS[suffix])
+    elif suffix in X3P_SUFFIXES:
+        _check_zip(path, field, "X3P", _x3p_declared_grid)
         z, dx, dy, reader = _read_x3p(path, field)
+    elif suffix in OWN_SUFFIXES:
+        z, dx, dy, reader = _read_nms(path, field)
     elif suffix in SURFALIZE_SUFFIXES:
-        if suffix in (".vk3", ".vk4"):
-            _check_vk(path, field)
-        elif suffix == ".plux":
-            _check_plux(path, field)
+        _check_sflz(path, field)
         z, dx, dy, reader = _read_surfalize(path, field)
-    elif suffix == ".plu":
-        z, dx, dy, reader = _read_plu(path, field)
-    elif suffix == ".datx":
-        z, dx, dy, reader = _read_datx(path, field)
-    elif suffix in ARRAY_SUFFIXES:
+    else:
         if spacing_mm is None:
             raise InputError(f"{field}: {path} holds no sample spacing; give spacing_mm = "
                              "[dx, dy] (or use an instrument file: X3P, .sur, .plu, ...)")
@@ -133,23 +164,16 @@ def read_topography(path, field: str = "surface.file", *, spacing_mm=None,
         z = _read_array(path, field) * HEIGHT_UNITS_MM[height_unit]
         dx, dy = (float(v) for v in spacing_mm)
         reader = "array"
-    elif suffix in NOT_READ:
-        raise InputError(f"{field}: {path}: {suffix} files are not read ({NOT_READ[suffix]}); "
-                         "export the measurement as X3P (ISO 25178-72) or SDF (ISO 25178-71) "
-                         "from the instrument software")
-    else:
-        read = X3P_SUFFIXES + SURFALIZE_SUFFIXES + OWN_SUFFIXES + ARRAY_SUFFIXES
-        raise InputError(f"{field}: {path}: unknown topography format {suffix!r}; read are "
-                         f"{', '.join(read)}")
     z = np.asarray(z, np.float64)
     if z.ndim != 2 or min(z.shape) < min_points:
         raise InputError(f"{field}: {path} must hold a 2-D grid of at least {min_points} x "
                          f"{min_points} heights, got shape {z.shape}")
     if not (np.isfinite(dx) and np.isfinite(dy) and dx > 0 and dy > 0):
         raise InputError(f"{field}: {path}: the sample spacing must be positive, got {dx}, {dy} mm")
+    not_measured = int((~np.isfinite(z)).sum())
     z, invalid = clean_heights(z, level=level, fill=fill, outlier_sigma=outlier_sigma,
                                what=f"{field}: {path}")
-    return Topography(z, float(dx), float(dy), str(path), reader, invalid)
+    return Topography(z, float(dx), float(dy), str(path), reader, invalid, not_measured)
 
 
 def clean_heights(z, *, level="none", fill="error", outlier_sigma=None, what="heights"):
@@ -214,6 +238,175 @@ def _read_array(path, field):
     return np.asarray(z, np.float64)
 
 
+def _declared_grid(what, nx, ny):
+    """Refuse a grid a file declares, before its heights are read: empty, or larger than the
+    plain loaders' limit (:data:`~pmdsim.config.files.MAX_GRID_ELEMENTS`)."""
+    nx, ny = int(nx), int(ny)
+    if nx < 1 or ny < 1:
+        raise InputError(f"{what}: declares a grid of {nx} x {ny} points, which holds no "
+                         "heights: the file is garbled or not of this format; export it "
+                         "again from the instrument software")
+    if nx * ny > MAX_GRID_ELEMENTS:
+        raise InputError(f"{what}: declares a grid of {nx} x {ny} = {nx * ny:,} points, more "
+                         f"than the {MAX_GRID_ELEMENTS:,} pmdsim reads (2 GB of heights); not "
+                         "read. Crop or resample the measurement in the instrument software")
+
+
+def _read_surfacetopography(path, field, fmt, name):
+    """Heights (mm, rows along y), dx, dy (mm), reader: the file's height channel through
+    SurfaceTopography, its declared grid checked from the header before the heights."""
+    what = f"{field}: {path} ({name})"
+    try:
+        import SurfaceTopography
+        from SurfaceTopography.IO import open_topography
+    except ImportError:
+        raise InputError(f"{what}: reading it needs SurfaceTopography (MIT): pip install "
+                         "'pmdsim[instruments]'") from None
+    _check_zip(path, field, name, _plux_declared_grid if fmt == "plux" else None)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            reader = open_topography(str(path), format=fmt)
+            channels = list(reader.channels)
+    except MemoryError:
+        raise InputError(f"{what}: its header asks for more memory than there is: the file is "
+                         "garbled or not of this format") from None
+    except Exception as err:  # noqa: BLE001 - the readers raise many kinds on damage
+        raise InputError(_unreadable(what, path, err)) from None
+    heights = [c for c in channels if getattr(c, "dim", 2) == 2
+               and _unit_mm(getattr(c, "unit", None)) is not None]
+    default = getattr(reader, "default_channel", None)
+    channel = default if default in heights else (heights[0] if heights else None)
+    if channel is None:
+        found = ", ".join(f"{c.name!r} ({c.unit})" for c in channels) or "none"
+        raise InputError(f"{what}: holds no areal map of heights in a length unit (channels: "
+                         f"{found}); export the topography")
+    _declared_grid(what, *channel.nb_grid_pts)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            t = reader.topography(channel_index=channel.index)
+            h = t.heights()
+            sizes = t.physical_sizes
+    except MemoryError:
+        raise InputError(f"{what}: needs more memory than there is to read") from None
+    except Exception as err:  # noqa: BLE001
+        raise InputError(_unreadable(what, path, err)) from None
+    if sizes is None or len(sizes) != 2 or not getattr(t, "is_uniform", True):
+        raise InputError(f"{what}: states no lateral size of a uniform grid; export it with "
+                         "its lateral calibration")
+    z = np.ma.filled(np.ma.asarray(h, np.float64), np.nan).T  # (nx, ny) -> rows along y
+    if z.shape != tuple(channel.nb_grid_pts)[::-1]:
+        raise InputError(f"{what}: holds {z.shape[1]} x {z.shape[0]} heights, its header "
+                         f"states {channel.nb_grid_pts[0]} x {channel.nb_grid_pts[1]}: "
+                         "inconsistent, not read; export it again from the instrument "
+                         "software")
+    scale = _unit_mm(t.unit)
+    ny, nx = z.shape
+    dx, dy = (float(s) * scale / n for s, n in zip(sizes, (nx, ny), strict=True))
+    return (z * scale, dx, dy,
+            f"SurfaceTopography {SurfaceTopography.__version__} ({channel.name})")
+
+
+def _unreadable(what, path, err):
+    """The message for a file SurfaceTopography refused: a feature its reader does not read
+    (a unit or a layout it names), or damage."""
+    name = type(err).__name__
+    if name == "UnsupportedFormatFeature" or "unit" in str(err).lower():
+        return (f"{what}: not read ({_brief(err)}); export the topography again from the "
+                "instrument software, in a length unit, or as X3P or SDF")
+    return (f"{what}: cannot read it ({_brief(err)}): the file is truncated, garbled or not a "
+            f"{path.suffix.lower()} file; export it again from the instrument software")
+
+
+def _unit_mm(unit):
+    return _LENGTH_MM.get(str(unit).strip()) if unit is not None else None
+
+
+def _brief(err):
+    text = " ".join(str(err).split())
+    return f"{type(err).__name__}: {text[:200]}{'...' if len(text) > 200 else ''}"
+
+
+def _check_zip(path, field, name, declared):
+    """For a ZIP container (X3P, .plux, ...): refuse a member that would unpack to more than
+    :data:`MAX_UNPACKED_BYTES` (Python's zipfile stops at the size the directory states),
+    and check the grid ``declared(archive)`` returns ((nx, ny) or None) from its header."""
+    import zipfile
+
+    what = f"{field}: {path} ({name})"
+    if not zipfile.is_zipfile(path):
+        if declared is not None:
+            raise InputError(f"{what}: is not a ZIP archive (an {name} file is one): the file "
+                             "is truncated, garbled or not of this format; export it again")
+        return
+    try:
+        with zipfile.ZipFile(path) as archive:
+            for info in archive.infolist():
+                if info.file_size > MAX_UNPACKED_BYTES:
+                    raise InputError(f"{what}: its part {info.filename!r} unpacks to "
+                                     f"{info.file_size / 2**30:.3g} GB, more than the "
+                                     f"{MAX_UNPACKED_BYTES / 2**30:.3g} GB of the largest grid "
+                                     "pmdsim reads; not read: is it the right file?")
+            grid = declared(archive) if declared is not None else None
+    except InputError:
+        raise
+    except ValueError as err:
+        raise InputError(f"{what}: {err}; not read: export it again from the instrument "
+                         "software") from None
+    except Exception as err:  # noqa: BLE001 - zipfile/XML raise many kinds on damage
+        raise InputError(f"{what}: not a readable ZIP archive ({_brief(err)}): truncated or "
+                         "garbled; export it again from the instrument software") from None
+    if grid is not None:
+        _declared_grid(what, *grid)
+
+
+def _plux_declared_grid(archive):
+    """(IMAGE_SIZE_X, _Y) of a Sensofar .plux's index.xml (the layout of SurfaceTopography's
+    PLUX.py), whose LAYER_0.raw must hold exactly that many float32 heights: the reader
+    takes the first nx x ny values whatever follows."""
+    import xml.etree.ElementTree as ET
+
+    info = archive.getinfo("index.xml")
+    if info.file_size > 16 * 2**20:
+        raise ValueError(f"index.xml of {info.file_size} bytes")
+    root = ET.fromstring(archive.read(info))
+    try:
+        nx, ny = (int(root.find(f"GENERAL/IMAGE_SIZE_{a}").text) for a in "XY")
+    except (AttributeError, TypeError, ValueError):
+        raise ValueError("index.xml states no GENERAL/IMAGE_SIZE_X and _Y") from None
+    raw = archive.getinfo("LAYER_0.raw").file_size
+    if 0 < nx * ny <= MAX_GRID_ELEMENTS and raw != 4 * nx * ny:
+        raise ValueError(f"LAYER_0.raw holds {raw} bytes, index.xml states {ny} x {nx} float32 "
+                         f"heights ({4 * nx * ny} bytes): inconsistent")
+    return nx, ny
+
+
+def _x3p_declared_grid(archive):
+    """(SizeX, SizeY) of an X3P's main.xml (Record3/MatrixDimension), from at most 16 MB of
+    XML (external entities are not resolved by ElementTree)."""
+    import xml.etree.ElementTree as ET
+
+    info = archive.getinfo("main.xml")
+    if info.file_size > 16 * 2**20:
+        raise ValueError(f"main.xml of {info.file_size} bytes")
+    root = ET.fromstring(archive.read(info))
+    sizes = {el.tag.rsplit("}", 1)[-1]: (el.text or "").strip() for el in root.iter()
+             if el.tag.rsplit("}", 1)[-1] in ("SizeX", "SizeY", "SizeZ")}
+    if "SizeX" not in sizes or "SizeY" not in sizes:
+        raise ValueError("main.xml states no MatrixDimension SizeX and SizeY")
+    if int(sizes.get("SizeZ") or 1) != 1:
+        raise ValueError(f"main.xml states SizeZ = {sizes['SizeZ']} layers, not one")
+    nx, ny = int(sizes["SizeX"]), int(sizes["SizeY"])
+    need = 8 * nx * ny + 4096  # float64 heights at most (and a bit mask of valid points)
+    for part in archive.infolist():
+        if part.filename != "main.xml" and part.file_size > need:
+            raise ValueError(f"its part {part.filename!r} unpacks to {part.file_size:,} bytes, "
+                             f"more than the {nx} x {ny} heights main.xml declares can fill "
+                             f"({need:,}): inconsistent")
+    return nx, ny
+
+
 def _read_x3p(path, field):
     try:
         import x3pio
@@ -240,9 +433,9 @@ def _read_x3p(path, field):
 def _read_surfalize(path, field):
     try:
         import surfalize
-    except ImportError:
+    except ImportError:  # pragma: no cover - _check_sflz asks for it first
         raise InputError(f"{field}: reading {path} needs surfalize (GPL-3.0): pip install "
-                         "'pmdsim[instruments]'") from None
+                         "surfalize") from None
     try:
         import warnings
 
@@ -255,222 +448,92 @@ def _read_surfalize(path, field):
     return z, float(s.step_x) * 1e-3, float(s.step_y) * 1e-3, "surfalize"
 
 
-# Sensofar .plu, after the layout Gwyddion's sensofar.c and SurfaceTopography's PLU.py read
-# (both tested on instrument files): a 500-byte header -- date (128 bytes), time (uint32),
-# comment (256), the axes' calibration (yres, xres, N_tall uint32; dy_multip, mppx, mppy,
-# x_0, y_0, mpp_tall, z_0 float32: micrometres per pixel at bytes 404, 408), the
-# measurement configuration (type uint32 at byte 428, 3 = topography; the number of layers
-# at byte 489, the format version at byte 490) -- then per layer the grid's size (rows,
-# columns uint32), the heights (float32 micrometres, row by row, 1000001 where not
-# measured) and their minimum and maximum (float32).
-_PLU_HEADER = 500
-_PLU_NOT_MEASURED = 1000001.0
-_PLU_TYPES = {0: "a confocal image", 1: "a profile", 2: "multiple profiles", 3: "a topography",
-              4: "coordinates of multiple profiles", 5: "a single-point thickness",
-              6: "a custom application", 7: "a coordinates topography map",
-              8: "a coordinates thickness map"}
+# NanoFocus .nms (the layout of SurfaceTopography's NMS.py, read alike by surfalize): a
+# 3468-byte header with the heights' range (zmin, zmax: float64 micrometres at byte 16) and
+# the grid (nx, ny: uint32; dx, dy: float64 at byte 1368), then ny rows of nx uint16
+# heights scaled between zmin and zmax over 0 .. 65534. The spacing is in nanometres:
+# nms-1.nms (tests/data/instrument-samples) holds 312.5 on a 512 x 512 grid, a 160 um
+# confocal field (surfalize reads that); SurfaceTopography 1.27 takes millimetres and
+# reports a field of 160 m.
+_NMS_HEADER = 3468
 
 
-def _read_plu(path, field):
-    """A Sensofar .plu topography: heights (mm), dx, dy (mm), reader. surfalize 0.19.2 is
-    not used: it reads the heights from byte 500, where the two readers above (and the files
-    they are tested on) have the grid's size, so its map is shifted by two values with the
-    size read as two tiny heights. A file whose grid size at byte 500 does not fit (a
-    truncated file, or a layout without it) is refused, not guessed."""
-    what = f"{field}: {path} (Sensofar .plu)"
+def _read_nms(path, field):
+    """A NanoFocus .nms topography: heights (mm), dx, dy (mm), reader (the layout above)."""
+    what = f"{field}: {path} (NanoFocus .nms)"
     try:
-        data = path.read_bytes()
-    except OSError as err:
-        raise InputError(f"{what}: cannot read it: {err}") from None
-    if len(data) < _PLU_HEADER + 8:
-        raise InputError(f"{what}: {len(data)} bytes, shorter than the {_PLU_HEADER}-byte "
-                         "header and the grid's size: the file is truncated or not a .plu file")
-    kind, = struct.unpack_from("<I", data, 428)
-    layers, version = data[489], data[490]
-    if not (version == 0 or version >= 0xF0):
-        raise InputError(f"{what}: format version byte {version} (byte 490) is none of "
-                         "Sensofar's (0 or 240-255): the file is garbled or not a .plu file")
-    if kind != 3:
-        raise InputError(f"{what}: holds {_PLU_TYPES.get(kind, f'measurement type {kind}')}, "
-                         "not a topography (type 3): export the topography")
-    if layers < 1:
-        raise InputError(f"{what}: holds no data layer")
-    mppx, mppy = struct.unpack_from("<2f", data, 404)
-    ny, nx = struct.unpack_from("<2I", data, _PLU_HEADER)
-    need = _PLU_HEADER + 8 + 4 * ny * nx + 8
-    if nx == 0 or ny == 0 or need > len(data):
-        raise InputError(f"{what}: the grid's size before the heights ({ny} rows x {nx} "
-                         f"columns, byte {_PLU_HEADER}) needs {need} bytes, the file has "
-                         f"{len(data)}: it is truncated, or laid out without the grid's size "
-                         "(not a layout read here)")
-    z = np.frombuffer(data, "<f4", ny * nx, _PLU_HEADER + 8).astype(np.float64).reshape(ny, nx)
-    z[z == _PLU_NOT_MEASURED] = np.nan
-    return z * 1e-3, abs(mppx) * 1e-3, abs(mppy) * 1e-3, "pmdsim .plu reader"
-
-
-# Zygo .datx (HDF5), after the layout SurfaceTopography's DATX.py and prysm's io.py read (MIT;
-# both used on instrument files): a "MetaData" table of (Source, Link, Destination) strings
-# leads from "Root" through "Measurement" and "Surface" to the surface dataset's "Path"
-# (prysm takes the one dataset under /Data/Surface). The dataset (rows along y, columns along
-# x: the image order of prysm and of the other open readers; SurfaceTopography takes the
-# first axis as x, which differs only for unequal pixel sizes) carries "No Data" (the value
-# of the points not measured), "Unit" and the compound "X/Y/Z Converter" (Category,
-# BaseUnit, Parameters): lateral "LateralCat" with the spacing in metres in Parameters[1],
-# heights "HeightCat" in BaseUnit.
-DATX_HEIGHT_UNITS_MM = {"NanoMeters": 1e-6, "MicroMeters": 1e-3, "MilliMeters": 1.0,
-                        "Meters": 1e3}
-_DATX_SHORT_UNITS = {"nm": "NanoMeters", "um": "MicroMeters", "\u00b5m": "MicroMeters",
-                     "\u03bcm": "MicroMeters", "mm": "MilliMeters", "m": "Meters"}
-
-
-def _read_datx(path, field):
-    """A Zygo .datx surface: heights (mm), dx, dy (mm), reader (the layout above)."""
-    what = f"{field}: {path} (Zygo .datx)"
-    try:
-        import h5py
-    except ImportError:
-        raise InputError(f"{what}: reading it (HDF5) needs h5py: pip install h5py or "
-                         "'pmdsim[instruments]'") from None
-    try:
-        with h5py.File(path, "r") as h5:
-            ds = _datx_surface(h5, what)
-            if ds.ndim != 2 or ds.dtype.kind not in "fiu":
-                raise InputError(f"{what}: the surface dataset {ds.name} holds {ds.dtype} "
-                                 f"data of shape {ds.shape}, not a 2-D grid of heights")
-            z = np.asarray(ds[()], np.float64)
-            attrs = {k: ds.attrs[k] for k in ds.attrs}
+        with open(path, "rb") as fh:
+            head = fh.read(_NMS_HEADER)
+            if len(head) < _NMS_HEADER:
+                raise InputError(f"{what}: {len(head)} bytes, shorter than its "
+                                 f"{_NMS_HEADER}-byte header: truncated or not a .nms file; "
+                                 "export it again")
+            zmin, zmax = struct.unpack_from("<2d", head, 16)
+            nx, ny, dx_nm, dy_nm = struct.unpack_from("<2I2d", head, 1368)
+            _declared_grid(what, nx, ny)
+            raw = np.fromfile(fh, "<u2", nx * ny)
     except InputError:
         raise
-    except Exception as err:  # noqa: BLE001 - h5py raises OSError, KeyError, ValueError...
-        raise InputError(f"{what}: cannot read it as HDF5 ({type(err).__name__}: {err}): the "
-                         "file is truncated, garbled or not a .datx file") from None
-    dx, dy = (_datx_spacing(attrs, axis, what) for axis in "XY")
-    category, base = (_datx_text(v) for v in _datx_converter(attrs, "Z", what)[:2])
-    if category != "HeightCat":
-        raise InputError(f"{what}: Z Converter category {category!r}, not 'HeightCat' "
-                         "(heights): not read")
-    if base not in DATX_HEIGHT_UNITS_MM:
-        raise InputError(f"{what}: heights in {base!r}; read are "
-                         f"{', '.join(DATX_HEIGHT_UNITS_MM)} (export the surface in a length "
-                         "unit, not in fringes)")
-    unit = _datx_text(np.asarray(attrs["Unit"]).reshape(-1)[0]) if "Unit" in attrs else base
-    if _DATX_SHORT_UNITS.get(unit, unit) != base:
-        raise InputError(f"{what}: the surface's Unit {unit!r} and its Z Converter's "
-                         f"{base!r} disagree: the file is inconsistent, not read")
-    bad = ~np.isfinite(z)
-    if "No Data" in attrs:
-        no_data = float(np.asarray(attrs["No Data"], np.float64).reshape(-1)[0])
-        bad |= (z == no_data) | ((z >= no_data) if no_data >= 1e30 else False)
-    z[bad] = np.nan
-    return (z * DATX_HEIGHT_UNITS_MM[base], dx * 1e3, dy * 1e3,
-            f"pmdsim .datx reader (h5py {h5py.__version__})")
-
-
-def _datx_text(value):
-    return value.decode("utf-8", "replace").strip("\0 ") if isinstance(value, bytes) else str(value)
-
-
-def _datx_surface(h5, what):
-    """The surface dataset: by the MetaData links, else the one dataset in /Data/Surface."""
-    if "MetaData" in h5:
-        links = {}
-        for row in np.asarray(h5["MetaData"][()]).reshape(-1):
-            source, link, dest = (_datx_text(v) for v in tuple(row)[:3])
-            links[(source, link)] = dest
-        node = links.get(("Root", "Measurement"))
-        node = links.get((node, "Surface")) if node else None
-        target = links.get((node, "Path")) if node else None
-        if target is None or target not in h5:
-            raise InputError(f"{what}: its MetaData table leads to no surface (Root -> "
-                             f"Measurement -> Surface -> Path; got {target!r})")
-        return h5[target]
-    group = h5.get("Data/Surface")
-    sets = [v for v in group.values() if hasattr(v, "shape")] if group is not None else []
-    if len(sets) != 1:
-        raise InputError(f"{what}: no MetaData table and {len(sets)} datasets under "
-                         "/Data/Surface (one surface expected): not a .datx surface")
-    return sets[0]
-
-
-def _datx_converter(attrs, axis, what):
-    """(Category, BaseUnit, Parameters) of the dataset's ``{axis} Converter``."""
-    key = f"{axis} Converter"
-    if key not in attrs:
-        raise InputError(f"{what}: the surface has no {key!r} attribute (its units)")
-    rec = np.asarray(attrs[key]).reshape(-1)[0]
-    names = rec.dtype.names or ()
-    if {"Category", "BaseUnit", "Parameters"} <= set(names):
-        return rec["Category"], rec["BaseUnit"], np.asarray(rec["Parameters"], np.float64)
-    try:
-        return rec[0], rec[1], np.asarray(rec[-1], np.float64)
-    except (IndexError, TypeError, ValueError):
-        raise InputError(f"{what}: its {key!r} is not a (Category, BaseUnit, Parameters) "
-                         "record") from None
-
-
-def _datx_spacing(attrs, axis, what):
-    category, _, params = _datx_converter(attrs, axis, what)
-    if _datx_text(category) != "LateralCat" or params.size < 2:
-        raise InputError(f"{what}: {axis} Converter category {_datx_text(category)!r} with "
-                         f"{params.size} parameters, not 'LateralCat' with the spacing in "
-                         "metres: not read")
-    return float(params[1])
-
-
-def _check_vk(path, field):
-    """Refuse a Keyence .vk3/.vk4 file that surfalize would misread or fail on obscurely:
-    the checks of Gwyddion's keyence.c (magic, four zero bytes, the measurement conditions'
-    size, the height image's offset, bit depth and byte size within the file). Offsets: a
-    12-byte header, the offset table (the measurement conditions first, the first height
-    image seventh), the conditions from byte 84 (.vk4; 80 in .vk3)."""
-    what = f"{field}: {path} (Keyence {path.suffix.lower()})"
-    try:
-        data = path.read_bytes()
     except OSError as err:
         raise InputError(f"{what}: cannot read it: {err}") from None
-    magic = path.suffix.upper()[1:].encode() + b"_"
-    if data[:4] != magic or data[8:12] != bytes(4):
-        raise InputError(f"{what}: does not start with {magic.decode()!r} and four zero bytes: "
-                         "the file is garbled or not a Keyence file")
-    if len(data) < 12 + 68 + 304:
-        raise InputError(f"{what}: {len(data)} bytes, shorter than its header: truncated")
-    (conds_at,), (height_at,) = struct.unpack_from("<I", data, 12), struct.unpack_from("<I", data, 36)
-    size = struct.unpack_from("<I", data, conds_at)[0] if conds_at + 4 <= len(data) else 0
-    if size < 304 or conds_at + size > len(data):
-        raise InputError(f"{what}: the measurement conditions (byte {conds_at}, {size} bytes) "
-                         "do not fit the file: truncated or garbled")
-    if height_at == 0 or height_at + 796 > len(data):
-        raise InputError(f"{what}: no height image within the file (offset {height_at}): "
-                         "truncated, or an image without heights")
-    width, height, depth, _, nbytes = struct.unpack_from("<5I", data, height_at)
-    if depth not in (16, 32) or nbytes != width * height * depth // 8 or not width * height:
-        raise InputError(f"{what}: height image of {width} x {height} at {depth} bits in "
-                         f"{nbytes} bytes: inconsistent, or a bit depth not read (16 or 32)")
-    if height_at + 796 + nbytes > len(data):
-        raise InputError(f"{what}: the height image needs {height_at + 796 + nbytes} bytes, "
-                         f"the file has {len(data)}: truncated")
+    if raw.size != nx * ny:
+        raise InputError(f"{what}: its header states {nx} x {ny} heights, the file holds "
+                         f"{raw.size}: truncated, not read; export it again from the "
+                         "instrument software")
+    if not (np.isfinite([zmin, zmax, dx_nm, dy_nm]).all() and zmax >= zmin
+            and 0 < dx_nm < 1e9 and 0 < dy_nm < 1e9):
+        raise InputError(f"{what}: height range {zmin:g} .. {zmax:g} um and spacing "
+                         f"{dx_nm:g} x {dy_nm:g} nm in its header are not plausible: garbled "
+                         "or not a .nms file; export it again from the instrument software")
+    z = raw.reshape(ny, nx).astype(np.float64) / 65534.0 * (zmax - zmin) + zmin
+    return z * 1e-3, dx_nm * 1e-6, dy_nm * 1e-6, "pmdsim .nms reader"
 
 
-def _check_plux(path, field):
-    """Refuse a Sensofar .plux file (a ZIP: index.xml with GENERAL/IMAGE_SIZE_X, _Y and the
-    spacing FOV_X, _Y in micrometres; the float32 heights in LAYER_0.raw, the layout of
-    SurfaceTopography's PLUX.py) that surfalize would misread: its heights must be exactly
-    the grid the index states (surfalize reads the first nx x ny values whatever follows)."""
-    import zipfile
-    import xml.etree.ElementTree as ET
+def _check_sflz(path, field):
+    """Refuse a surfalize .sflz file whose layers declare a grid above the limit or whose
+    compressed layers unpack to other than their declared size, before surfalize reads it
+    (the layout of surfalize's sflz.py: magic, version, header, metadata, then per layer a
+    header and the zlib- or LZMA-compressed data)."""
+    import lzma
+    import zlib
 
-    what = f"{field}: {path} (Sensofar .plux)"
+    what = f"{field}: {path} (surfalize .sflz)"
     try:
-        with zipfile.ZipFile(path) as archive:
-            root = ET.fromstring(archive.read("index.xml"))
-            raw = archive.getinfo("LAYER_0.raw").file_size
-    except Exception as err:  # noqa: BLE001 - zipfile/XML raise many kinds on damage
-        raise InputError(f"{what}: not a readable .plux archive ({type(err).__name__}: "
-                         f"{err}): truncated or garbled") from None
+        from surfalize.file.sflz import LAYOUT_HEADER, LAYOUT_LAYER_HEADER, MAGIC
+    except ImportError:
+        raise InputError(f"{what}: reading it needs surfalize (GPL-3.0; the only reader of its "
+                         "own format): pip install surfalize, or save the surface as SDF or "
+                         "X3P from surfalize") from None
     try:
-        nx, ny = (int(root.find(f"GENERAL/IMAGE_SIZE_{a}").text) for a in "XY")
-    except (AttributeError, TypeError, ValueError):
-        raise InputError(f"{what}: index.xml states no GENERAL/IMAGE_SIZE_X and _Y") from None
-    if nx < 1 or ny < 1 or raw != 4 * nx * ny:
-        raise InputError(f"{what}: LAYER_0.raw holds {raw} bytes, index.xml states {ny} x {nx} "
-                         f"float32 heights ({4 * nx * ny} bytes): inconsistent, not read")
+        with open(path, "rb") as fh:
+            if fh.read(len(MAGIC)) != MAGIC:
+                raise InputError(f"{what}: does not start with {MAGIC!r}: garbled or not a "
+                                 ".sflz file")
+            fh.read(10)
+            header = LAYOUT_HEADER.read(fh)
+            fh.seek(header["metadata_size"], 1)
+            for _ in range(header["num_layers"]):
+                layer = LAYOUT_LAYER_HEADER.read(fh)
+                _declared_grid(what, layer["width"], layer["height"])
+                dtype = layer["datatype"]
+                dtype = dtype.decode() if isinstance(dtype, bytes) else str(dtype)
+                itemsize = np.dtype(dtype.strip("\0 ")).itemsize
+                declared = layer["width"] * layer["height"] * max(layer["channels"], 1) * itemsize
+                data = fh.read(layer["size"])
+                algo = header["compression_algorithm"]
+                if algo == "zlib":
+                    size = len(zlib.decompressobj().decompress(data, declared + 1))
+                elif algo == "lzma":
+                    size = len(lzma.LZMADecompressor().decompress(data, declared + 1))
+                else:
+                    size = len(data)
+                if size != declared:
+                    raise InputError(f"{what}: a layer of {layer['width']} x {layer['height']} "
+                                     f"declares {declared} bytes and unpacks to "
+                                     f"{'more' if size > declared else size}: garbled, not "
+                                     "read; save the surface again from surfalize")
+    except InputError:
+        raise
+    except Exception as err:  # noqa: BLE001 - struct/zlib/lzma/dtype raise many kinds
+        raise InputError(f"{what}: cannot read its header ({_brief(err)}): truncated or "
+                         "garbled; save the surface again from surfalize") from None

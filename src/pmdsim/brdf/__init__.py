@@ -1,4 +1,10 @@
-"""BRDF models behind one small interface (:class:`~pmdsim.brdf.base.BRDF`)."""
+"""BRDF models behind one small interface (:class:`~pmdsim.brdf.base.BRDF`): Ward,
+Beckmann, the mirror, slope densities (``slope_density``; turned surfaces, ``turning``),
+measured topographies (``topography``), the specular peak plus Rayleigh-Rice halo
+(``rayleigh_rice``) and the surface PSD models both use (``psd``); the model of a
+``[brdf]`` section (:func:`brdf_from_config`)."""
+
+from __future__ import annotations
 
 import math
 
@@ -7,9 +13,10 @@ from .beckmann import Beckmann
 from .mirror import Mirror
 from .slope_density import SlopeDensityBRDF
 from .ward import Ward
+from ..config import BrdfConfig, SlopeDensityConfig, TurnedConfig
 
 
-def brdf_from_config(cfg, incidence_deg: float = 0.0) -> BRDF:
+def brdf_from_config(cfg: BrdfConfig, incidence_deg: float = 0.0) -> BRDF:
     """The BRDF of a ``[brdf]`` configuration; ``incidence_deg``: the set-up's incidence at
     the surface centre, for the models built for one (``rayleigh_rice``, ``topography``)
     when the configuration gives none."""
@@ -34,7 +41,7 @@ def brdf_from_config(cfg, incidence_deg: float = 0.0) -> BRDF:
     raise ValueError(f"brdf.model: unknown model {cfg.model!r}")
 
 
-def equivalent_alphas(cfg) -> tuple[float, float]:
+def equivalent_alphas(cfg: BrdfConfig) -> tuple[float, float]:
     """(alpha along local x, alpha along local y) of a BRDF configuration: its own alphas
     (Ward, Beckmann, Gaussian slopes) or sqrt(2) x the RMS slope per axis of its slope
     density (kinematic, tabulated, turned); (0, 0) for the mirror."""
@@ -45,7 +52,7 @@ def equivalent_alphas(cfg) -> tuple[float, float]:
     return brdf_from_config(cfg).smith_alphas
 
 
-def _slope_brdf(cfg) -> SlopeDensityBRDF:
+def _slope_brdf(cfg: SlopeDensityConfig | TurnedConfig) -> SlopeDensityBRDF:
     from . import slope_density as sd
     from . import turning
 

@@ -38,7 +38,7 @@ This equals the Rayleigh-Rice BRDF exactly at the specular direction for inciden
 ``theta_0`` and departs from it, to second order in the scattering angle, through
 ``(cos_i + cos_o) / (2 cos(theta_0))`` (the halo's width scales with ``cos(theta_0) /
 cos(theta_i)`` at other incidences), ``cos_i cos_o`` versus ``cos^4(theta_0) / cos^4(theta_h)``
-and ``Q``'s angular dependence: ``tests/test_rayleigh_rice.py`` bounds the difference.
+and ``Q``'s angular dependence: ``tests/brdf/test_rayleigh_rice.py`` bounds the difference.
 """
 
 from __future__ import annotations
@@ -48,6 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import RayleighRiceConfig
 from .slope_density import SlopeDensityBRDF, TabulatedSlopes
 
 
@@ -290,10 +291,10 @@ def permittivity(refractive_index) -> complex | None:
     return complex(n, k) ** 2
 
 
-def from_config(cfg, incidence_deg: float = 0.0) -> SpecularHaloBRDF:
+def from_config(cfg: RayleighRiceConfig, incidence_deg: float = 0.0) -> SpecularHaloBRDF:
     """The ``rayleigh_rice`` model of a configuration (``incidence_deg``: the set-up's, used
     when the configuration gives none)."""
-    from .topography import KCorrelation
+    from .psd import KCorrelation
 
     theta0 = math.radians(cfg.incidence_deg if cfg.incidence_deg is not None else incidence_deg)
     psd = KCorrelation(cfg.sigma_nm * 1e-6, 2 * math.pi * cfg.correlation_length_tangential_um * 1e-3,

@@ -26,9 +26,11 @@ from .interrupt import install as _install_interrupt
 
 _install_interrupt()  # Ctrl-C during the start-up: one line, exit 130 (no traceback)
 
+from ..run.pages import hugepages_at_start
 from ..run.threads import blas_pool_at_start
 
 blas_pool_at_start()  # before anything imports NumPy
+hugepages_at_start()
 
 from .common import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED, app
 from .simulate import simulate

@@ -4,9 +4,19 @@ one red line (exit 2) and interrupts (exit 130/143)."""
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
 
 import typer
+import typer.rich_utils
 from rich.console import Console
+
+#: Width of ``--help`` when it does not go to a terminal (a pipe, a file, a test): Rich's
+#: default of 80 columns cut option help into narrow columns and ellipsised long names.
+#: A terminal keeps its own width; ``TERMINAL_WIDTH`` or ``COLUMNS`` override both.
+HELP_WIDTH = 120
+if not (os.environ.get("TERMINAL_WIDTH") or os.environ.get("COLUMNS")) and not sys.stdout.isatty():
+    typer.rich_utils.MAX_WIDTH = HELP_WIDTH
 
 app = typer.Typer(
     name="pmdsim",
@@ -37,13 +47,11 @@ def _bad_input() -> tuple[type[BaseException], ...]:
 def _guard():
     """Bad input -> one red line, exit 2; SIGINT/SIGTERM -> a note, exit 130/143 (the run's
     temporary folder is already removed); anything else propagates (traceback, exit 1)."""
-    from ..run.claim import Terminated
+    from ..store.folder_lock import Terminated
 
-    bad_input = _bad_input()  # imported here, never in an except clause (a Ctrl-C inside an
-    # import leaves the module half loaded, and importing it again would be a new error)
     try:
         yield
-    except bad_input as err:
+    except _bad_input() as err:
         _fail(str(err))
     except KeyboardInterrupt as err:
         term = isinstance(err, Terminated)
@@ -94,12 +102,6 @@ def _main(
     """Simulate Phase Measuring Deflectometry (PMD) of scattering surfaces by reverse ray
     tracing with a BRDF-weighted ray bundle per camera pixel."""
     from . import interrupt
-
-    # What every command's guard needs (NumPy, the configuration, the run's claim) is loaded
-    # while the start-up handler still holds SIGINT: a Ctrl-C inside these imports is the
-    # start-up's one line, never a half-imported NumPy that the guard would import again.
-    _bad_input()
-    from ..run.claim import Terminated  # noqa: F401
 
     interrupt.release()  # the start-up is over: SIGINT unwinds the command (KeyboardInterrupt)
     _warnings_as_messages()

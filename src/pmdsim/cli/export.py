@@ -21,7 +21,7 @@ def export(
     """Export the reconstructed surface's maps (height error, slope errors X/Y and the
     reconstructed height) for surface-metrology software (docs/reconstruction.md); X3P
     holds the heights only (its z axis is a length)."""
-    from ..run.export import export_run
+    from ..store.export import export_run
 
     console = _console()
     notes: list[str] = []

@@ -28,9 +28,9 @@ def report(
     """Draw a run's figures again from its folder's dataset alone (run.zarr with its
     configuration): any of them, all of them, into the run or another folder."""
     from ..report.text import description
-    from ..run.dataset import DATASET_NAME
+    from ..store.schema import DATASET_NAME
     from ..run.figures import draw_figures, figure_names
-    from ..run.integrity import open_run_checked
+    from ..store.integrity import open_run_checked
 
     console = _console()
     run = Path(run)

@@ -74,7 +74,7 @@ def simulate(
     target_error_mrad: float | None = typer.Option(
         None, "--target-error-mrad",
         help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
-        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "error (P95 over pixels, every fringe) is below this (the same as [sampling] target_error_mrad); "
         "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Render the configured patterns and write a run folder (images, run.zarr, figures);
@@ -82,7 +82,7 @@ def simulate(
     reference (statistics.json, summary.txt, deviation figures), and check the sampling
     (diagnostics: warnings, each naming the setting that fixes it; bounds in the
     configuration's diagnostics section)."""
-    from ..run.claim import OutputBusy, check_free
+    from ..store.folder_lock import OutputBusy, check_free
 
     try:  # a run already writing there: fail before the heavy imports (pydantic, NumPy)
         check_free(output)
@@ -95,7 +95,7 @@ def simulate(
         cfg = with_target_error(load_config(config), target_error_mrad)  # field-named errors
         from ..report.text import warning_text
         from ..run import run_simulation
-        from ..run.files import check_output_dir
+        from ..store.folder import check_output_dir
 
         check_output_dir(output, overwrite)
     # the objects of the imports so far (modules, classes, the configuration) live as long
@@ -146,7 +146,7 @@ def simulate(
                   f"figures {result.timings['figures']:.2f} s)")
     table.add_row("run folder", str(result.outdir))
     if result.sizes:
-        from ..run.files import size_text
+        from ..store.folder import size_text
 
         table.add_row("size", size_text(result.sizes).removeprefix("run folder: "))
     if result.variants:

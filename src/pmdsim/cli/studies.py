@@ -1,4 +1,4 @@
-"""The studies' commands: ``pmdsim converge`` (sampling against the converged answer),
+"""The studies' commands: ``pmdsim converge`` (sampling against a reference of stated error),
 ``pmdsim budget`` (the error budget) and ``pmdsim sweep`` (a parameter study)."""
 
 from __future__ import annotations
@@ -40,12 +40,14 @@ def converge(
                                         help="Do not check the configured settings."),
 ) -> None:
     """Study the decoded phase deviation and modulation versus N, theta_max and estimator
-    (paper, weighted_mean, radiometric) against the converged answer; writes
+    (paper, weighted_mean, radiometric) against a reference (radiometric, largest N) that
+    states its own numerical error: a row whose difference is within it says "not
+    resolved", a fringe where the reference is not converged is named; writes
     OUT/convergence.csv, convergence.png, convergence.json and warns about the configured
     settings (lobe energy outside theta_max, phase standard error, effective sample size)."""
     import math
 
-    from ..config import ConfigError, load_config
+    from ..config import load_config
     from ..run.convergence import run_convergence
     from ..studies.convergence import DEFAULT_N, DEFAULT_THETA_DEG
 
@@ -81,7 +83,7 @@ def converge(
     n_max = max(r["n_rays"] for r in rows)
     table = Table(title=f"pmdsim converge '{cfg.name}' ({wall:.1f} s)", title_justify="left")
     for col in ("estimator", "theta_max", "N", "fringe", "phase RMS vs mirror (mrad)",
-                "vs converged (mrad)", "modulation"):
+                "vs reference ± its error (mrad)", "modulation"):
         table.add_column(col, justify="right" if col not in ("estimator", "fringe") else "left")
     picks = [r for r in rows
              if (r["estimator"] == "paper" and r["n_rays"] == cfg.sampling.n_rays
@@ -89,11 +91,31 @@ def converge(
              or (r["estimator"] == "radiometric" and r["n_rays"] in (cfg.sampling.n_rays, n_max))]
     for r in picks:
         th = "" if math.isnan(r["theta_max_deg"]) else f"{r['theta_max_deg']:g} deg"
-        table.add_row(r["estimator"], th, str(r["n_rays"]), f"{r['direction']} {r['width_px']:g} px",
-                      f"{1e3 * r['phase_rms_rad']:.3g}",
-                      f"{1e3 * r['phase_rms_vs_converged_rad']:.3g}",
+        is_ref = r["estimator"] == "radiometric" and r["n_rays"] == n_max
+        table.add_row(r["estimator"], th, str(r["n_rays"]) + (" (ref.)" if is_ref else ""),
+                      f"{r['direction']} {r['width_px']:g} px",
+                      _with_error(r["phase_rms_rad"], r["phase_error_rms_rad"]),
+                      ("reference ± " + _mrad(r["reference_error_rms_rad"])) if is_ref
+                      else _vs_reference(r),
                       f"{r['modulation_median']:.3f}")
+    if not console.is_terminal:  # a pipe or a file: Rich's 80 columns would wrap every cell
+        from rich.console import Console
+
+        console = Console(width=max(console.width, 132), soft_wrap=True, highlight=False)
     console.print(table)
+    ref = result.reference or {}
+    stale = [f"{f['direction']} {f['width_px']:g} px ({_mrad(f['error_rms_rad'])} mrad)"
+             for f in ref.get("fringes", []) if not f["converged"]]
+    console.print(f"reference: {ref.get('run')}, every row states its numerical error (the "
+                  "rule's own statement, RMS over the pixels); 'not resolved': the difference "
+                  "is within the reference's error", markup=False)
+    if stale:
+        _console(stderr=True).print(
+            "warning: the reference is NOT converged for " + ", ".join(stale) + ": its stated "
+            "numerical error exceeds "
+            f"{1e3 * ref.get('converged_below_rad', float('nan')):g} mrad, so differences "
+            "from it are not the sampling error of the other rows there; raise --n-values",
+            style="yellow", markup=False)
     console.print(f"table  {result.table}")
     if result.figure is not None:
         console.print(f"figure {result.figure}")
@@ -101,6 +123,25 @@ def converge(
         _console(stderr=True).print(f"warning: {w.message}", style="yellow", markup=False)
     for note in result.notes:
         _console(stderr=True).print(f"note: {note}", style="yellow", markup=False)
+
+
+def _mrad(rad) -> str:
+    """A phase in mrad (3 significant digits); "unknown" without a value."""
+    if rad is None or rad != rad:
+        return "unknown"
+    return "> pi" if rad == float("inf") else f"{1e3 * rad:.3g}"
+
+
+def _with_error(value: float, err: float) -> str:
+    return f"{1e3 * value:.3g}" + ("" if err != err else f" ± {_mrad(err)}")
+
+
+def _vs_reference(r: dict) -> str:
+    """The row's difference from the reference, or why it is not a number."""
+    ref = _mrad(r["reference_error_rms_rad"])
+    if not r["resolved"]:
+        return f"not resolved (± {ref})"
+    return f"{1e3 * r['phase_rms_vs_reference_rad']:.3g} ± {ref}"
 
 
 def budget(
@@ -115,7 +156,7 @@ def budget(
     target_error_mrad: float | None = typer.Option(
         None, "--target-error-mrad",
         help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
-        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "error (P95 over pixels, every fringe) is below this (the same as [sampling] target_error_mrad); "
         "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Error budget: the chain with each system effect of CONFIG alone and all together on
@@ -176,14 +217,14 @@ def sweep(
     target_error_mrad: float | None = typer.Option(
         None, "--target-error-mrad",
         help="Raise the quadrature rule's order (n_rays) until the stated numerical phase "
-        "error (P95 over pixels, every fringe) is below this (sampling.target_error_mrad); "
+        "error (P95 over pixels, every fringe) is below this (the same as [sampling] target_error_mrad); "
         "the order used is reported, a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Run the measurement chain at every point of the configuration's [sweep] (grid, zip or
     random design over any configuration fields) into one Zarr store with a dimension per
     swept field; resumes an interrupted sweep with only its unfinished points. See
     docs/sweeps.md."""
-    from ..run.claim import OutputBusy, check_free
+    from ..store.folder_lock import OutputBusy, check_free
 
     try:  # a sweep already writing there: fail before the heavy imports and the planning
         check_free(output)

@@ -132,7 +132,7 @@ def fit(
         None, "--target-error-mrad",
         help="Raise the quadrature rule's order (n_rays) at the start values until the stated "
         "numerical phase error (P95 over pixels, every fringe) is below this "
-        "(sampling.target_error_mrad); the fit starts from that order (reported in fit.json "
+        "(as [sampling] target_error_mrad); the fit starts from that order (reported in fit.json "
         "model.target), a target not met within sampling.max_rays is a warning."),
 ) -> None:
     """Images to parameters: fit alpha_x/alpha_y (tangential/radial) and a brightness scale

@@ -41,7 +41,8 @@ from .sensor import SensorConfig
 from .budget import BudgetConfig, CalibrationUncertainty
 from .sweep import SweepConfig, SweepRange
 from .variants import RESERVED_VARIANT_NAMES, VariantConfig
-from .run import PHYSICAL_ESTIMATOR, RunConfig, physical_estimator, with_sampling, with_target_error
+from .run import (PHYSICAL_ESTIMATOR, RunConfig, SceneSections, SimulationSections, physical_estimator,
+                  with_sampling, with_target_error)
 from .loading import load_config, parse_config
 from .resources import (BASE_MEMORY_BYTES, RAYS_PER_CPU_SECOND, ResourceEstimate,
                         available_memory_bytes, check_resources, estimate_resources)
@@ -59,7 +60,7 @@ __all__ = [
     "SlopeDensityConfig", "TurnedConfig", "WardConfig", "RayleighRiceConfig", "TopographyConfig", "SamplingConfig", "DotConfig",
     "FringeConfig", "ImageConfig", "PatternsConfig", "DiagnosticsConfig", "ComputeConfig",
     "OutputConfig", "ReconstructConfig", "DecodeConfig", "SensorConfig", "BudgetConfig", "CalibrationUncertainty", "SweepConfig",
-    "SweepRange", "RESERVED_VARIANT_NAMES", "VariantConfig", "RunConfig", "PHYSICAL_ESTIMATOR",
+    "SweepRange", "RESERVED_VARIANT_NAMES", "VariantConfig", "RunConfig", "SceneSections", "SimulationSections", "PHYSICAL_ESTIMATOR",
     "physical_estimator", "with_sampling", "with_target_error", "load_config",
     "parse_config", "BASE_MEMORY_BYTES", "RAYS_PER_CPU_SECOND", "ResourceEstimate",
     "available_memory_bytes", "check_resources", "estimate_resources",

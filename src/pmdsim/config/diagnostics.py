@@ -10,7 +10,7 @@ from .base import Bool, Float, Int, PositiveFloat, _Model
 
 
 class DiagnosticsConfig(_Model):
-    """Bounds for the convergence warnings of :func:`pmdsim.studies.diagnostics.check`, and
+    """Bounds for the convergence warnings of :func:`pmdsim.studies.diagnostic_warnings.check`, and
     the explicit overrides of the checks before and after the work (``allow_*``)."""
 
     min_energy_fraction: Annotated[Float, Field(gt=0, le=1)] = Field(

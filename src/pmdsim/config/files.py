@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -48,20 +48,52 @@ def _fail(field: str, path: Path, what: str) -> FileInputError:
     return FileInputError(f"{field}: {path}: {what}")
 
 
-def _existing(path, field: str) -> Path:
+def check_regular_file(path, field: str) -> Path:
+    """``path`` as a :class:`~pathlib.Path` if it names a readable regular file of 1 byte to
+    :data:`MAX_FILE_BYTES`; else a :class:`FileInputError` naming ``field`` and the file that
+    says what it is instead (absent: :class:`MissingFileError`; a broken link or a link
+    loop, a folder, a named pipe, a device or a socket, empty, too large, unreadable) and
+    what to do. Nothing is opened, so a FIFO or ``/dev/zero`` cannot block or fill memory."""
+    import errno
+    import os
+    import stat
+
     path = Path(path)
-    if not path.exists():
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        if path.is_symlink():
+            raise _fail(field, path, f"is a symbolic link to {os.readlink(path)!r}, which does "
+                        "not exist; name the measurement file itself") from None
         raise MissingFileError(f"{field}: file not found: {path} (check the path; relative "
-                               "paths are relative to the configuration file)")
-    if not path.is_file():
-        raise _fail(field, path, "is not a file (a folder or a device?); name the file itself")
-    size = path.stat().st_size
-    if size == 0:
+                               "paths are relative to the configuration file)") from None
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            raise _fail(field, path, "is a symbolic link loop (the link points back to itself); "
+                        "name the measurement file itself") from None
+        raise _fail(field, path, f"cannot be looked at ({err.strerror or err}); check the "
+                    "path and its folders' permissions") from None
+    mode = st.st_mode
+    kind = ("a folder" if stat.S_ISDIR(mode) else "a named pipe (FIFO)" if stat.S_ISFIFO(mode)
+            else "a character device" if stat.S_ISCHR(mode) else "a block device"
+            if stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else None)
+    if kind == "a folder":
+        raise _fail(field, path, "is a folder, not a file; name the measurement file inside it")
+    if kind is not None or not stat.S_ISREG(mode):
+        raise _fail(field, path, f"is {kind or 'not a regular file'}, not a file; save the "
+                    "measurement to a file and name that")
+    if st.st_size == 0:
         raise _fail(field, path, "is empty (0 bytes); was it written completely?")
-    if size > MAX_FILE_BYTES:
-        raise _fail(field, path, f"is {size / 2**30:.3g} GB, more than any map or table "
+    if st.st_size > MAX_FILE_BYTES:
+        raise _fail(field, path, f"is {st.st_size / 2**30:.3g} GB, more than any map or table "
                     "pmdsim reads; is it the right file?")
+    if not os.access(path, os.R_OK):
+        raise _fail(field, path, "cannot be read (permission denied); make it readable")
     return path
+
+
+def _existing(path, field: str) -> Path:
+    return check_regular_file(path, field)
 
 
 # ----------------------------------------------------------------------------- text tables
@@ -386,6 +418,19 @@ def read_variation_map(path, quantity: str | None,
     return grids
 
 
-__all__ = ["FileInputError", "MissingFileError", "read_table", "read_response_lut",
-           "read_flatness_map", "read_grid", "read_npz", "read_slope_table", "read_height_map", "read_variation_map",
-           "register_height_map_reader", "HEIGHT_MAP_READERS", "VARIATION_QUANTITIES"]
+__all__ = [
+    "HEIGHT_MAP_READERS",
+    "VARIATION_QUANTITIES",
+    "FileInputError",
+    "MissingFileError",
+    "check_regular_file",
+    "read_flatness_map",
+    "read_grid",
+    "read_height_map",
+    "read_npz",
+    "read_response_lut",
+    "read_slope_table",
+    "read_table",
+    "read_variation_map",
+    "register_height_map_reader",
+]

@@ -10,6 +10,10 @@ from pydantic import Field, field_validator, model_validator
 from .base import (Bool, Float, Int, Length, ResolutionAxis, Vec3, _Model, _nonzero_vector,
     _unit)
 
+#: Cosine harmonics of a non-linear (gamma != 1) display response that analytic fringes on a
+#: continuous monitor are summed with (the render's sums, and their memory in the estimate).
+GAMMA_HARMONICS = 16
+
 
 class MonitorConfig(_Model):
     """Flat monitor: a grid of square pixels. Pixel (v, u) (row, column; centres at integers)

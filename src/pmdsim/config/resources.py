@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from .base import ConfigError
 from .brdf import MirrorConfig
+from .monitor import GAMMA_HARMONICS
 from .run import RunConfig
 
 # ----------------------------------------------------------------------------- resources
@@ -23,9 +24,6 @@ from .run import RunConfig
 RAYS_PER_CPU_SECOND = 3.0e6
 #: Resident memory of the interpreter with NumPy, Numba, xarray and Dask loaded.
 BASE_MEMORY_BYTES = 400 * 2**20
-#: Harmonics of a non-linear (gamma != 1) display in the continuous pixel model
-#: (``pmdsim.render.GAMMA_HARMONICS``; config imports nothing of the package).
-_GAMMA_HARMONICS = 16
 #: Grid pixels of the diagnostics' ray transport keep every ray: float64 u, v, weight,
 #: a 3-vector direction and scratch, per ray.
 _TRANSPORT_BYTES_PER_RAY = 64
@@ -89,7 +87,7 @@ def _member_estimate(cfg: "RunConfig", n_px: float, width: int) -> tuple[dict, f
         nd, nw, k = len(fr.directions), len(fr.widths_px), fr.shifts
         linear = cfg.monitor.gamma == 1.0
         if cfg.monitor.pixel_model == "continuous":
-            ncols = 2 + 2 * nd * nw * (1 if linear else _GAMMA_HARMONICS)
+            ncols = 2 + 2 * nd * nw * (1 if linear else GAMMA_HARMONICS)
         else:
             ncols = 2 + nd * nw * (2 if linear else k)
         # the tiles' float64 outputs and their concatenation, the float32 images, the
@@ -125,18 +123,29 @@ def _member_estimate(cfg: "RunConfig", n_px: float, width: int) -> tuple[dict, f
 
 #: Rays of a Gauss rule plus its two embedded rules (about 3/4 and 1/2 of the order in
 #: each of two dimensions: ~0.56 + 0.25 more nodes), rounded up: the error-estimating
-#: passes of mode "rule".
+#: passes of mode "rule" where the integrand is not smooth.
 RULE_WITH_EMBEDDED = 1.85
+#: Mode "rule" on a continuous monitor: the rule once, and its pilot (a rule 4 x finer on
+#: 1/64 of the pixels, the local pilots where a lobe leaves the monitor), rounded up.
+RULE_WITH_PILOT = 1.15
+#: The rule a target is expected to pick, per node it starts from, for the estimate (the
+#: pilot picks it; Fig. 3's 0.1 mrad: 64-128 nodes from 16), and at least this many nodes.
+TARGET_TYPICAL_NODES = 256
 
 
 def rays_per_bundle(sampling, pixel_model: str = "continuous") -> float:
-    """Rays per vision ray over all the sample sets of one render: ``n_rays`` (or, with
-    ``target_error_mrad``, up to ``max_rays``); mode ``rule`` with its error estimate adds
-    the embedded rules on a smooth (continuous-monitor) integrand, elsewhere it runs as
-    ``rqmc`` (R sets of n_rays / R: n_rays in all)."""
-    n = float(sampling.max_rays if sampling.target_error_mrad is not None else sampling.n_rays)
-    if (sampling.mode == "rule" and sampling.error_estimate and pixel_model == "continuous"):
-        return RULE_WITH_EMBEDDED * n
+    """Rays per vision ray over all the sample sets of one render: ``n_rays`` (with
+    ``target_error_mrad``: :data:`TARGET_TYPICAL_NODES`, at least ``n_rays`` and at most
+    ``max_rays``, and the doubling renders of a target on a nearest-pixel monitor); mode
+    ``rule`` with its error estimate adds its pilot on a smooth (continuous-monitor)
+    integrand and the embedded rules elsewhere (its ``rqmc`` replicates share n_rays)."""
+    n = float(sampling.n_rays)
+    if sampling.target_error_mrad is not None:
+        n = float(min(sampling.max_rays, max(sampling.n_rays, TARGET_TYPICAL_NODES)))
+        if pixel_model != "continuous":
+            n *= 2.0  # the doubling full renders (1 + 1/2 + 1/4 ...)
+    if sampling.mode == "rule" and sampling.error_estimate:
+        return (RULE_WITH_PILOT if pixel_model == "continuous" else RULE_WITH_EMBEDDED) * n
     return n
 
 

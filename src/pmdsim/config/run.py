@@ -3,7 +3,7 @@ across sections."""
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Protocol
 
 from pydantic import Field, model_validator
 
@@ -24,6 +24,25 @@ from .sensor import SensorConfig
 from .budget import BudgetConfig
 from .sweep import SweepConfig
 from .variants import VariantConfig
+
+
+class SceneSections(Protocol):
+    """The sections a scene is built from (:meth:`pmdsim.scene.Scene.from_config`): what a
+    :class:`RunConfig` has, and all the scene may read of it."""
+
+    camera: CameraConfig
+    monitor: MonitorConfig
+    surface: SurfaceConfig
+    anisotropy: AnisotropyConfig
+    brdf: BrdfConfig
+    sampling: SamplingConfig
+
+
+class SimulationSections(SceneSections, Protocol):
+    """The sections a simulation is built from (:meth:`pmdsim.render.Simulation.from_config`):
+    the scene's and ``compute`` (tiles, scheduler, workers)."""
+
+    compute: ComputeConfig
 
 
 class RunConfig(_Model):
@@ -114,6 +133,12 @@ def physical_estimator(cfg: "RunConfig") -> "RunConfig":
 def with_sampling(cfg: "RunConfig", **changes) -> "RunConfig":
     """``cfg`` with ``changes`` to ``[sampling]``, validated; the fields the configuration
     set explicitly stay marked as set (:func:`physical_estimator` reads them)."""
+    from .sampling import DEFAULT_TARGET_MRAD, DEFAULT_TARGET_START
+
+    s = cfg.sampling
+    if ("n_rays" in changes and "target_error_mrad" not in changes
+            and s.n_rays == DEFAULT_TARGET_START and s.target_error_mrad == DEFAULT_TARGET_MRAD):
+        changes = {**changes, "target_error_mrad": None}  # the default target: n_rays alone
     given = set(cfg.sampling.model_fields_set) | set(changes)
     full = type(cfg).model_validate({**cfg.model_dump(), "sampling": {**cfg.sampling.model_dump(),
                                                                       **changes}})

@@ -1,7 +1,7 @@
 """Compiled mantissa rounding of float32 data for storage.
 
 The NumPy reference is numcodecs' ``BitRound`` (round to nearest, ties to even, on the
-float's bit pattern), which ``tests/test_storage.py`` compares against; here NaN and inf
+float's bit pattern), which ``tests/store/test_storage.py`` compares against; here NaN and inf
 are left unchanged. One pass over the data in place, without the NumPy version's
 temporaries (about 5x faster on the Fig. 3 run's 420 MB of rounded variables).
 """

@@ -52,7 +52,7 @@ and weights each ray by ``w = f cos(theta_o) / pdf(o)`` in closed form, so that
 same geometry rows (in any orthonormal basis: it expresses them in the BRDF frame per
 pixel).
 
-Both sources share phase 2 (``PATTERNS``). ``tests/test_radiometric.py`` checks that
+Both sources share phase 2 (``PATTERNS``). ``tests/render/test_radiometric.py`` checks that
 ``render_tile`` still matches a frozen copy of the original kernel (bit for bit, except the
 reordered table sums).
 

@@ -3,7 +3,7 @@
 Without Intel SVML, LLVM cannot vectorise calls to libm's ``exp``/``sin``/``cos``; a loop
 containing one runs scalar. These polynomial versions are plain arithmetic, so the loops that
 use them vectorise (AVX2/AVX-512). Their accuracy is tested against NumPy
-(``tests/test_kernels.py``): ``exp_neg`` has a relative error below 1e-11 on [-64, 0],
+(``tests/kernels/test_kernels.py``): ``exp_neg`` has a relative error below 1e-11 on [-64, 0],
 ``sincos`` an absolute error below 1e-13 for |x| <= 100, growing as about 1e-16 |x|
 beyond (argument-reduction rounding; 9e-13 at |x| = 1e4), below the rounding error of the
 argument k * u itself.

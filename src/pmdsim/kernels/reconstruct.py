@@ -19,7 +19,10 @@ Slow NumPy references: ``tests/naive_integrate.py`` (the right-hand side) and
 - :func:`slope_deviation_3d`: the measurement chain's signed tilt between the bisector
   normals of a reference and a decoded monitor point (NumPy reference:
   :func:`pmdsim.measure.reconstruct.slope_deviation_3d`).
-- :func:`support_cells`: which projected nodes fall in a cell of 2 x 2 valid camera pixels.
+- :func:`node_support`: how the decoded maps serve each projected node: by the cubic spline
+  (its 4 x 4 pixel support inside the image and valid), by the rim fit (the pixel the node
+  falls in is valid, the spline's support is not), or not at all (that pixel is invalid, or
+  outside the image).
 """
 
 from __future__ import annotations
@@ -182,20 +185,39 @@ def slope_deviation_3d(points, camera_position, centre, e_u, e_v, pitch, u_mid, 
         out[p] = (1.0 if d > 0 else (-1.0 if d < 0 else 0.0)) * ang
 
 
+#: :func:`node_support` codes: served by the spline, by the rim fit, not served (the pixel the
+#: node falls in is invalid; it falls outside the image, or its coordinates are not finite)
+SUPPORT_SPLINE, SUPPORT_RIM, SUPPORT_PIXEL_INVALID, SUPPORT_OUTSIDE = 0, 1, 2, 3
+
+
 @parallel_jit(fastmath=False)
-def support_cells(valid, cols, rows, ok):
-    """``ok[k] &=`` the fractional pixel (cols[k], rows[k]) lies in a cell of 2 x 2 valid
-    pixels of ``valid`` (H, W) (NaN coordinates: not)."""
+def node_support(valid, cols, rows, margin, status):
+    """``status[k]`` (int8) of the fractional pixel (cols[k], rows[k]) (integers = pixel
+    centres) in the decoded maps' validity ``valid`` (H, W): SUPPORT_SPLINE when the cubic
+    spline's 4 x 4 support grown by ``margin`` pixels on every side (floor - 1 - margin ..
+    floor + 2 + margin on each axis) lies inside the image and is valid; else SUPPORT_RIM
+    when the pixel it falls in (the nearest, ``floor(x + 0.5)``) is inside and valid;
+    SUPPORT_PIXEL_INVALID when that pixel is inside and invalid; SUPPORT_OUTSIDE when it is
+    outside the image (or a coordinate is NaN or inf)."""
     h, w = valid.shape
-    for k in numba.prange(ok.shape[0]):
-        if not ok[k]:
-            continue
+    n = 4 + 2 * margin
+    for k in numba.prange(status.shape[0]):
         c = cols[k]
         r = rows[k]
-        if not (c >= 0.0 and r >= 0.0 and c < w - 1.0 and r < h - 1.0):  # also NaN, inf
-            ok[k] = False
+        if not (c >= -0.5 and r >= -0.5 and c < w - 0.5 and r < h - 0.5):  # also NaN, inf
+            status[k] = SUPPORT_OUTSIDE
             continue
-        c0 = int(math.floor(c))
-        r0 = int(math.floor(r))
-        ok[k] = valid[r0, c0] and valid[r0 + 1, c0] and valid[r0, c0 + 1] and valid[r0 + 1, c0 + 1]
-
+        cn = math.floor(c + 0.5)
+        rn = math.floor(r + 0.5)
+        if not valid[rn, cn]:
+            status[k] = SUPPORT_PIXEL_INVALID
+            continue
+        c0 = math.floor(c) - 1 - margin
+        r0 = math.floor(r) - 1 - margin
+        full = c0 >= 0 and r0 >= 0 and c0 + n <= w and r0 + n <= h
+        if full:
+            for a in range(n):
+                for b in range(n):
+                    if not valid[r0 + a, c0 + b]:
+                        full = False
+        status[k] = SUPPORT_SPLINE if full else SUPPORT_RIM

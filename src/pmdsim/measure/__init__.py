@@ -2,4 +2,5 @@
 decoding (:mod:`.decode`, files: :mod:`.images`), deviation and statistics
 (:mod:`.deviation`), the simulated measurement chain (:mod:`.chain`), monocular
 reconstruction of slopes and height (:mod:`.reconstruct`) and slope integration
-(:mod:`.integrate`)."""
+(:mod:`.integrate`, its solvers :mod:`.poisson`), form removal (:mod:`.form`) and the
+propagation of the render's numerical error (:mod:`.numerical`)."""

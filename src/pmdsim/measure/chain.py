@@ -11,8 +11,8 @@ the surface point that moves the exact specular monitor point by the deviation),
 the surface points, the small-angle :func:`pmdsim.measure.deviation.slope_deviation`
 (coord / 2 d: right in the plane of incidence, cos(theta_i) short across it). :func:`dot_table` measures the second moments of dot images.
 
-Everything here computes; nothing is written (see :mod:`pmdsim.run`) or drawn (see
-:mod:`pmdsim.report.chain`).
+Everything here computes; nothing is written (see :mod:`pmdsim.store`) or drawn (see
+:mod:`pmdsim.report.chain_maps`).
 
 What a deviation means
 ----------------------
@@ -34,9 +34,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..config import DecodeConfig, FringeConfig
 from ..quantiles import median
 from . import deviation as analysis
 from . import decode as dec
+from .decode_plan import unambiguous_range_px
 
 #: Background threshold of the dot moments, as a fraction of each dot image's maximum.
 DOT_THRESHOLD_FRACTION = 0.05
@@ -59,21 +61,23 @@ def extent_px(monitor_resolution, direction: str) -> float:
     return float(w if direction == "x" else h)
 
 
-def decode_problem(cfg) -> str | None:
-    """Why the fringes of a configuration cannot be decoded, or None if they can.
+def decode_problem(fringes: FringeConfig | None, decode: DecodeConfig,
+                   monitor_resolution) -> str | None:
+    """Why the fringes (``patterns.fringes``) cannot be decoded with ``decode`` on a monitor
+    of ``monitor_resolution`` (width, height), or None if they can.
 
     The message names ``patterns.fringes.widths_px`` and the fix (e.g. the width to add).
     """
-    fr = cfg.patterns.fringes
+    fr = fringes
     if fr is None:
         return "no fringes are configured (patterns.fringes = false): nothing to decode"
-    method = cfg.decode.method
+    method = decode.method
     try:
-        reach = dec.unambiguous_range_px(fr.widths_px, method)
+        reach = unambiguous_range_px(fr.widths_px, method)
     except ValueError as err:
         return (f"patterns.fringes.widths_px = {list(fr.widths_px)} do not fit "
                 f"decode.method = {method!r}: {err}")
-    need = max(extent_px(cfg.monitor.resolution, d) for d in fr.directions)
+    need = max(extent_px(monitor_resolution, d) for d in fr.directions)
     if reach < need:
         if method == "hierarchical":
             fix = (f"add a width of at least {need:g} monitor px (e.g. widths_px = "
@@ -374,12 +378,16 @@ def statistics(chain: ChainResult, name: str) -> dict:
 DOT_COLUMNS = ("variant", "dot", "dot_u_px", "dot_v_px", "dot_size_px", "centroid_col",
                "centroid_row",
                "sigma_major_px", "sigma_minor_px", "elongation", "angle_deg", "peak",
-               "total", "threshold")
+               "total", "threshold", "centroid_col_err", "centroid_row_err",
+               "sigma_major_px_err", "sigma_minor_px_err", "elongation_err", "angle_deg_err")
 
 
 def dot_table(dot_images: np.ndarray, dots, variant: str = "",
-              threshold_fraction: float = DOT_THRESHOLD_FRACTION) -> list[dict]:
-    """Second moments of every dot image (:func:`pmdsim.measure.deviation.image_moments`).
+              threshold_fraction: float = DOT_THRESHOLD_FRACTION,
+              dot_errors: np.ndarray | None = None) -> list[dict]:
+    """Second moments of every dot image (:func:`pmdsim.measure.deviation.image_moments`)
+    and their numerical error (:func:`~pmdsim.measure.deviation.moments_error`, the
+    ``*_err`` columns; NaN without ``dot_errors``, the images' numerical error).
 
     The background threshold is ``threshold_fraction`` x the image's maximum; centroid in
     camera px (col, row), sigmas in camera px, angle of the major axis from +col towards
@@ -391,6 +399,11 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
         peak = float(np.nanmax(img)) if np.isfinite(img).any() else float("nan")
         thr = threshold_fraction * peak if np.isfinite(peak) and peak > 0 else 0.0
         m = analysis.image_moments(img, thr)
+        errs = dict.fromkeys(analysis.MOMENT_ERRORS, float("nan"))
+        if dot_errors is not None and np.isfinite(peak):
+            e = np.asarray(dot_errors[q], np.float64)
+            at_peak = e[np.unravel_index(np.nanargmax(img), img.shape)]
+            errs = analysis.moments_error(img, e, thr, threshold_fraction * float(at_peak))
         rows.append({
             "variant": variant, "dot": q, "dot_u_px": float(dot.u), "dot_v_px": float(dot.v),
             "dot_size_px": float(dot.size),
@@ -398,35 +411,13 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
             "sigma_major_px": m.sigma_major, "sigma_minor_px": m.sigma_minor,
             "elongation": m.elongation, "angle_deg": float(np.degrees(m.angle)),
             "peak": peak, "total": m.total, "threshold": thr,
+            "centroid_col_err": errs["centroid_col"], "centroid_row_err": errs["centroid_row"],
+            "sigma_major_px_err": errs["sigma_major"], "sigma_minor_px_err": errs["sigma_minor"],
+            "elongation_err": errs["elongation"],
+            "angle_deg_err": float(np.degrees(errs["angle"])),
         })
     return rows
 
 
-def decode_specular_reference(cfg, sim, geometry, progress=None):
-    """Render, capture (with ``[sensor]``: its own noise stream 1) and decode the fringes of
-    the ideal specular reference of ``sim`` (mirror BRDF, one ray per pixel, the same camera,
-    surface and monitor model). Returns ``(decoded, distance_mm)``: the decoded directions
-    (:func:`decode_fringes`) and the surface-to-monitor distance
-    (:func:`surface_to_monitor_mm`)."""
-    from dataclasses import replace
-
-    from ..render import Simulation
-    from ..scene.sensor import Sensor, capture_dn
-
-    fr_cfg = cfg.patterns.fringes
-    ref_sim = Simulation(sim.scene.specular(), sim.tile_rows, sim.scheduler, sim.num_workers)
-    fr = ref_sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
-                                progress=progress)
-    sensor = Sensor.from_config(cfg.sensor)
-    if sensor.enabled:
-        fr = replace(fr, images=capture_dn(sensor, fr.images, 1))
-    decoded = decode_fringes(fr, cfg.monitor.resolution, cfg.decode,
-                             sensor.saturation_dn if sensor.enabled else None,
-                             keep_amplitude=False)
-    del fr
-    return decoded, surface_to_monitor_mm(sim, geometry)
-
-
 __all__ = ["DirectionChain", "ChainResult", "decode_problem", "decode_fringes", "compare",
-           "decode_specular_reference",
            "surface_to_monitor_mm", "SlopeGeometry", "slope_deviation_urad", "statistics", "dot_table", "DOT_COLUMNS", "QUANTITIES", "STATISTICS", "DOT_THRESHOLD_FRACTION"]

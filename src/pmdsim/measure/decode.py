@@ -81,13 +81,11 @@ import numpy as np
 
 from ..kernels import decode as _k
 from .decode_plan import (
-    METHODS, _Plan, _check_frames, _check_out_dtype, _check_positive, _check_shifts,
-    _check_thresholds, _check_widths, _plan, unambiguous_range_px,
+    _Plan, _check_frames, _check_out_dtype, _check_positive, _check_shifts,
+    _check_thresholds, _check_widths, _plan,
 )
-from .images import load_image_stack  # noqa: F401  (pmdsim.decode.load_image_stack)
 
 __all__ = [
-    "METHODS",
     "DecodeFlag",
     "DecodeResult",
     "PhaseShiftResult",
@@ -96,7 +94,6 @@ __all__ = [
     "monitor_px_to_mm",
     "phase_shift",
     "phase_to_monitor_px",
-    "unambiguous_range_px",
     "unwrap_phase",
 ]
 

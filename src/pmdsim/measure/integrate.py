@@ -41,10 +41,8 @@ import numpy as np
 import scipy.fft
 
 from ..quantiles import percentile
-# the solvers moved to poisson; _OPERATORS and the DCT helpers are re-exported for the tests
-from .poisson import (  # noqa: F401
-    _OPERATORS, _dct_eigenvalues, _dct_poisson, _neumann_tridiagonal_solve,
-    _southwell_sparse, clear_operator_cache,
+from .poisson import (
+    _dct_poisson, _southwell_sparse,
 )
 
 __all__ = [
@@ -60,7 +58,6 @@ __all__ = [
     "height_stats",
     "HeightStats",
     "TERM_LEVELS",
-    "clear_operator_cache",
 ]
 
 

@@ -81,12 +81,3 @@ def exceeds(value: float | None, error: float | None, share: float = 0.1) -> boo
     if value is None or error is None or not (math.isfinite(value) and math.isfinite(error)):
         return False
     return error > share * abs(value)
-
-
-def format_pm(value: float | None, error: float | None, fmt: str = ".3g") -> str:
-    """``"value ± error"`` (the value alone without an error)."""
-    if value is None or not math.isfinite(value):
-        return "-"
-    if error is None or not math.isfinite(error):
-        return format(value, fmt)
-    return f"{format(value, fmt)} ± {error:.2g}"

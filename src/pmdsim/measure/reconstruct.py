@@ -32,19 +32,25 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..kernels.reconstruct import bisector_slopes, bisector_slopes_planar, support_cells
-from ..kernels.surface import bspline_eval_pair
-from .integrate import _integrate, _lstsq
+from ..kernels.reconstruct import bisector_slopes, bisector_slopes_planar
+from .integrate import _integrate
+from .interpolate import (
+    EXCLUSION_REASONS,
+    NODE_OUTSIDE_APERTURE,
+    NODE_RIM_FIT,
+    maps_at,
+    spline_maps,
+)
 
 __all__ = [
-    "Reconstruction",
-    "reconstruct",
-    "bisector_normals",
-    "slopes_in_frame",
-    "prior_frame",
     "PriorFrame",
-    "slope_deviation_3d",
+    "Reconstruction",
     "SurfaceErrors",
+    "bisector_normals",
+    "prior_frame",
+    "reconstruct",
+    "slope_deviation_3d",
+    "slopes_in_frame",
     "surface_errors",
 ]
 
@@ -114,7 +120,10 @@ def slopes_in_frame(normals, rotation):
 class Reconstruction:
     """Result of :func:`reconstruct`, on the grid ``x_mm`` (W,) x ``y_mm`` (H,) of the
     prior's local frame. ``height_mm`` and slopes NaN outside ``mask``; ``nominal_mm`` the
-    prior's sag on the grid; ``history`` max |change of z| (mm) per iteration."""
+    prior's sag on the grid; ``history`` max |change of z| (mm) per iteration;
+    ``node_status`` (H, W) int8: how each node was served or why it is not reported
+    (:mod:`pmdsim.measure.interpolate`: ``NODE_SPLINE``, ``NODE_RIM_FIT``, the keys of
+    ``EXCLUSION_REASONS``; ``NODE_OUTSIDE_APERTURE`` off the nominal aperture)."""
 
     x_mm: np.ndarray
     y_mm: np.ndarray
@@ -126,76 +135,24 @@ class Reconstruction:
     iterations: int
     history: tuple
     converged: bool
+    node_status: np.ndarray | None = None
 
     @property
     def spacing(self):
         return (float(self.x_mm[1] - self.x_mm[0]), float(self.y_mm[1] - self.y_mm[0]))
 
+    @property
+    def excluded(self) -> dict:
+        """``{reason: count}`` of the aperture's nodes that are not reported
+        (:data:`EXCLUSION_REASONS`; every reason listed, zeros included)."""
+        st = self.node_status
+        return {name: (0 if st is None else int(np.count_nonzero(st == code)))
+                for code, (name, _) in EXCLUSION_REASONS.items()}
 
-def _smooth_fill(maps, valid, near, degree=6, max_samples=50_000):
-    """The maps (each (H, W)) with invalid pixels filled smoothly: a 2-D polynomial fitted to
-    the valid pixels plus the nearest valid pixel's residual (continuous at the boundary, so
-    the spline's prefilter does not ring into the valid region). ``near``: the (rows, cols)
-    of the nearest valid pixel of each invalid one, in ``np.nonzero(~valid)`` order."""
-    h, w = valid.shape
-    rows, cols = np.nonzero(valid)
-    step = max(1, len(rows) // max_samples)
-    rs, cs = rows[::step], cols[::step]
-
-    terms = [(i, j) for i in range(degree + 1) for j in range(degree + 1 - i)]
-
-    def vander(r, c):
-        vx = np.polynomial.legendre.legvander(2.0 * c / max(w - 1, 1) - 1.0, degree)
-        vy = np.polynomial.legendre.legvander(2.0 * r / max(h - 1, 1) - 1.0, degree)
-        return vx, vy
-
-    vx, vy = vander(rs, cs)
-    a_mat = np.stack([vx[:, i] * vy[:, j] for i, j in terms], axis=1)
-    coefs = _lstsq(a_mat, np.stack([a[rs, cs] for a in maps], axis=1))
-    gx, _ = vander(np.zeros(w), np.arange(w))
-    _, gy = vander(np.arange(h), np.zeros(h))
-    bad = ~valid
-    out = []
-    for a, coef in zip(maps, coefs.T):
-        cmat = np.zeros((degree + 1, degree + 1))
-        for (i, j), c in zip(terms, coef):
-            cmat[i, j] = c
-        # the fit on the whole grid, separably: fit[r, c] = sum_ij C_ij Px_i(c) Py_j(r)
-        fit = gy @ cmat.T @ gx.T
-        f = a.copy()
-        f[bad] = fit[bad] + (a[near] - fit[near])
-        out.append(f)
-    return out
-
-
-def _nearest_valid(valid):
-    """(rows, cols) of the nearest valid pixel (Euclidean) of each invalid one, in
-    ``np.nonzero(~valid)`` order. The nearest valid pixel always has an invalid 4-neighbour
-    (a step from any other valid pixel towards the invalid one comes closer), so a k-d tree
-    of those edge pixels answers when few pixels are invalid; the exact distance transform
-    of the whole image otherwise."""
-    bad = ~valid
-    if bad.sum() > 0.05 * bad.size:
-        idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-        return tuple(i[bad] for i in idx)
-    from scipy.spatial import cKDTree
-
-    edge = np.argwhere(valid & ~ndimage.binary_erosion(valid, border_value=1))
-    k = cKDTree(edge).query(np.argwhere(bad))[1]
-    return edge[k, 0], edge[k, 1]
-
-
-def _spline_maps(u, v, valid):
-    """Cubic-spline coefficients of u and v with the invalid pixels filled smoothly."""
-    if not valid.any():
-        raise ValueError("no valid decoded pixel: nothing to reconstruct")
-    if valid.all():
-        uf, vf = u, v
-    else:
-        uf, vf = _smooth_fill((u, v), valid, _nearest_valid(valid))
-    cu = np.pad(ndimage.spline_filter(uf, order=3, mode="mirror"), 2, mode="reflect")
-    cv = np.pad(ndimage.spline_filter(vf, order=3, mode="mirror"), 2, mode="reflect")
-    return cu, cv
+    @property
+    def rim_fitted(self) -> int:
+        """Reported nodes served by the rim fit (:mod:`pmdsim.measure.interpolate`)."""
+        return 0 if self.node_status is None else int(np.count_nonzero(self.node_status == NODE_RIM_FIT))
 
 
 def _anchor(z, nominal, ok, anchor_idx, parts=None):
@@ -279,7 +236,7 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     x, y = np.meshgrid(xs, ys)
     nominal = np.asarray(pf.sag(x, y), np.float64)
     mask = np.asarray(pf.in_aperture(x, y), bool) & np.isfinite(nominal)
-    cu, cv = _spline_maps(u, v, ok_pix)
+    cu, cv = spline_maps(u, v, ok_pix)
     # homogeneous viewpoint (a telecentric camera's is at infinity), else the centre
     cam_pos = np.asarray(getattr(camera, "viewpoint", camera.position), np.float64)
 
@@ -307,23 +264,30 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     planar = planar_monitor(monitor)
     # the aperture's nodes: their (x, y) part of the world point is fixed, z moves
     base = pf.centre + x[mask][:, None] * rot[:, 0] + y[mask][:, None] * rot[:, 1]
-    ok_m = np.ones(len(base), bool)  # measured, among the aperture's nodes
+    status = np.empty(len(base), np.int8)  # how each aperture node is served (node_status)
+    left_out = np.zeros(len(base), bool)  # nodes left out so far
+    first_reason = np.empty_like(status)  # why (where left_out)
     ok_pix = np.ascontiguousarray(ok_pix)
     parts = None  # (node mask, its connected parts)
     for it in range(1, max_iter + 1):
         s = base + z[mask][:, None] * rot[:, 2]
         pix = camera.project(s)
         col, row = np.ascontiguousarray(pix[..., 0]), np.ascontiguousarray(pix[..., 1])
-        # nodes whose fractional pixel lies in a cell of 2 x 2 valid pixels (the invalid
-        # pixels around were filled smoothly, so the spline's wider support may use them)
-        support_cells(ok_pix, col, row, ok_m)
+        # the decoded maps at the nodes' pixels: by the spline, by the rim fit, or not
+        # (status says which, and why)
+        mu, mv = maps_at(u, v, ok_pix, cu, cv, col, row, status)
+        # a node left out once stays out, for the reason it was: one whose pixel sits at a
+        # threshold would otherwise come and go with the height, and the loop never settle
+        status[left_out] = first_reason[left_out]
+        new = (status > NODE_RIM_FIT) & ~left_out
+        first_reason[new] = status[new]
+        left_out |= new
+        ok_m = status <= NODE_RIM_FIT
         node_ok = np.zeros(mask.shape, bool)
         node_ok[mask] = ok_m
         k = int(ok_m.sum())
-        mu = np.empty(k)
-        mv = np.empty(k)
-        # = ndimage.map_coordinates(..., order=3, mode="mirror") of u and v, in one pass
-        bspline_eval_pair(cu, cv, np.ascontiguousarray(row[ok_m]), np.ascontiguousarray(col[ok_m]), mu, mv)
+        mu = np.ascontiguousarray(mu[ok_m])
+        mv = np.ascontiguousarray(mv[ok_m])
         a = np.empty(k)
         b = np.empty(k)
         # = slopes_in_frame(bisector_normals(s, camera, monitor.pixel_to_world(mu, mv)), rotation)
@@ -354,8 +318,10 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         sx[~node_ok] = np.nan
         sy[~node_ok] = np.nan
     height = np.where(node_ok, z, np.nan)
+    node_status = np.full(mask.shape, NODE_OUTSIDE_APERTURE, np.int8)
+    node_status[mask] = status
     return Reconstruction(xs, ys, node_ok, height, sx, sy, np.where(mask, nominal, np.nan), it,
-                          tuple(history), converged)
+                          tuple(history), converged, node_status)
 
 
 def planar_monitor(monitor):

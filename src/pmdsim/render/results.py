@@ -1,6 +1,5 @@
 """What a render returns: :class:`FringeResult` (with the numerical error of its sums) and
-:class:`Geometry`, and the phase error of sums (moved from :mod:`pmdsim.render.simulation`,
-which re-exports them)."""
+:class:`Geometry`, and the phase error of sums and the observed convergence of a rule."""
 
 from __future__ import annotations
 
@@ -59,7 +58,7 @@ def _phase_error_compiled(sums, sums_err, kind, convergence):
     """:func:`phase_error` of whole-camera complex128 arrays: the kernel over 16 pixel
     blocks on two threads, each block taking NumPy's ``|S|`` (and ``|dS|``) of its own
     pixels (no whole-camera temporaries)."""
-    from ..kernels.synth import phase_error_embedded_rows, phase_error_rows
+    from ..kernels.fringe_finish import phase_error_embedded_rows, phase_error_rows
 
     out = np.empty(sums.shape)
     if kind == "replicates":
@@ -165,10 +164,16 @@ def convergence_of_ratios(ratio: np.ndarray, a1: np.ndarray, exponent: float) ->
     return out
 
 
+#: Pixels with more of their lobe's weight off the monitor are left out of a target's P95
+#: (the chain never counts them valid: ``diagnostics.max_off_monitor_fraction``' default).
+MAX_OFF = 0.05
+
+
 def worst_phase_error(fr, min_modulation: float = 0.05) -> float | None:
     """The largest over fringes of the P95 over pixels of the stated phase error (rad),
     over the pixels whose fringe keeps a modulation ``|S| / f_hit >= min_modulation``
-    (washed-out fringes cannot be decoded at any order); None without an estimate."""
+    (washed-out fringes cannot be decoded at any order) and whose lobe has at most
+    :data:`MAX_OFF` of its weight off the monitor; None without an estimate."""
     pe = fr.phase_error()
     if pe is None:
         return None
@@ -180,6 +185,9 @@ def worst_phase_error(fr, min_modulation: float = 0.05) -> float | None:
                                     np.moveaxis(fr.images.astype(np.float64), 2, 0), axes=1))
             k = len(fr.shifts)
             mod = 2 * z / k / (np.sum(fr.images.astype(np.float64), axis=2) / k)
+    with np.errstate(divide="ignore", invalid="ignore"):  # never valid in the chain
+        off = 1.0 - np.abs(fr.f_hit) / np.abs(fr.f_total)
+    mod = np.where(off > MAX_OFF, 0.0, mod)
     worst = None
     for di in range(pe.shape[0]):
         for wi in range(pe.shape[1]):
@@ -235,7 +243,7 @@ class FringeResult:
         without the second embedded rule.
     stated_phase_error : (n_directions, n_widths, H, W) float64 or None
         The phase error (rad) where the render states it directly: a non-linear display on
-        a nearest-pixel monitor (:mod:`pmdsim.render.control`: the error of the shifted
+        a nearest-pixel monitor (:mod:`pmdsim.render.control_variate`: the error of the shifted
         images' fringe sum ``sum_k I_k exp(-i delta_k)``), else None.
     """
 

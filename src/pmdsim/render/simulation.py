@@ -31,29 +31,48 @@ from __future__ import annotations
 
 import threading
 import uuid
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Callable, Sequence
 
 import numpy as np
 
 from ..kernels import bundle as kb
-from . import control
+from . import control_variate as control
+from ..config import SimulationSections
+from ..config.monitor import GAMMA_HARMONICS
 from ..patterns import DIRECTIONS, Dot, phase_shifts
 from ..scene import Scene
 from ..scene.brdf_variation import with_params
 from ..scene.quadrature import convergence_exponent
-from .results import (EMBEDDED_FLOOR, FringeResult, Geometry, convergence_factor,  # noqa: F401
-                      convergence_of_ratios, phase_error, value_error, worst_phase_error)
-from .rows import (FringeFinish, TileErrors, convergence_stride, fringe_errors,  # noqa: F401
-                   fuses, keep_grid, local_scheduler, reduce_subrays, render_rule_fused,
-                   scene_geometry_rows, vision_geometry_rows)
+from .results import (FringeResult, Geometry, convergence_of_ratios, value_error, worst_phase_error)
+from .fringe_finish import FringeFinish, TileErrors, fringe_errors
+from .convergence_grid import convergence_stride, keep_grid
+from .tile_tasks import fuses, local_scheduler, render_rule_fused
+from .geometry_rows import reduce_subrays, scene_geometry_rows, vision_geometry_rows
 from ..trace import bundle_geometry, cone_basis, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
 
 
-#: Harmonics used for analytic fringes on a continuous monitor with gamma != 1.
-GAMMA_HARMONICS = 16
+def target_not_met(target: float, worst: float | None, n: int, max_rays: int) -> None:
+    """Warn that ``sampling.target_error_mrad`` was not met (``UserWarning``: the run
+    reports it as a note, without a source path)."""
+    import warnings
+
+    stated = "unknown" if worst is None else f"{worst * 1e3:.3g} mrad"
+    warnings.warn(
+        f"sampling.target_error_mrad = {target * 1e3:g} not met: the stated phase error is "
+        f"{stated} (P95, worst fringe) with the rule of n_rays = {n}, the largest that "
+        f"sampling.max_rays = {max_rays} allows; raise sampling.max_rays (or accept the "
+        "error)", TargetNotMet, stacklevel=3)
+
+
+class TargetNotMet(UserWarning):
+    """The target of the stated phase error was not met within ``max_rays``."""
+
+
+class RuleTooSmall(UserWarning):
+    """A rule too small to state its numerical error (its phase is stated as unknown)."""
 
 
 class Simulation:
@@ -81,9 +100,28 @@ class Simulation:
         self.tile_rows = tile_rows
         self.scheduler = scheduler
         self.num_workers = num_workers
+        #: rays the bundle kernels traced, one entry per kernel call (appended from the
+        #: tile threads; shared with the simulations of other rules this one renders through,
+        #: :meth:`with_sampling`): :attr:`rays_traced`
+        self._traced: list[int] = []
+
+    @property
+    def rays_traced(self) -> int:
+        """Every scattered ray the bundle kernels traced for this simulation's renders
+        (each rule, pilot and error pass; a mirror reference one per vision ray)."""
+        return int(sum(self._traced))
+
+    def with_sampling(self, sampling) -> "Simulation":
+        """The same simulation with another sample set, counting its rays with this one's."""
+        sim = Simulation(self.scene.replace(sampling=sampling), self.tile_rows, self.scheduler,
+                         self.num_workers)
+        sim._traced = self._traced
+        return sim
 
     @classmethod
-    def from_config(cls, cfg) -> "Simulation":
+    def from_config(cls, cfg: SimulationSections) -> "Simulation":
+        """The simulation of the scene's sections and ``compute`` (a
+        :class:`~pmdsim.config.RunConfig` has them)."""
         return cls(Scene.from_config(cfg), cfg.compute.tile_rows, cfg.compute.scheduler,
                    cfg.compute.num_workers)
 
@@ -148,7 +186,7 @@ class Simulation:
         pass; mode ``rule``, whose embedded passes only give the error), or None (the mean
         of rqmc replicates; a specular peak's mirror pass added after the tiles): only then
         can a caller finish the sums inside that pass's tiles (``finish``,
-        :class:`~pmdsim.render.rows.FringeFinish`). Keep in step with :meth:`_render`."""
+        :class:`~pmdsim.render.fringe_finish.FringeFinish`). Keep in step with :meth:`_render`."""
         from .specular import specular_reflectance
 
         passes = self.plan(smooth)
@@ -222,7 +260,7 @@ class Simulation:
         in-process scheduler, each tile task calls ``fn(r0, r1, sums)`` (``sums`` the whole
         (H, W, ncols) array, rows ``r0:r1`` final) right after its kernel, while the rows
         are in cache (:meth:`result_pass`). With ``raw=False`` and pinhole rays the caller
-        reads only what ``fn`` (a :class:`~pmdsim.render.rows.FringeFinish`) keeps: the
+        reads only what ``fn`` (a :class:`~pmdsim.render.fringe_finish.FringeFinish`) keeps: the
         tiles' raw sums live in a buffer of the worker thread, and the result is an empty
         (H, W, 0) token that :meth:`FringeFinish.complete` sees as finished."""
         kernel = self._kernel(scene, mode, ncols, **patterns)
@@ -317,9 +355,11 @@ class Simulation:
         mc = scene.monitor.correction_params()
         extra = () if mc is None else (mc,)
         var = None if delta else scene.brdf_variation
+        per_row, traced = int(w_ray.size), self._traced
 
         def kernel(geo, rot, out=None):
             out = np.empty((geo.shape[0], ncols)) if out is None else out
+            traced.append(per_row * int(np.count_nonzero(geo[:, kb.G_VALID] > 0)))
             if orient and not (lobe or delta):  # phi = 0 on the lobe's long axis (the rule)
                 samp.orient(geo, brdf)
             if var is not None:  # spatially varying alpha/rho_s: per-pixel parameters
@@ -438,9 +478,10 @@ class Simulation:
         ``target_error_mrad``, ``achieved_p95_mrad``, ``n_rays`` used and ``target_met``.
         """
         samp = self.scene.sampling
+        if self.pilot_applies():
+            return self._fringes_pilot(widths, directions, shifts, progress)
         if samp.target_error is None or self.scene.brdf.is_delta:
             return self._fringes_once(widths, directions, shifts, progress)
-        import warnings
 
         sim = self
         while True:
@@ -450,19 +491,106 @@ class Simulation:
             met = worst is not None and worst <= samp.target_error
             if met or worst is None or 2 * n > samp.max_rays:
                 break
-            sim = Simulation(self.scene.replace(sampling=replace(sim.scene.sampling, n_rays=2 * n)),
-                             self.tile_rows, self.scheduler, self.num_workers)
+            sim = self.with_sampling(replace(sim.scene.sampling, n_rays=2 * n))
         info = dict(fr.sampling or {}, target_error_mrad=samp.target_error * 1e3,
                     achieved_p95_mrad=None if worst is None else worst * 1e3, n_rays=n,
                     target_met=bool(met))
         if not met:
-            warnings.warn(
-                f"sampling.target_error_mrad = {samp.target_error * 1e3:g}: the stated phase "
-                f"error is {'unknown' if worst is None else f'{worst * 1e3:.3g} mrad'} (P95, "
-                f"worst fringe) at n_rays = {n}, and doubling would pass sampling.max_rays = "
-                f"{samp.max_rays}: raise max_rays or accept the error", RuntimeWarning,
-                stacklevel=2)
+            target_not_met(samp.target_error, worst, n, samp.max_rays)
         return replace(fr, sampling=info)
+
+    def pilot_applies(self) -> bool:
+        """Whether the fringes' error comes from the pilot on a sparse grid
+        (:mod:`pmdsim.render.pilot`): mode ``rule`` with ``error_estimate`` on a smooth
+        integrand (a continuous monitor; the radiometric estimator on a Gaussian slope
+        density), a scattering BRDF."""
+        samp = self.scene.sampling
+        return (not self.scene.brdf.is_delta and samp.mode == "rule" and samp.error_estimate
+                and self.fringes_smooth())
+
+    def _fringes_pilot(self, widths, directions, shifts, progress) -> FringeResult:
+        """The fringes of mode ``rule`` on a smooth integrand: the order from the target by
+        the pilot (when the sampling has one), the camera rendered once with that rule, and
+        its phase error from the pilot (:mod:`pmdsim.render.pilot`)."""
+        import warnings
+
+        from . import pilot as pl
+
+        samp = self.scene.sampling
+        widths = tuple(float(w) for w in widths)
+        lay, ku, kv, ncols = self._harmonic_layout(widths, tuple(directions), shifts)
+        pilot = pl.Pilot(self, lay, kb.MODE_HARMONIC, ncols, {"k_u": ku, "k_v": kv}, self.shape)
+        tried, renders = None, 0
+        n = samp.n_rays
+        if samp.target_error is not None:
+            n, _, tried = pl.choose_order(pilot, samp.n_rays, samp.target_error, samp.max_rays)
+        while True:
+            main = self.with_sampling(replace(samp, n_rays=n, error_estimate=False,
+                                              target_error=None, max_rays=max(samp.max_rays, n)))
+            fr = main._fringes_once(widths, directions, shifts, progress)
+            renders += 1
+            with np.errstate(divide="ignore", invalid="ignore"):
+                off = 1.0 - np.abs(fr.f_hit) / np.abs(fr.f_total)
+            ok = np.isfinite(fr.f_total) & np.isfinite(fr.f_hit)
+            stated, n_local = pilot.statement(n, ok, fr.images, fr.shifts, off, fr.f_total)
+            if samp.target_error is None or 2 * n > samp.max_rays:
+                break
+            worst = worst_phase_error(replace(fr, stated_phase_error=stated))
+            if worst is not None and worst <= samp.target_error:
+                break
+            # the grid did not see what the whole camera states (its local pixels, the
+            # monitor's edge): the next order the pilot accepts from twice this one
+            n, _, more = pl.choose_order(pilot, 2 * n, samp.target_error, samp.max_rays)
+            tried += more
+        info = main.describe_sampling(True)
+        rule = main.scene.sampling.rule(self._lobe)
+        fine = pilot.sampling(pl.FINE_FACTOR * n).rule(self._lobe)
+        info.update(error="pilot", passes=1, pilot={
+            "grid_step_px": pilot.stride, "grid_pixels": int(pilot.rows.size * pilot.cols.size),
+            "finer_rule": fine.describe(), "safety": pl.SAFETY, "local_pixels": n_local,
+            "orders_tried": None if tried is None else [t[0] for t in tried],
+            "camera_renders": renders})
+        fr = replace(fr, stated_phase_error=stated, sums_err=None, convergence=None,
+                     sampling=info)
+        if rule.n < pl.MIN_NODES:
+            warnings.warn(
+                f"sampling.n_rays = {n}: a rule of {rule.n} nodes is too small to state its "
+                f"numerical error (it is stated as unknown, pi); raise sampling.n_rays to >= "
+                f"{pl.MIN_NODES} (or set sampling.target_error_mrad)", RuleTooSmall,
+                stacklevel=3)
+        if samp.target_error is not None:
+            worst = worst_phase_error(fr)
+            met = worst is not None and worst <= samp.target_error
+            info.update(target_error_mrad=samp.target_error * 1e3,
+                        achieved_p95_mrad=None if worst is None else worst * 1e3, n_rays=n,
+                        target_met=bool(met))
+            if not met:
+                target_not_met(samp.target_error, worst, n, samp.max_rays)
+        return fr
+
+    def _harmonic_layout(self, widths, directions, shifts):
+        """The continuous monitor's fringe columns (as :meth:`_fringes_once` renders them):
+        the pilot's :class:`~pmdsim.render.pilot.Layout`, ``k_u``, ``k_v`` and the columns."""
+        from .pilot import Layout
+
+        mon = self.scene.monitor
+        linear = mon.is_linear
+        harm = 1 if linear else GAMMA_HARMONICS
+        nw = len(widths)
+        n_u = sum(1 for d in directions if d == "x")
+        per_width = 2 * harm
+        base = {"x": kb.OUT_FIRST, "y": kb.OUT_FIRST + n_u * nw * per_width}
+        ks = {"x": [], "y": []}
+        for d in directions:
+            for w in widths:
+                ks[d] += [2 * np.pi * m / w for m in range(1, harm + 1)]
+        ku, kv = np.array(ks["x"]), np.array(ks["y"])
+        ncols = kb.OUT_FIRST + 2 * (ku.size + kv.size)
+        cols = np.array([base[d] + wi * per_width for d in directions for wi in range(nw)])
+        coef, g = (None, None) if linear else control.response_series(mon)
+        lay = Layout(cols, linear, phase_shifts(shifts), mon.black_level, mon.white_level,
+                     harm, coef, g)
+        return lay, ku, kv, ncols
 
     def _fringes_once(self, widths, directions, shifts, progress) -> FringeResult:
         widths = tuple(float(w) for w in widths)
@@ -474,7 +602,7 @@ class Simulation:
                 raise ValueError(f"directions: must be 'x' or 'y', got {d!r}")
         deltas = phase_shifts(shifts)
         mon = self.scene.monitor
-        black, white, gamma = mon.black_level, mon.white_level, mon.gamma
+        black, white = mon.black_level, mon.white_level
         nw, nd = len(widths), len(directions)
         coords = {"x": np.arange(mon.width, dtype=np.float64), "y": np.arange(mon.height, dtype=np.float64)}
         linear = mon.is_linear

@@ -50,13 +50,43 @@ def height_text(height_rows: list[dict], settings: dict | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+def areal_text(height_rows: list[dict]) -> str:
+    """Per height row, the ISO 25178 areal parameters of its height error (nm; Sdq urad)
+    and its band-limited RMS (form / mid-spatial / high, nm), value ± numerical error."""
+    rows = [r for r in height_rows if (r.get("areal") or {}).get("height_error_nm")]
+    if not rows:
+        return ""
+    cols = ("sq", "sa", "sz", "ssk", "sku", "sdq")
+    head = (f"{'part':11s} {'effect':40s} " + " ".join(f"{c.capitalize():>17s}" for c in cols)
+            + " " + " ".join(f"{b + ' RMS':>17s}" for b in ("form", "mid", "high")))
+    lines = [("height error after the removal: ISO 25178 areal parameters (nm; Sdq nm/mm = "
+              "urad) and band-limited RMS of its PSD (nm); value ± numerical error"),
+             head, "-" * len(head)]
+    for r in rows:
+        st = r["areal"]["height_error_nm"]
+        psd = st.get("psd") or {}
+        rms, err = psd.get("band_rms") or {}, psd.get("band_rms_err") or {}
+        bands = " ".join(f"{_pm({'v': rms.get(b), 'v_err': err.get(b)}, 'v'):>17s}"
+                         for b in ("form", "mid", "high"))
+        lines.append(f"{r['part']:11s} {r['label'][:40]:40s} "
+                     + " ".join(f"{_pm(st, c):>17s}" for c in cols) + " " + bands)
+    bands = (rows[0]["areal"]["height_error_nm"].get("psd") or {}).get("bands_per_mm")
+    if bands:
+        lines.append(f"bands: form below {bands['form'][1]:.3g} 1/mm (periods > "
+                     f"{1 / bands['form'][1]:.3g} mm), high above {bands['high'][0]:.3g} 1/mm "
+                     f"(periods < {1 / bands['high'][0]:.3g} mm); radial PSDs in budget.json, "
+                     "budget_psd.png")
+    return "\n".join(lines) + "\n"
+
+
 def budget_text(rows: list[dict], height_rows: list[dict] = (), settings: dict | None = None,
                 quantity: str = "urad") -> str:
     """Fixed-width tables: the height rows (:func:`height_text`) and one line per (effect,
     direction), RMS and P95 in every unit (slope: the 3-D conversion)."""
     head = (f"{'part':9s} {'effect':44s} {'dir':3s} {'RMS mrad':>17s} {'P95 mrad':>17s} "
             f"{'RMS px':>17s} {'P95 px':>17s} {'RMS um':>17s} {'RMS urad':>17s} {'P95 urad':>17s}")
-    lines = [height_text(list(height_rows), settings)] if height_rows else []
+    lines = ([height_text(list(height_rows), settings), areal_text(list(height_rows))]
+             if height_rows else [])
     lines += ["per fringe direction: decoded minus exact (system) or minus the mirror (surface); "
               "value ± numerical error",
               head, "-" * len(head)]

@@ -1,6 +1,6 @@
 """What the measurement-chain figures share: the colours of the pixel classes, the deviation
 quantities and their units, symmetric colour limits, the class overlay, map sizes and
-number formatting (:mod:`pmdsim.report.chain`)."""
+number formatting (:mod:`pmdsim.report.chain_maps`, :mod:`pmdsim.report.overview`, :mod:`pmdsim.report.dots`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from matplotlib.colors import to_rgba
 from matplotlib.patches import Patch
 
 from ..quantiles import percentile as quantile_of
-from .scene import camera_axes as _image_axes  # noqa: F401  (the maps' axes)
 from .scene import imshow
 
 

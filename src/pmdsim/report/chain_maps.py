@@ -10,10 +10,10 @@ from matplotlib.colors import ListedColormap
 from matplotlib.patches import Patch
 
 from ..quantiles import nanmedian
-from .scene import _figure, _save, imshow
+from .scene import _figure, _save, camera_axes, imshow
 from .chain_common import (
     CLASS_COLOURS, DEVIATIONS, DEV_CMAP, DIR_COLOURS, FLAG_COLOURS, VS_EXACT, VS_MIRROR,
-    _classes, _dirs, _g, _histogram, _image_axes, _label, _map_size, _off_monitor, _overlay,
+    _classes, _dirs, _g, _histogram, _label, _map_size, _off_monitor, _overlay,
     _pm, _stats, _with_error, coord_vs_exact, symmetric_limit, valid_only,
 )
 
@@ -34,7 +34,7 @@ def plot_phase(ds, path, name: str | None = None) -> Path:
             im = imshow(ax, ds["wrapped_phase"].sel(direction=d, width=wd).values, cmap="twilight",
                            vmin=-np.pi, vmax=np.pi, interpolation="nearest")
             ax.set_title(f"{name}: {d.upper()} wrapped phase\nwidth {wd:g} monitor px", fontsize=8)
-            _image_axes(ax)
+            camera_axes(ax)
         cb = fig.colorbar(im, ax=list(axes[i, :len(widths)]), shrink=0.8, pad=0.01)
         cb.set_label("wrapped phase (rad)", fontsize=8)
         cb.set_ticks([-np.pi, -np.pi / 2, 0, np.pi / 2, np.pi],
@@ -46,7 +46,7 @@ def plot_phase(ds, path, name: str | None = None) -> Path:
         ax.set_facecolor(CLASS_COLOURS["no valid reference"])
         ax.set_title(f"{name}: {d.upper()} absolute phase\nwidth {min(widths):g} px "
                      "(flagged pixels grey)", fontsize=8)
-        _image_axes(ax)
+        camera_axes(ax)
         cb = fig.colorbar(im, ax=ax, shrink=0.8, pad=0.01)
         cb.set_label("absolute phase (rad)", fontsize=8)
     return _save(fig, path)
@@ -90,7 +90,7 @@ def plot_deviation(ds, path, name: str | None = None) -> Path:
             st = _with_error(stats[d], key)
             ax.set_title(f"{name}: {d.upper()} {title}\nmean {_g(st.get('mean'))}, "
                          f"RMS {_pm(st, 'rms')}, P95 {_pm(st, 'p95')} {unit}", fontsize=8)
-            _image_axes(ax)
+            camera_axes(ax)
         cb = fig.colorbar(im, ax=list(axes[:, j]), orientation="horizontal", shrink=0.9,
                           extend="both", pad=0.02)
         cb.set_label(label + f"\nscale +-{lim:g} (P99.5 of |deviation|, valid pixels)"
@@ -138,7 +138,7 @@ def plot_modulation_ratio(ds, path, name: str | None = None) -> Path:
             below = int(np.count_nonzero(r < thr))
             ax.set_title(f"{name}: {d.upper()}, width {wd:g} monitor px\nmedian ratio {med:.3f}; "
                          f"{below:,} px < {thr:g}", fontsize=8)
-            _image_axes(ax)
+            camera_axes(ax)
     cb = fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, extend="max")
     cb.set_label("modulation / reference modulation (1)", fontsize=8)
     cb.ax.axhline(thr, color="#e377c2", linewidth=2)
@@ -179,7 +179,7 @@ def plot_masks(ds, path, name: str | None = None) -> Path:
                    for k, (c, lab) in enumerate(zip(cols, labels))]
         lax.legend(handles=handles, loc="upper center", ncol=2, fontsize=7, frameon=False)
         ax.set_title(f"{name}: {d.upper()} pixel classes", fontsize=9)
-        _image_axes(ax)
+        camera_axes(ax)
     return _save(fig, path)
 
 
@@ -201,7 +201,7 @@ def plot_decoded(ds, folder) -> list[Path]:
         im = imshow(ax, arr, cmap=cmap, interpolation="nearest", **kw)
         ax.set_facecolor(CLASS_COLOURS["no valid reference"])
         ax.set_title(title, fontsize=9)
-        _image_axes(ax)
+        camera_axes(ax)
         fig.colorbar(im, ax=ax, shrink=0.85).set_label(label, fontsize=8)
         paths.append(_save(fig, folder / fname))
 
@@ -222,7 +222,7 @@ def plot_decoded(ds, folder) -> list[Path]:
         im = imshow(ax, m, cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
         ax.set_title(f"{d} modulation B/A, width {wd:g} px\nmedian "
                      f"{_g(nanmedian(m) if np.isfinite(m).any() else np.nan)}", fontsize=8)
-        _image_axes(ax)
+        camera_axes(ax)
     fig.colorbar(im, ax=list(axes), shrink=0.85, extend="max").set_label("modulation B/A (1)",
                                                                        fontsize=8)
     paths.append(_save(fig, folder / "modulation.png"))
@@ -244,6 +244,6 @@ def plot_decoded(ds, folder) -> list[Path]:
                         for c, lab, n in zip(cols, labels, counts)],
                loc="upper center", ncol=3, fontsize=7, frameon=False)
     ax.set_title(f"{d} decode flags (a pixel with several flags shows the first)", fontsize=9)
-    _image_axes(ax)
+    camera_axes(ax)
     paths.append(_save(fig, folder / "flags.png"))
     return paths

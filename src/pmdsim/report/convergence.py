@@ -11,7 +11,8 @@ import numpy as np
 def plot_convergence(rows: list, path: str | Path, n_config: int | None = None,
                      theta_config: float | None = None, title: str = "") -> Path:
     """Figure of the study: per fringe direction (rows of panels), the RMS phase deviation
-    from the mirror, the RMS phase difference from the converged radiometric answer and the
+    from the mirror, the RMS phase difference from the reference (radiometric, largest N;
+    a dashed line at its own stated numerical error: differences below it are not resolved) and the
     median modulation versus N (log x), for the finest fringe width whose converged
     modulation is at least 0.1 (finer fringes are washed out by the lobe: their phase is
     noise at any N; the table has them all); one line per cone half angle (cone
@@ -45,7 +46,7 @@ def plot_convergence(rows: list, path: str | Path, n_config: int | None = None,
     cmap = plt.get_cmap("viridis")
     fig, axes = plt.subplots(len(directions), 3, figsize=(14, 3.6 * len(directions)), squeeze=False)
     cols = (("phase_rms_rad", "RMS phase deviation from mirror (rad)"),
-            ("phase_rms_vs_converged_rad", "RMS phase difference from converged (rad)"),
+            ("phase_rms_vs_reference_rad", "RMS phase difference from reference (rad)"),
             ("modulation_median", "median modulation"))
     for di, d in enumerate(directions):
         for ci, (key, label) in enumerate(cols):
@@ -63,8 +64,12 @@ def plot_convergence(rows: list, path: str | Path, n_config: int | None = None,
                                 label=f"config (N = {n_config}, {th:g} deg)")
             rr = sorted((r for r in sel if r["direction"] == d and r["estimator"] == "radiometric"),
                         key=lambda r: r["n_rays"])
-            if key == "phase_rms_vs_converged_rad":
-                rr = rr[:-1]  # the converged run itself (0)
+            if key == "phase_rms_vs_reference_rad":
+                ref_err = [r["reference_error_rms_rad"] for r in rr[-1:]]
+                rr = rr[:-1]  # the reference run itself (0)
+                if ref_err and np.isfinite(ref_err[0]) and ref_err[0] > 0:
+                    ax.axhline(ref_err[0], color="tab:red", ls="--", lw=1,
+                               label="reference's own error: below it, not resolved")
             if rr:
                 ax.plot([r["n_rays"] for r in rr], [r[key] for r in rr], "s-", ms=3, lw=2.5,
                         color="black", label="radiometric")
@@ -78,6 +83,9 @@ def plot_convergence(rows: list, path: str | Path, n_config: int | None = None,
             ax.set_title(f"{d} fringes, width {chosen[d]:g} monitor px", fontsize=10)
             ax.grid(True, which="both", alpha=0.3)
     axes[0, 0].legend(fontsize=7, loc="best")
+    for ax in axes[:, 1]:
+        if any(line.get_linestyle() == "--" for line in ax.get_lines()):
+            ax.legend(fontsize=7, loc="best")
     if title:
         fig.suptitle(title)
     fig.tight_layout()

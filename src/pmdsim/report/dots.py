@@ -9,8 +9,8 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Ellipse
 
-from .scene import _figure, _save, imshow
-from .chain_common import _image_axes, _nice, _wrap
+from .scene import _figure, _save, camera_axes, imshow
+from .chain_common import _nice, _wrap
 
 
 # ----------------------------------------------------------------------------- dots
@@ -163,7 +163,7 @@ def plot_dot_shapes(images: dict, tables: dict, path, centre_px=None,
         ax.set_xlim(-0.5, w - 0.5)
         ax.set_ylim(h - 0.5, -0.5)
         ax.set_aspect("equal")
-        _image_axes(ax)
+        camera_axes(ax)
         sm = [r["sigma_major_px"] for r in tables[n] if np.isfinite(r["sigma_major_px"])]
         em = [r["elongation"] for r in tables[n] if np.isfinite(r["elongation"])]
         ax.set_title(f"{n}: 2-sigma ellipses (true scale)\nsigma_major {min(sm):.2g}-"

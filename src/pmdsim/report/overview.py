@@ -9,10 +9,10 @@ import numpy as np
 from matplotlib.ticker import FixedLocator, MaxNLocator
 
 from ..quantiles import nanmedian
-from .scene import _axes_at, _figure, _fixed_figure, _save, imshow
+from .scene import _axes_at, _figure, _fixed_figure, _save, camera_axes, imshow
 from .chain_common import (
     CLASS_COLOURS, DEV_CMAP, DIR_COLOURS, OVERVIEW_DPI, VS_EXACT, VS_MIRROR, _dirs, _g,
-    _histogram, _image_axes, _label, _overlay, _pm, _stats, _with_error, _wrap, coord_vs_exact,
+    _histogram, _label, _overlay, _pm, _stats, _with_error, _wrap, coord_vs_exact,
     symmetric_limit, valid_only,
 )
 
@@ -56,7 +56,7 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
         last["f"] = (ax, im)
         ax.set_title(f"{name}: {d.upper()} fringes, width {fine:g} monitor px, shift 0",
                      fontsize=9)
-        _image_axes(ax)
+        camera_axes(ax)
         ax = panel(i, 1)
         r = ds["modulation_ratio"].sel(direction=d, width=fine).values
         im = imshow(ax, r, cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
@@ -64,7 +64,7 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
         ax.set_facecolor(CLASS_COLOURS["no valid reference"])
         ax.set_title(f"{name}: {d.upper()} modulation ratio (width {fine:g} px)\nmedian "
                      f"{_g(nanmedian(r) if np.isfinite(r).any() else np.nan)}", fontsize=9)
-        _image_axes(ax)
+        camera_axes(ax)
         cols = ((maps[i], "vs mirror (= exact point)" if same else VS_MIRROR, "coord_px", lim),
                 (slope[i], "3-D", "slope_urad", slim) if same else
                 (exact[i], VS_EXACT, "coord_vs_exact_px", lim))
@@ -82,7 +82,7 @@ def plot_overview(ds, path, name: str | None = None, description: str = "") -> P
             ax.set_title(f"{name}: {d.upper()} {'slope' if unit == 'urad' else 'coordinate'} deviation"
                          f" {against}\nRMS {_pm(s, 'rms')} {unit}{extra}\nP95 {_pm(s, 'p95')} {unit}",
                          fontsize=8)
-            _image_axes(ax)
+            camera_axes(ax)
     for col, (key, label, extend) in enumerate((
             ("f", "camera value", "neither"),
             ("m", "modulation / reference modulation (1)", "max"),
@@ -208,7 +208,7 @@ def plot_variant_deviation(datasets: dict, path, descriptions: dict | None = Non
             ax.set_title(f"{n}: {d.upper()} coordinate deviation {VS_MIRROR}\nRMS {_pm(s, 'rms')} px, "
                          f"P95 {_pm(s, 'p95')} px, valid {100 * (s['valid_fraction'] or 0):.1f} %",
                          fontsize=8)
-            _image_axes(ax)
+            camera_axes(ax)
         if descriptions.get(n):
             fig.axes[-len(dirs)].set_ylabel(_wrap(descriptions[n], 38), fontsize=7)
     cb = fig.colorbar(im, ax=map_axes, shrink=0.8, extend="both")

@@ -94,21 +94,6 @@ def camera_axes(ax, fontsize: float = 8) -> None:
     ax.yaxis.set_major_locator(MaxNLocator(4, integer=True))
 
 
-def zoom_to_data(ax, mask, pad: float = 0.04) -> None:
-    """Limit an image axes (drawn in pixel-index coordinates, row 0 at the top) to the
-    bounding box of ``mask`` (True = data) plus ``pad`` of its size, so that a part that
-    fills a corner of the camera fills the frame; nothing when ``mask`` is empty."""
-    mask = np.asarray(mask, bool)
-    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
-    if not rows.size:
-        return
-    h, w = mask.shape
-    pr = max(1.0, pad * (rows[-1] - rows[0] + 1))
-    pc = max(1.0, pad * (cols[-1] - cols[0] + 1))
-    ax.set_xlim(max(cols[0] - 0.5 - pc, -0.5), min(cols[-1] + 0.5 + pc, w - 0.5))
-    ax.set_ylim(min(rows[-1] + 0.5 + pr, h - 0.5), max(rows[0] - 0.5 - pr, -0.5))
-
-
 def _line(ax, a, b, **kw):
     a, b = np.asarray(a), np.asarray(b)
     ax.plot([a[0], b[0]], [a[1], b[1]], [a[2], b[2]], **kw)
@@ -251,7 +236,9 @@ def plot_setup(sim, path: str | Path, pixel: tuple[int, int] | None = None,
         Vision rays and their principal reflections are drawn for an
         ``n_vision x n_vision`` grid of pixels.
     """
-    import mpl_toolkits.mplot3d  # noqa: F401  (registers the 3-D projection)
+    import importlib
+
+    importlib.import_module("mpl_toolkits.mplot3d")  # registers the 3-D projection
 
     scene = sim.scene
     mon = scene.monitor

@@ -31,7 +31,15 @@ def summary_text(stats: dict, timings: dict | None = None) -> str:
             line += f"; numerical error from the embedded {smp.get('embedded_rule')}"
         elif smp.get("error") == "replicates":
             line += f"; numerical error from {smp.get('passes')} replicates"
+        elif smp.get("error") == "pilot":
+            pil = smp.get("pilot") or {}
+            line += (f"; numerical error measured against the {pil.get('finer_rule')} on "
+                     f"{pil.get('grid_pixels')} pilot pixels (every {pil.get('grid_step_px')}th "
+                     f"row and column) and {pil.get('local_pixels')} local ones, times "
+                     f"{pil.get('safety')}, plus float32 floors")
         line += ")"
+        if smp.get("rays_traced") is not None:
+            line += f"; {smp['rays_traced']:,} rays traced, pilot included"
         if smp.get("target_error_mrad") is not None:
             line += (f"; target {smp['target_error_mrad']:g} mrad "
                      f"{'met' if smp.get('target_met') else 'NOT met'} at n_rays = "
@@ -140,6 +148,7 @@ def diagnostics_text(name: str, d: dict) -> str:
                      f"min {_fmt(d['ess_min'], '.1f')} of {d['n_rays']} rays")
     if "phase_se_rad" in d:
         how = {"seeds": "spread over independent rotations of the sample set",
+               "pilot": "the render's statement: the rule against a 4 x finer one on a pilot grid",
                "rule": "the stated error of the rule rendered (embedded rules or replicates)",
                }.get(d["phase_se_method"], "N independent rays, an upper bound for the lattice")
         lines.append(f"phase standard error ({d['phase_se_method']} method: {how}), mrad, "
@@ -187,6 +196,20 @@ def value_pm(st: dict, stat: str) -> str:
     return f"{st[stat]:.3g} ± {e:.2g}"
 
 
+def excluded_text(rec: dict) -> str:
+    """One line: the aperture's nodes that are not reported, by reason, and those the rim
+    fit serves (statistics.json's ``excluded_nodes``, ``rim_fit_nodes``)."""
+    ex = rec["excluded_nodes"]
+    why = {"outside_camera_view": "outside the camera view",
+           "pixel_invalid": "on an invalid pixel out of the rim fit's reach",
+           "too_few_valid_pixels": "with too few valid pixels around"}
+    parts = [f"{ex[k]} {text}" for k, text in why.items() if ex.get(k)]
+    head = (f"not reported: {ex['total']} of the aperture's {ex['aperture_nodes']} nodes "
+            f"({100 * ex['fraction_of_aperture']:.2g} %)")
+    return (head + (": " + ", ".join(parts) if parts else "") +
+            f"; {rec.get('rim_fit_nodes', 0)} rim nodes served by the rim fit")
+
+
 def reconstruction_text(name: str, rec: dict) -> str:
     """The surface-error lines of summary.txt (reconstructed minus true surface)."""
     if "error" in rec:
@@ -201,6 +224,8 @@ def reconstruction_text(name: str, rec: dict) -> str:
         f"y RMS {value_pm(sy, 'rms_about_zero')} urad  PV {value_pm(sy, 'pv')} urad"
         + ("  (value ± the rendering's numerical error)" if "rms_err" in h else ""),
     ]
+    if "excluded_nodes" in rec:
+        lines.append("  " + excluded_text(rec))
     if rec.get("sphere"):
         sp = rec["sphere"]
         lines.append(f"  best-fit sphere: radius {sp['radius_measured_mm']:.8g} mm reconstructed, "
@@ -226,7 +251,29 @@ def reconstruction_text(name: str, rec: dict) -> str:
     if "reference_height_error_nm" in rec:
         r = rec["reference_height_error_nm"]
         lines.append(f"  specular reference (the chain's floor): height RMS {r['rms']:.3g} nm  PV {r['pv']:.3g} nm")
+    lines += areal_lines(rec.get("areal") or {})
     return "\n".join(lines) + "\n"
+
+
+def areal_lines(areal: dict) -> list[str]:
+    """summary.txt's lines of the areal parameters and band RMS of each error map
+    (``statistics.json`` -> ``reconstruction.areal``)."""
+    out = []
+    for key, what in (("height_error_nm", "height error"), ("slope_error_x_urad", "slope error x"),
+                      ("slope_error_y_urad", "slope error y")):
+        st = areal.get(key)
+        if not st or st.get("sq") is None:
+            continue
+        u = st["unit"]
+        psd = st.get("psd") or {}
+        rms, err = psd.get("band_rms") or {}, psd.get("band_rms_err") or {}
+        bands = ", ".join(f"{b} {value_pm({'v': v, 'v_err': err.get(b)}, 'v')}"
+                          for b, v in rms.items() if v is not None)
+        out.append(f"  ISO 25178, {what}: Sq {value_pm(st, 'sq')} {u}  Sa {value_pm(st, 'sa')} {u}  "
+                   f"Sz {value_pm(st, 'sz')} {u}  Ssk {value_pm(st, 'ssk')}  Sku {value_pm(st, 'sku')}  "
+                   f"Sdq {value_pm(st, 'sdq')} {st['sdq_unit']}; band RMS {bands} {u} "
+                   "(PSD: statistics.json, run.zarr, surface_psd.png)")
+    return out
 
 
 

@@ -158,7 +158,7 @@ def plot_topography(analysis, heights, dx: float, dy: float, path) -> Path:
     column, positive frequencies, Hann window) with the K-correlation fit, and the slope
     densities per axis with the equivalent Gaussian (Ward/Beckmann) lobes.
     ``analysis``: :class:`~pmdsim.brdf.topography.TopographyAnalysis`; lengths in mm."""
-    from ..brdf import topography as tp
+    from ..brdf.psd import KCorrelation, periodogram
 
     a = analysis
     h = np.asarray(heights, np.float64)
@@ -172,8 +172,8 @@ def plot_topography(analysis, heights, dx: float, dy: float, path) -> Path:
     ax0.set_xlabel("x (tangential), um")
     ax0.set_ylabel("y (radial), um")
     ax0.set_title(f"Sq {a.sq_um * 1e3:.3g} nm, Sdq {a.sdq:.3g}")
-    fx, fy, s = tp.periodogram(h, dx, dy, "hann")
-    kc = None if a.kc_note else tp.KCorrelation(
+    fx, fy, s = periodogram(h, dx, dy, "hann")
+    kc = None if a.kc_note else KCorrelation(
         a.kc_sigma_um * 1e-3, 2 * math.pi * a.kc_correlation_tangential_um * 1e-3,
         2 * math.pi * a.kc_correlation_radial_um * 1e-3, a.kc_exponent)
     ix, iy = nx // 2, ny // 2  # zero frequency after fftshift

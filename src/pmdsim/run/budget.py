@@ -2,8 +2,10 @@
 
 OUT/budget.csv (per effect and fringe direction), heights.csv (per effect: slope errors
 X/Y and height error after the removal, the calibration rows among them), zernike.csv (the
-Noll and Fringe tables of every height row, after removal), budget.json (all rows, the
-settings, the configuration) and budget.png; the folder is created atomically (:func:`pmdsim.run.files.atomic_run_dir`, marker ``pmdsim-budget.json``).
+Noll and Fringe tables of every height row, after removal), areal.csv (per height row and
+map: ISO 25178 areal parameters and band-limited RMS, :mod:`pmdsim.studies.budget_areal`),
+budget.json (all rows with their radial PSDs, the settings, the configuration), budget.png
+and budget_psd.png (the height rows' radial PSDs); the folder is created atomically (:func:`pmdsim.store.folder.atomic_run_dir`, marker ``pmdsim-budget.json``).
 """
 
 from __future__ import annotations
@@ -15,11 +17,13 @@ from pathlib import Path
 from typing import Callable
 
 from ..config import ConfigError, RunConfig, check_resources
-from ..scene import resolve_roi
-from ..studies.budget import HEIGHT_COLUMNS, TABLE_COLUMNS, budget
+from .simulate import resolve_roi
+from ..studies.budget_error import HEIGHT_COLUMNS, TABLE_COLUMNS
+from ..studies.budget import budget
 from ..studies.valid_pixels import check_rows
-from . import files as pio
 from .threads import single_blas
+from ..store.folder import atomic_run_dir, check_output_dir
+from ..store.tables import write_json
 
 MARKER = "pmdsim-budget.json"
 
@@ -88,11 +92,11 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     from ..config import physical_estimator
 
     final = Path(outdir).absolute()
-    cfg = resolve_roi(physical_estimator(cfg))  # the rendering integral unless cfg names one  # camera.roi = "auto": the window that sees the part
+    cfg = resolve_roi(physical_estimator(cfg))  # the rendering integral unless cfg names one; camera.roi = "auto": the window that sees the part
     check_resources(cfg)  # the budget's largest run, before anything is computed
-    pio.check_output_dir(final, overwrite, MARKER)
+    check_output_dir(final, overwrite, MARKER)
     from ..scene import Scene
-    from ..scene.sanity import check_physics
+    from ..studies.physics_checks import check_physics
 
     check_physics(cfg, Scene.from_config(cfg))  # a sensor/display that leaves no signal
     try:
@@ -107,13 +111,16 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     notes = check_rows(rows, cfg.diagnostics.allow_no_valid_pixels, "budget",
                        lambda r: f"{r['effect']} {r['direction']}")  # 0 valid: not a result
     notes += _check_height_rows(cfg, result.height_rows)
-    with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
+    with atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
         _csv(tmp / "budget.csv", rows, TABLE_COLUMNS)
         if result.height_rows:
             _csv(tmp / "heights.csv", result.height_rows, HEIGHT_COLUMNS)
             _csv(tmp / "zernike.csv", zernike_rows(result.height_rows),
                  ("effect", "part", "order", "index", "n", "m", "coefficient", "removed"))
-        pio.write_json(tmp / "budget.json", {
+            from ..studies.budget_areal import AREAL_COLUMNS, areal_rows
+
+            _csv(tmp / "areal.csv", areal_rows(result.height_rows), AREAL_COLUMNS)
+        write_json(tmp / "budget.json", {
             "name": cfg.name, "truth": truth, "settings": result.settings,
             "units": "every statistic X has its numerical error X_err (null: not stated)",
             "rows": rows, "height_rows": result.height_rows,
@@ -125,6 +132,11 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
             plot_budget(rows, tmp / "budget.png", title=f"{cfg.name}: error budget",
                         height_rows=result.height_rows, settings=result.settings)
             fig = final / "budget.png"
+            if result.height_rows:
+                from ..report.psd import plot_budget_psd
+
+                plot_budget_psd(result.height_rows, tmp / "budget_psd.png",
+                                title=f"{cfg.name}: error budget")
         (tmp / MARKER).write_text(json.dumps({"name": cfg.name, "kind": "budget"}) + "\n")
     return BudgetResult(rows, final, final / "budget.csv", fig, result.height_rows, result.settings,
                         tuple(notes))

@@ -5,18 +5,18 @@ for what is computed)."""
 from __future__ import annotations
 
 import csv
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
 from ..config import RunConfig
-from ..scene.sanity import check_physics
+from ..studies.physics_checks import check_physics
 from ..studies.valid_pixels import check_rows
 from ..studies.convergence import (ALL_ESTIMATORS, COLUMNS, DEFAULT_N, DEFAULT_THETA_DEG,
                                    convergence_study)
-from . import files as pio
 from .threads import single_blas
+from ..store.folder import atomic_run_dir, check_output_dir
+from ..store.tables import write_json
 
 #: Marker file of a finished convergence folder (an existing folder is replaced only if it
 #: carries it, or is empty).
@@ -40,6 +40,7 @@ class ConvergenceResult:
     warnings: list = field(default_factory=list)
     diagnostics: dict = field(default_factory=dict)
     notes: tuple = ()
+    reference: dict | None = None
 
 
 
@@ -69,13 +70,13 @@ def run_convergence(
     ``overwrite`` and only if it is a convergence folder or empty). ``figure``: draw
     ``convergence.png``; the other parameters are the study's."""
     final = Path(outdir).absolute()
-    pio.check_output_dir(final, overwrite, MARKER)
+    check_output_dir(final, overwrite, MARKER)
     notes = check_physics(cfg)  # a sensor/display/BRDF that leaves no signal, before the work
     study = convergence_study(cfg, n_values, theta_values, estimators, camera_size, widths,
                               directions, shifts, progress, diagnostics)
     notes += check_rows(study.rows, cfg.diagnostics.allow_no_valid_pixels, "converge",
                         _row_name)
-    with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
+    with atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
         with open(tmp / "convergence.csv", "w", newline="") as fh:
             wr = csv.DictWriter(fh, fieldnames=COLUMNS)
             wr.writeheader()
@@ -90,6 +91,7 @@ def run_convergence(
                              cfg.sampling.theta_max_deg,
                              title=f"{cfg.name}: convergence ({w} x {h} px camera)")
             fig_path = final / "convergence.png"
-        pio.write_json(tmp / MARKER, study.meta)
+        write_json(tmp / MARKER, study.meta)
     return ConvergenceResult(study.rows, final, final / "convergence.csv", fig_path,
-                             study.warnings, study.diagnostics, tuple(notes))
+                             study.warnings, study.diagnostics, tuple(notes),
+                             study.meta.get("reference"))

@@ -34,8 +34,12 @@ import numpy as np
 
 from ..config import InputError, MissingInputError
 from ..measure import decode as dec
+from ..measure.decode_plan import METHODS, unambiguous_range_px
+from ..measure.images import load_image_stack
 from ..quantiles import median
-from . import files as pio
+from ..store.folder import MANIFEST, atomic_run_dir, check_output_dir, is_run_dir
+from ..store.manifest import write_manifest
+from ..store.tables import write_json
 
 DATASET_NAME = "decode.zarr"
 FORMAT = "pmdsim-decode/1"
@@ -62,10 +66,10 @@ def setup_from_run(run: str | Path, direction: str) -> dict:
     fringes or without that direction.
     """
     from ..config import RunConfig
-    from .dataset import CONFIG_NAME, load_run, run_config
+    from ..store.schema import CONFIG_NAME, load_run, run_config
 
     run = Path(run)
-    if (run / CONFIG_NAME).is_file() and pio.is_run_dir(run):
+    if (run / CONFIG_NAME).is_file() and is_run_dir(run):
         cfg = RunConfig.model_validate_json((run / CONFIG_NAME).read_text())
     else:
         try:
@@ -113,10 +117,10 @@ def make_setup(*, widths=None, shifts=None, direction="x", extent_px=None, metho
         raise InputError(f"--extent-px must be positive monitor px, got {extent_px}")
     if pitch_mm is not None and not pitch_mm > 0:
         raise InputError(f"--pitch-mm must be positive, got {pitch_mm}")
-    if method not in dec.METHODS:
-        raise InputError(f"--method must be one of {', '.join(dec.METHODS)}, got {method!r}")
+    if method not in METHODS:
+        raise InputError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
     try:
-        reach = dec.unambiguous_range_px(widths, method)
+        reach = unambiguous_range_px(widths, method)
     except ValueError as err:
         raise InputError(f"--widths {list(widths)} do not fit --method {method}: {err}") from None
     if reach < extent_px:
@@ -186,7 +190,7 @@ def _compare_with_run(res: dec.DecodeResult, run: Path, variant: str | None,
                       direction: str) -> dict | None:
     """Decoded-from-files minus the run's own decoding (of its float images), if stored."""
     from ..measure.deviation import deviation_stats
-    from .dataset import load_run
+    from ..store.schema import load_run
 
     try:
         ds = load_run(run, variant=variant)
@@ -249,8 +253,8 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
 
     t0 = time.perf_counter()
     paths = [Path(p) for p in paths]
-    pio.check_output_dir(outdir, overwrite)
-    frames = dec.load_image_stack(paths)
+    check_output_dir(outdir, overwrite)
+    frames = load_image_stack(paths)
     n_w, k = len(setup.widths_px), setup.shifts
     if frames.shape[0] != n_w * k:
         raise InputError(
@@ -268,7 +272,7 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
     if from_run is not None:
         if variant is None:
             try:
-                names = json.loads((Path(from_run) / pio.MANIFEST).read_text()).get("variants", [])
+                names = json.loads((Path(from_run) / MANIFEST).read_text()).get("variants", [])
             except (OSError, ValueError):
                 names = []
             variant = _infer_variant(paths, Path(from_run), names) if names else None
@@ -312,17 +316,17 @@ def decode_files(paths, outdir, setup: DecodeSetup, *, min_relative_amplitude: f
                 "inputs": json.dumps([str(p) for p in paths]),
                 "statistics_json": json.dumps(stats), "pmdsim_version": __version__}
 
-    with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp:
+    with atomic_run_dir(outdir, overwrite=overwrite) as tmp:
         t = time.perf_counter()
         ds.to_zarr(tmp / DATASET_NAME, mode="w-", consolidated=False)
-        pio.write_json(tmp / "statistics.json", stats)
+        write_json(tmp / "statistics.json", stats)
         figure_paths = []
         if figures:
-            from ..report.chain import plot_decoded
+            from ..report.chain_maps import plot_decoded
 
             figure_paths = plot_decoded(ds, tmp / "figures")
         seconds = {"read": t_read, "decode": t_decode, "write": time.perf_counter() - t}
-        pio.write_manifest(tmp, {
+        write_manifest(tmp, {
             "format": FORMAT, "pmdsim_version": __version__,
             "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "dataset": DATASET_NAME, "statistics": "statistics.json",

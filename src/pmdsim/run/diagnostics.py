@@ -1,6 +1,6 @@
 """Run diagnostics as a run stores them: :func:`pmdsim.studies.diagnostics.diagnose` on the
 ``[diagnostics]`` grid of a run's configuration, reduced to a JSON summary, the
-:func:`~pmdsim.studies.diagnostics.check` warnings and the ``diag_*`` dataset variables."""
+:func:`~pmdsim.studies.diagnostic_warnings.check` warnings and the ``diag_*`` dataset variables."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 
 from ..config import RunConfig
 from ..render import Geometry, Simulation
-from .files import json_safe
+from ..store.tables import json_safe
 
 
 #: Quadrature points per grid pixel for the lobe-energy fraction of a run (``diagnose``'s
@@ -38,9 +38,9 @@ class _KnownGeometry:
 
 
 @dataclass(frozen=True, eq=False)
-class _Diagnosed:
+class RunDiagnostics:
     """The run diagnostics of one configuration: ``summary`` (statistics.json
-    ``"diagnostics"``), the :class:`~pmdsim.studies.diagnostics.DiagnosticWarning` s, and the
+    ``"diagnostics"``), the :class:`~pmdsim.studies.diagnostic_warnings.DiagnosticWarning` s, and the
     dataset ``coords`` and ``variables`` ``{name: (dims, data, attrs)}``."""
 
     summary: dict
@@ -51,10 +51,10 @@ class _Diagnosed:
 
 
 def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
-                 exclude: np.ndarray | None = None) -> _Diagnosed | None:
+                 exclude: np.ndarray | None = None) -> RunDiagnostics | None:
     """Energy fraction inside theta_max (cone estimators), effective sample size and the
     phase standard error (``[diagnostics] phase_method``) of every fringe (with fringes) on the coarse pixel
-    grid of ``[diagnostics]``, and the :func:`~pmdsim.studies.diagnostics.check` warnings for its
+    grid of ``[diagnostics]``, and the :func:`~pmdsim.studies.diagnostic_warnings.check` warnings for its
     bounds. None for the mirror (no lobe). ``exclude`` (H, W): pixels left out of the
     judgement (bundles off the monitor)."""
     if sim.scene.brdf.is_delta:
@@ -62,6 +62,7 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
     from dataclasses import asdict
 
     from ..studies import diagnostics as dg
+    from ..studies.diagnostic_warnings import check as warnings_of
 
     fr = cfg.patterns.fringes
     cone = cfg.sampling.estimator in dg.CONE_ESTIMATORS
@@ -84,7 +85,7 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
         diag = replace(diag, phase_se=None)
         for key in ("phase_se_method", "phase_se_rad", "modulation_median"):
             summary.pop(key, None)
-    warnings = tuple(dg.check(diag, bounds=cfg.diagnostics))
+    warnings = tuple(warnings_of(diag, bounds=cfg.diagnostics))
     grid = diag.grid
     summary["grid"] = {"columns": int(grid.cols.size), "rows": int(grid.rows.size)}
     if diag.energy is not None:
@@ -111,7 +112,7 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
         variables["diag_theta_needed_deg"] = (dims, e.theta_needed_deg, {
             "units": "deg", "description": f"smallest cone half angle about P holding "
             f"{100 * e.target:g} % of the lobe's reflected energy" + where})
-    if diag.rays is not None:
+    if diag.rays is not None and not diag.summary.get("deterministic_rule"):  # no noise
         variables["diag_effective_sample_size"] = (dims, diag.rays.ess, {
             "units": "rays", "description": "effective sample size (sum w)^2 / sum w^2 of the "
             f"weights of the monitor-hitting rays, of N = {diag.n_rays}" + where})
@@ -122,4 +123,4 @@ def diagnose_run(cfg: RunConfig, sim: Simulation, geometry: Geometry,
                if diag.phase_se_method == "seeds" else
                "delta method: std of the per-ray terms / (sqrt(N) |mean|), the error of N "
                "independent rays (an upper bound for the lattice sample sets)") + where})
-    return _Diagnosed(summary, warnings, coords, variables)
+    return RunDiagnostics(summary, warnings, coords, variables)

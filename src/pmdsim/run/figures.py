@@ -28,8 +28,8 @@ import sys
 import threading
 from pathlib import Path
 
-from .dataset import DATASET_NAME
-from .imports import imports_done
+from ..store.schema import DATASET_NAME, load_run
+from .preload import imports_done
 
 #: Every per-run figure: name -> (file, needs) with needs "fringes" (fringe images in the
 #: dataset), "chain" (the measurement chain's variables), "reconstruction" (slope and
@@ -45,8 +45,9 @@ FIGURES = {
     "modulation_ratio": ("modulation_ratio.png", "chain"),
     "masks": ("masks.png", "chain"),
     "surface_errors": ("surface_errors.png", "reconstruction"),
+    "surface_psd": ("surface_psd.png", "psd"),
 }
-SUMMARY_DECODED = ("setup", "overview", "surface_errors")
+SUMMARY_DECODED = ("setup", "overview", "surface_errors", "surface_psd")
 SUMMARY = ("setup", "fringes", "modulation")
 
 
@@ -57,6 +58,8 @@ def _has(ds, needs: str | None) -> bool:
         return "fringes" in ds
     if needs == "reconstruction":
         return "height_error_nm" in ds
+    if needs == "psd":
+        return "height_error_psd" in ds
     return "phase_deviation" in ds
 
 
@@ -85,8 +88,10 @@ def _simulation(ds):
 def draw_one(ds, name: str, folder: Path, run_name: str, description: str = "",
              sim=None) -> Path:
     """Draw figure ``name`` of dataset ``ds`` into ``folder``."""
-    from ..report import chain as plot_chain
     from ..report import scene as plot
+    from ..report.chain_maps import (plot_deviation, plot_histograms, plot_masks,
+                                     plot_modulation_ratio, plot_phase)
+    from ..report.overview import plot_overview
 
     path = Path(folder) / FIGURES[name][0]
     if name == "setup":
@@ -96,16 +101,21 @@ def draw_one(ds, name: str, folder: Path, run_name: str, description: str = "",
     if name == "modulation":
         return plot.plot_modulation(ds, path)
     if name == "overview":
-        return plot_chain.plot_overview(ds, path, run_name, description)
+        return plot_overview(ds, path, run_name, description)
     if name == "surface_errors":
         from ..report.reconstruction import plot_surface_errors
         from ..report.scene import _save
 
         return _save(plot_surface_errors(ds, run_name, description), path)
-    fn = {"phase": plot_chain.plot_phase, "deviation": plot_chain.plot_deviation,
-          "histograms": plot_chain.plot_histograms,
-          "modulation_ratio": plot_chain.plot_modulation_ratio,
-          "masks": plot_chain.plot_masks}[name]
+    if name == "surface_psd":
+        from ..report.psd import plot_surface_psd
+        from ..report.scene import _save
+
+        return _save(plot_surface_psd(ds, run_name, description), path)
+    fn = {"phase": plot_phase, "deviation": plot_deviation,
+          "histograms": plot_histograms,
+          "modulation_ratio": plot_modulation_ratio,
+          "masks": plot_masks}[name]
     return fn(ds, path, run_name)
 
 
@@ -132,16 +142,7 @@ def _draw_here(ds, names, folder: Path, run_name: str, description: str, sim,
 def _draw_from_folder(run_folder: str, name: str, folder: str, run_name: str,
                       description: str) -> str:
     """Worker process job: open the run's dataset and draw one figure."""
-    return str(draw_one(open_dataset(run_folder), name, Path(folder), run_name, description))
-
-
-def open_dataset(run_folder):
-    """The run's dataset, each variable read once on first use and kept (a figure reads
-    only what it draws)."""
-    import xarray as xr
-
-    return xr.open_dataset(Path(run_folder) / DATASET_NAME, engine="zarr", chunks=None,
-                           cache=True, consolidated=False)
+    return str(draw_one(load_run(Path(run_folder) / DATASET_NAME, dask=False), name, Path(folder), run_name, description))
 
 
 def default_workers(n_figures: int) -> int:
@@ -177,7 +178,7 @@ def draw_figures(run_folder: str | Path, names, run_name: str, description: str 
     workers = default_workers(len(names)) if workers is None else workers
     if workers <= 1 or len(names) <= 1:
         if ds is None:
-            ds = open_dataset(run_folder)
+            ds = load_run(Path(run_folder) / DATASET_NAME, dask=False)
         drawn = _draw_here(ds, names, folder, run_name, description, sim, failed)
         return [drawn[n] for n in names if n in drawn]
     import multiprocessing as mp
@@ -344,7 +345,7 @@ class Drawing:
 #: Rough drawing cost of each figure (CPU-s on the Fig. 3 run), to share them out.
 _COST = {"overview": 1.5, "deviation": 1.2, "phase": 1.2, "masks": 0.8, "histograms": 0.6,
          "modulation_ratio": 0.8, "fringes": 0.5, "modulation": 0.6, "setup": 0.5,
-         "surface_errors": 0.4}
+         "surface_errors": 0.4, "surface_psd": 0.5}
 
 
 def start_drawings(names, folder: Path, run_name: str, description: str, ds, sim,

@@ -1,9 +1,13 @@
 """``pmdsim fit``: fit a BRDF's alphas to fringe images and write the result to a folder.
 
+Images that a pmdsim run wrote (``RUN/fringes/*.tif``) carry that run's numerical error:
+the fit reads the run's sampling (:func:`images_sampling_of`) and carries the images' error
+to the parameters; integer images carry their quantisation (one count).
+
 OUT/fit.json (every number, ``success`` and ``reason``), fit.txt (the table), fit.png
 (modulation against width) and the marker ``pmdsim-fit.json``. The folder is checked before
 anything is read or computed (an existing file or folder is refused unless ``overwrite``
-and it is a fit folder) and created atomically (:func:`pmdsim.run.files.atomic_run_dir`).
+and it is a fit folder) and created atomically (:func:`pmdsim.store.folder.atomic_run_dir`).
 A fit that *failed* (:attr:`pmdsim.studies.fit.FitResult.success` false: not converged,
 an alpha at its bound, or a reduced chi-square above ``max_chi2``) is written all the same,
 marked failed in fit.json, fit.txt and the figure's title; the caller decides the exit code.
@@ -18,11 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from ..config import ConfigError, InputError, RunConfig
-from ..studies.fit import (MAX_CHI2, MAX_RAYS, FitResult, NoiseModel, check_fit_resources,
+from ..studies.fit import (MAX_CHI2, MAX_RAYS, FitResult, check_fit_resources,
                            fit_fringe_images, format_fit)
-from ..scene.sanity import check_physics
-from . import files as pio
+from ..studies.fit_stats import NoiseModel
+from ..studies.physics_checks import check_physics
 from .threads import single_blas
+from ..store.folder import atomic_run_dir, check_output_dir
+from ..store.tables import write_json
 
 MARKER = "pmdsim-fit.json"
 
@@ -44,7 +50,7 @@ def check_fit_output(outdir, overwrite: bool = False) -> Path:
     if final.exists() and not final.is_dir():
         raise FileExistsError(f"output {final} is an existing file, not a folder: name a new "
                               "folder for fit.json, fit.txt and fit.png")
-    pio.check_output_dir(final, overwrite, MARKER)
+    check_output_dir(final, overwrite, MARKER)
     return final
 
 
@@ -80,6 +86,34 @@ def load_fit_images(cfg: RunConfig, image_paths) -> tuple[np.ndarray, NoiseModel
     return images, noise, saturated
 
 
+def images_sampling_of(image_paths) -> dict | None:
+    """The ``[sampling]`` the images were rendered with when they are a pmdsim run's own
+    fringe images (``RUN/fringes/*`` or ``RUN/VARIANT/fringes/*`` next to the run's
+    ``config.json``; the order a target error chose, from ``statistics.json``), else None."""
+    from ..store.schema import CONFIG_NAME
+
+    parents = {Path(p).absolute().parent for p in image_paths}
+    if len(parents) != 1:
+        return None
+    folder = parents.pop()
+    run = folder.parent
+    if folder.name != "fringes" or not (run / CONFIG_NAME).is_file():
+        return None
+    try:
+        cfg = RunConfig.model_validate_json((run / CONFIG_NAME).read_text())
+    except ValueError:
+        return None
+    out = cfg.sampling.model_dump()
+    try:  # the order a target error chose
+        stats = json.loads((run / "statistics.json").read_text())
+        n = (stats.get("sampling") or {}).get("n_rays")
+        if n:
+            out.update(n_rays=int(n), target_error_mrad=None)
+    except (OSError, ValueError):
+        pass
+    return out
+
+
 @single_blas
 def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwrite: bool = False,
             max_chi2: float = MAX_CHI2, max_rays: int = MAX_RAYS) -> FitRun:
@@ -91,14 +125,18 @@ def run_fit(cfg: RunConfig, image_paths, outdir, *, figure: bool = True, overwri
     notes = check_physics(cfg)  # a sensor/display/BRDF that leaves no signal, named
     fr = cfg.patterns.fringes
     images, noise, saturated = load_fit_images(cfg, image_paths)
+    finite = images[np.isfinite(images)]
+    # integer files (TIFF/PNG counts) are quantised in steps of one count
+    step = 1.0 if noise is None and finite.size and np.all(finite == np.round(finite)) else None
     res = fit_fringe_images(cfg, images, fr.widths_px, fr.directions, noise, max_chi2=max_chi2,
-                            max_rays=max_rays)
+                            max_rays=max_rays, quantisation_step=step,
+                            images_sampling=images_sampling_of(image_paths))
     text = format_fit(res, cfg.anisotropy.frame)
     if saturated:
         text += f"\n{saturated} saturated values left out"
     fig = None
-    with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
-        pio.write_json(tmp / "fit.json", res.as_dict() | {
+    with atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
+        write_json(tmp / "fit.json", res.as_dict() | {
             "model_name": cfg.brdf.model, "frame": cfg.anisotropy.frame,
             "saturated_values": saturated})
         (tmp / "fit.txt").write_text(text + "\n")

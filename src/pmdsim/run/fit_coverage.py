@@ -12,8 +12,9 @@ from pathlib import Path
 
 from ..report.texture import plot_fit_coverage
 from ..studies.fit_coverage import fit_coverage
-from . import files as pio
 from .threads import single_blas
+from ..store.folder import atomic_run_dir, check_output_dir
+from ..store.tables import write_json
 
 MARKER = "pmdsim-fit-coverage.json"
 
@@ -22,11 +23,11 @@ MARKER = "pmdsim-fit-coverage.json"
 def run_fit_coverage(outdir, n: int = 20, seed: int = 0, overwrite: bool = False,
                      progress=None) -> tuple[list, Path]:
     final = Path(outdir).absolute()
-    pio.check_output_dir(final, overwrite, MARKER)
+    check_output_dir(final, overwrite, MARKER)
     results = fit_coverage(n, seed, progress)
     covered = sum(r.covered for r in results)
-    with pio.atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
-        pio.write_json(tmp / "coverage.json", {"n": n, "seed": seed, "covered_k2": covered,
+    with atomic_run_dir(final, overwrite, marker=MARKER) as tmp:
+        write_json(tmp / "coverage.json", {"n": n, "seed": seed, "covered_k2": covered,
                                                "cases": [r.as_dict() for r in results]})
         plot_fit_coverage(results, tmp / "coverage.png")
         (tmp / MARKER).write_text(json.dumps({"kind": "fit-coverage", "n": n}) + "\n")

@@ -8,6 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..measure.interpolate import (
+    EXCLUSION_REASONS,
+    NODE_OUTSIDE_APERTURE,
+    NODE_RIM_FIT,
+    NODE_SPLINE,
+)
 from ..measure.reconstruct import reconstruct, surface_errors
 
 
@@ -56,15 +62,91 @@ def from_chain(cfg, scene, measured, reference_rec=None):
     if rec is None:
         return {}, {"reconstruction": {"error": problem}}
     stats = statistics(cfg, rec, err, reference_rec)
+    moves = None
     ex, ey = ((dc.numerical or {}).get("coord_px") for dc in (dx, dy))
     if ex is not None and ey is not None:  # the render's numerical error, carried through
-        # from the reconstructed height: the moved coordinates' fixed point is next to it
-        _, moved, _ = reconstruct_coords(cfg, scene, u + np.nan_to_num(ex),
-                                         v + np.nan_to_num(ey), valid,
-                                         start=rec.height_mm, tables=False)
+        moved = moved_errors(cfg, scene, rec, u, v, ex, ey, valid)
         if moved is not None and moved.height_nm.shape == err.height_nm.shape:
             add_numerical_error(stats, err, moved)
-    return variables(rec, err, reference_rec), {"reconstruction": stats}
+            moves = {a: np.nan_to_num(getattr(moved, a) - getattr(err, a), nan=0.0)
+                     for a, _, _ in AREAL_MAPS}
+    avars, stats["areal"] = areal_of(rec, err, moves, reference_rec)
+    return {**variables(rec, err, reference_rec), **avars}, {"reconstruction": stats}
+
+
+#: The error maps that get areal parameters and PSDs: (SurfaceErrors attribute, dataset
+#: name, unit); ``statistics.json`` names them ``<name>_<unit>`` as the RMS/PV/P95.
+AREAL_MAPS = (("height_nm", "height_error", "nm"), ("slope_x_urad", "slope_error_x", "urad"),
+              ("slope_y_urad", "slope_error_y", "urad"))
+#: Coordinates of the PSD variables: 2-D spatial frequencies and the radial bins (1/mm).
+PSD_COORDS = ("psd_fx", "psd_fy", "psd_f")
+
+
+def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
+    """(dataset variables, statistics) of the areal parameters and PSDs of the surface
+    errors (:mod:`pmdsim.measure.areal`): per map its Sq ... Sdq, band RMS and radial PSD
+    (with their numerical errors from ``moves``, ``{attribute: (H, W)}``: each node's signed
+    change when the decoded coordinates move by their numerical error; its magnitude is the
+    node's error, the map of changes the PSDs' error spectrum), its 2-D and radial
+    PSD as variables; the reference's height error too (the chain's floor; exact, no
+    error). The bands are those of the height error's measured region, for every map."""
+    from ..measure import areal
+
+    dx, dy = rec.spacing
+    stats: dict = {"definitions": dict(areal.DEFINITIONS)}
+    out: dict = {}
+    valid = np.isfinite(err.height_nm)
+    if not valid.any():
+        return out, stats
+    bands = areal.default_bands(valid, dx, dy)
+    maps = [(getattr(err, a), name, unit, None if moves is None else moves[a])
+            for a, name, unit in AREAL_MAPS]
+    if reference_rec is not None and reference_rec[1].height_nm.shape == err.height_nm.shape:
+        maps.append((reference_rec[1].height_nm, "reference_height_error", "nm", None))
+    for z, name, unit, dz in maps:
+        # the bound for any signs of the node errors: the pilot's stated errors are an
+        # envelope (blocks of 8 x 8 pixels), not a smooth signed field, and the signed map's
+        # spectrum missed the repeated reconstruction's by 5x at high frequencies
+        # (tests/test_reconstruct.py)
+        st, p = areal.describe(z, dx, dy, unit, error=None if dz is None else np.abs(dz),
+                               bands=bands)
+        stats[f"{name}_{unit}"] = st
+        if p is None:
+            continue
+        if not out:
+            out["psd_fx"] = (("psd_fx",), p.fx, {"units": "1/mm", "description":
+                             "spatial frequency along the surface's local x (cycles per mm)"})
+            out["psd_fy"] = (("psd_fy",), p.fy, {"units": "1/mm", "description":
+                             "spatial frequency along the surface's local y (cycles per mm)"})
+            out["psd_f"] = (("psd_f",), p.frequency, {"units": "1/mm", "description":
+                            "radial spatial frequency: centre of each bin (width: psd_f[0])"})
+        what = f"{name.replace('_', ' ')} map"
+        out[f"{name}_psd"] = (("psd_f",), p.psd_radial, {
+            "units": f"{unit}^2 mm", "description": f"1-D radial PSD of the {what}: power of "
+            "each annulus of spatial frequency / bin width (pmdsim.measure.areal)"})
+        if name == "reference_height_error":
+            continue
+        out[f"{name}_psd_2d"] = (("psd_fy", "psd_fx"), p.psd_2d, {
+            "units": f"{unit}^2 mm^2", "description": f"2-D PSD of the {what}, tapered window "
+            "(pmdsim.measure.areal), centred on psd_fx, psd_fy"})
+        if p.psd_2d_err is not None:
+            out[f"{name}_psd_err"] = (("psd_f",), p.psd_radial_err, {
+                "units": f"{unit}^2 mm", "description": f"numerical error of {name}_psd"})
+            out[f"{name}_psd_2d_err"] = (("psd_fy", "psd_fx"), p.psd_2d_err, {
+                "units": f"{unit}^2 mm^2", "description": f"numerical error of {name}_psd_2d"})
+    return out, stats
+
+
+def moved_errors(cfg, scene, rec, u, v, ex, ey, valid):
+    """The :class:`~pmdsim.measure.reconstruct.SurfaceErrors` of the reconstruction ``rec``
+    of (``u``, ``v``) with every coordinate moved by its numerical error (``ex``, ``ey``):
+    the reconstruction repeated with the moved coordinates from the reconstructed height
+    (their fixed point is next to it). A linear carry through the reconstruction's
+    linearisation was measured 40 % cheaper but disagreed with this repetition at the rim
+    fit's nodes by more than the change itself (docs/performance.md)."""
+    _, err, _ = reconstruct_coords(cfg, scene, u + np.nan_to_num(ex), v + np.nan_to_num(ey),
+                                   valid, start=rec.height_mm, tables=False)
+    return err
 
 
 #: The statistics of each surface error that get a numerical error, with what they are of:
@@ -75,8 +157,8 @@ _ERROR_STATS = {"height_error_nm": "height_nm", "slope_error_x_urad": "slope_x_u
 
 def add_numerical_error(stats: dict, err, moved) -> None:
     """Add ``<stat>_err`` to the RMS / PV / P95 of each surface error in ``stats``: the
-    reconstruction is repeated with every decoded coordinate moved by its numerical error
-    (x and y together; the reconstruction is linear in small coordinate changes), each
+    reconstruction with every decoded coordinate moved by its numerical error (x and y
+    together; the reconstruction is linear in small coordinate changes: :func:`moved_errors`), each
     node's change is its error, carried to the statistics as the budget's height rows are
     (:func:`pmdsim.studies.budget_error.stat_error`: exact intervals for RMS and P95; the
     PV by the widest range the nodes' errors allow)."""
@@ -128,11 +210,31 @@ def variables(rec, err, reference_rec=None) -> dict:
         "slope_error_y_urad": (dims, err.slope_y_urad, {
             "units": "urad", "description": "reconstructed minus true dz/dy (local frame)"}),
     }
+    if rec.node_status is not None:
+        codes = {NODE_OUTSIDE_APERTURE: "outside_aperture", NODE_SPLINE: "reported_spline",
+                 NODE_RIM_FIT: "reported_rim_fit",
+                 **{c: f"excluded_{name}" for c, (name, _) in EXCLUSION_REASONS.items()}}
+        out["reconstruction_node_status"] = (dims, rec.node_status, {
+            "description": "how each grid node of the reconstruction is served, or why it is "
+                           "not reported (docs/reconstruction.md)",
+            "flag_values": list(codes), "flag_meanings": " ".join(codes.values())})
     if reference_rec is not None and reference_rec[0].height_mm.shape == rec.height_mm.shape:
         out["reference_height_error_nm"] = (dims, reference_rec[1].height_nm, {
             "units": "nm", "description": "the specular reference's reconstruction minus the true "
                                           f"height, {err.removed} removed (the chain's own floor)"})
     return out
+
+
+def excluded_nodes(rec) -> dict:
+    """The aperture's nodes that are not reported, by reason, and those the rim fit serves
+    (statistics.json's ``excluded_nodes`` and ``rim_fit_nodes``)."""
+    ex = rec.excluded
+    aperture = int(np.isfinite(rec.nominal_mm).sum())
+    total = sum(ex.values())
+    return {"excluded_nodes": {"total": total, "fraction_of_aperture": total / max(aperture, 1),
+                               "aperture_nodes": aperture, **ex},
+            "rim_fit_nodes": rec.rim_fitted,
+            "excluded_definitions": {name: text for name, text in EXCLUSION_REASONS.values()}}
 
 
 def statistics(cfg, rec, err, reference_rec=None) -> dict:
@@ -145,6 +247,7 @@ def statistics(cfg, rec, err, reference_rec=None) -> dict:
         "converged": rec.converged,
         "grid_points": int(rec.mask.sum()),
         "aperture_fraction": float(rec.mask.sum() / max(np.isfinite(rec.nominal_mm).sum(), 1)),
+        **excluded_nodes(rec),
         **err.stats,
     }
     if reference_rec is not None:

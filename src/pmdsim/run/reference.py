@@ -11,6 +11,7 @@ import numpy as np
 
 from ..config import ConfigError, RunConfig
 from ..measure import chain
+from ..studies.specular_reference import decode_specular_reference
 from ..render import Geometry, Simulation
 from .result import _Steps
 
@@ -51,7 +52,7 @@ def chain_mode(cfg: RunConfig, decode: bool | None) -> tuple[bool, list[str]]:
     enabled = cfg.decode.enabled if decode is None else decode
     if enabled is False:
         return False, []
-    problem = chain.decode_problem(cfg)
+    problem = chain.decode_problem(cfg.patterns.fringes, cfg.decode, cfg.monitor.resolution)
     if problem is None:
         return True, []
     if enabled is True:
@@ -81,8 +82,8 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     per pixel, the same camera, surface and monitor model)."""
     t = time.perf_counter()
     base = steps.done
-    decoded, distance = chain.decode_specular_reference(cfg, sim, geometry,
-                                                        progress=steps.tiles(n_tiles))
+    decoded, distance = decode_specular_reference(cfg, sim, geometry,
+                                                  progress=steps.tiles(n_tiles))
     steps.finish_render(base, n_tiles)
     notes = []
     for d, res in decoded.items():

@@ -46,7 +46,7 @@ class RunResult:
         The content of ``statistics.json``: the measurement chain's statistics (when
         decoded) and the run diagnostics under ``"diagnostics"`` (when computed);
         ``{variant: ...}`` for a run with variants; empty when there is neither.
-    warnings : tuple of pmdsim.studies.diagnostics.DiagnosticWarning
+    warnings : tuple of pmdsim.studies.diagnostic_warnings.DiagnosticWarning
         The diagnostics' warnings for this run (each names the setting that fixes it);
         empty for a run with variants (see each variant's).
     """

@@ -3,7 +3,7 @@
 :func:`run_simulation` builds the :class:`~pmdsim.render.Simulation` of a
 :class:`~pmdsim.config.RunConfig`, traces the vision rays (:meth:`Simulation.geometry`),
 renders every configured pattern (all fringe widths, directions and shifts in one pass;
-dots; monitor images) and writes, atomically (see :func:`pmdsim.run.files.atomic_run_dir`)::
+dots; monitor images) and writes, atomically (see :func:`pmdsim.store.folder.atomic_run_dir`)::
 
     <outdir>/
       pmdsim-run.json            manifest: files, exposure, timings (written last)
@@ -31,7 +31,7 @@ grid of ``[diagnostics]`` (:mod:`pmdsim.studies.diagnostics`) the fraction of th
 ``theta_max`` (cone estimators), the effective sample size of the weights and, with fringes,
 the standard error of the phase of every fringe (``[diagnostics] phase_method``) (one pass over the grid pixels'
 rays); the maps go into the dataset (``diag_*`` on ``diag_row``/``diag_col``), the summary and
-the :func:`pmdsim.studies.diagnostics.check` warnings (bounds from ``[diagnostics]``) into
+the :func:`pmdsim.studies.diagnostic_warnings.check` warnings (bounds from ``[diagnostics]``) into
 ``statistics.json``/``summary.txt``, the manifest and ``RunResult.warnings``.
 
 With ``variants`` (a comparison of BRDFs, anisotropy frames or sampling on one set-up)
@@ -43,7 +43,7 @@ figures of all variants); :func:`load_run` concatenates the variants along a
 ``variant`` dimension.
 
 Image files are integers scaled by one run-wide exposure factor (one per variant; see
-:mod:`pmdsim.run.files`). The dataset holds the float camera values, the per-pixel weight sums, the masks and the
+:mod:`pmdsim.store.images`). The dataset holds the float camera values, the per-pixel weight sums, the masks and the
 exact specular monitor coordinates, with units and descriptions in the attributes and the
 resolved configuration as JSON in ``attrs["config_json"]``, so that
 ``RunConfig.model_validate_json(load_run(path).attrs["config_json"])`` reproduces the run.
@@ -57,18 +57,18 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..config import RESERVED_VARIANT_NAMES, ConfigError, RunConfig, check_resources
-from ..scene.sanity import check_physics
+from ..studies.physics_checks import check_physics
 from ..studies import coverage
 from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
-from ..scene import resolve_roi
-from . import files as pio
-from .manifest import write_run_manifest, write_variants_manifest
-from .member import run_member
+from ..scene import resolved_camera
+from ..store.manifest import write_run_manifest, write_variants_manifest
+from .steps import RunInputs, run_member
 from .reference import chain_mode, specular_reference
 from .result import ProgressFn, RunResult, _Steps
 from .threads import single_blas
 from .variants import run_variants
+from ..store.folder import atomic_run_dir, folder_sizes, size_text
 
 #: Names a variant cannot have: they are files or folders of the run folder itself
 #: (validated by the config already; kept here for configs built around the validators).
@@ -80,10 +80,10 @@ class RunPlan:
     """Everything a run needs, resolved and checked before anything is written."""
 
     cfg: RunConfig
-    members: list          # (name, RunConfig, Simulation) per variant (one without variants)
-    inputs: tuple          # (dots, image_files, monitor image levels, tiles per render)
+    members: list[tuple[str, RunConfig, Simulation]]  # per variant (one without variants)
+    inputs: RunInputs
     decoding: bool
-    notes: list
+    notes: list[str]
     figures: bool
     diagnostics: bool
     steps: _Steps
@@ -92,6 +92,13 @@ class RunPlan:
     def sim(self) -> Simulation:
         """The first member's simulation: geometry and reference are the same for all."""
         return self.members[0][2]
+
+
+def resolve_roi(cfg: RunConfig) -> RunConfig:
+    """``cfg`` with ``camera.roi = "auto"`` replaced by its window
+    (:func:`pmdsim.scene.resolved_camera`); ``cfg`` itself otherwise."""
+    camera = resolved_camera(cfg.camera, cfg.surface)
+    return cfg if camera is cfg.camera else cfg.model_copy(update={"camera": camera})
 
 
 @single_blas
@@ -156,7 +163,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
     plan = plan_run(cfg, progress, figures, decode, diagnostics)
     if client is not None:
         on_cluster(plan, client)
-    with pio.atomic_run_dir(outdir, overwrite=overwrite) as tmp, _current(client):
+    with atomic_run_dir(outdir, overwrite=overwrite) as tmp, _current(client):
         t = time.perf_counter()
         # The vision rays and the ideal specular reference do not depend on what a variant
         # may change (BRDF, anisotropy frame, sampling): one of each for all.
@@ -190,12 +197,12 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
         timings = dict(result.timings, total=time.perf_counter() - t_start)
         result = replace(result, timings=timings)
         # the folder's size, measured now that everything but the manifest is written
-        sizes = pio.folder_sizes(tmp)
+        sizes = folder_sizes(tmp)
         result = replace(result, sizes=sizes)
         summary = tmp / "summary.txt"
         if summary.is_file():
             with open(summary, "a") as fh:
-                fh.write("\n" + pio.size_text(sizes) + "\n")
+                fh.write("\n" + size_text(sizes) + "\n")
         if cfg.variants:
             write_variants_manifest(tmp, cfg, result)
         else:
@@ -217,6 +224,26 @@ def _check_valid(cfg: RunConfig, result: RunResult) -> tuple[str, ...]:
     return tuple(notes)
 
 
+def _check_rule_size(cfg: RunConfig, sim) -> None:
+    """Refuse fringes of a Gauss rule (mode ``rule``) of fewer nodes than its error
+    statement needs (:data:`pmdsim.render.pilot.MIN_NODES`): its phase is known only to
+    within pi, and its widths' phases disagree (the decoding would flag every pixel)."""
+    from ..render.pilot import MIN_NODES
+
+    samp = sim.scene.sampling
+    if (cfg.patterns.fringes is None or sim.scene.brdf.is_delta or samp.mode != "rule"
+            or samp.target_error is not None):
+        return
+    nodes = samp.rule(sim._lobe).n
+    if nodes < MIN_NODES:
+        raise ConfigError(
+            f"invalid configuration:\n  sampling.n_rays: {samp.n_rays} gives a Gauss rule of "
+            f"{nodes} nodes, too few to state its numerical error or to decode the fringes "
+            f"(their phases are known only to within pi); raise sampling.n_rays to >= "
+            f"{MIN_NODES}, or set sampling.target_error_mrad instead (or mode = 'stratified' "
+            "for the paper's sample set)")
+
+
 def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
              decode: bool | None, diagnostics: bool) -> RunPlan:
     """Resolve and check the inputs of a run (variant names, dots, monitor images, whether
@@ -229,9 +256,11 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
                 f"invalid configuration:\n  variants.{k}.name: {v.name!r} cannot name a sub-folder of the run (reserved "
                 f"or hidden: {sorted(RESERVED_NAMES)}); choose another name")
     members = [(name, c, Simulation.from_config(c)) for name, c in cfg.expand()]
-    dots = resolve_dots(cfg)
-    image_files, levels = resolve_images(cfg)
+    dots = resolve_dots(cfg.patterns.dots, cfg.monitor.resolution)
+    image_files, levels = resolve_images(cfg.patterns.images, cfg.monitor.resolution)
     decoding, notes = chain_mode(cfg, decode)
+    for _, c, s in members:  # a rule too small to state its error: refused before any work
+        _check_rule_size(c, s)
     for _, c, s in members:  # sensor, display and BRDF that leave no signal: refused here
         notes += [n for n in check_physics(c, s.scene) if n not in notes]
     n_calls = (cfg.patterns.fringes is not None) + bool(dots) + (levels is not None)
@@ -242,7 +271,7 @@ def plan_run(cfg: RunConfig, progress: ProgressFn | None, figures: bool | None,
     n_diagnosed = sum(not s.scene.brdf.is_delta for _, _, s in members) if diagnostics else 0
     steps = _Steps(progress, 1 + len(members) * (n_calls * n_tiles + 2 + int(figures))
                    + int(top_figures) + (n_tiles if decoding else 0) + n_diagnosed)
-    return RunPlan(cfg, members, (dots, image_files, levels, n_tiles), decoding, notes,
+    return RunPlan(cfg, members, RunInputs(dots, image_files, levels, n_tiles), decoding, notes,
                    figures, diagnostics, steps)
 
 
@@ -275,4 +304,4 @@ def moved(result: RunResult, tmp: Path, final: Path, **changes) -> RunResult:
         variants=tuple(moved(r, tmp, final) for r in result.variants), **changes)
 
 
-__all__ = ["RunResult", "RunPlan", "run_simulation", "plan_run", "on_cluster"]
+__all__ = [ "RunPlan", "run_simulation", "plan_run", "on_cluster"]

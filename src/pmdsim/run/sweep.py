@@ -87,12 +87,12 @@ def _extent(plan: SweepPlan, dim: str) -> int:
 
 
 def _quantities():
-    from ..studies.sweep import QUANTITIES
+    from ..measure.chain import QUANTITIES
     return QUANTITIES
 
 
 def _statistics():
-    from ..studies.sweep import STATISTICS
+    from ..measure.chain import STATISTICS
     return STATISTICS
 
 
@@ -201,11 +201,11 @@ def done_mask(store: str | Path) -> np.ndarray:
 @contextlib.contextmanager
 def claim_sweep(outdir: str | Path):
     """Hold the sweep folder ``outdir`` for the ``with`` block, as ``simulate`` holds its
-    run folder (:func:`pmdsim.run.claim.claim_output`: a lock on ``<outdir>.lock``, released
+    run folder (:func:`pmdsim.store.folder_lock.claim_output`: a lock on ``<outdir>.lock``, released
     by the operating system however the process ends). A second sweep on the same folder
-    fails at once with :class:`~pmdsim.run.claim.OutputBusy`; under the claim, temporary
+    fails at once with :class:`~pmdsim.store.folder_lock.OutputBusy`; under the claim, temporary
     stores (``.sweep.zarr.tmp-<pid>``) of processes that no longer exist are removed."""
-    from .claim import claim_output
+    from ..store.folder_lock import claim_output
 
     outdir = Path(outdir)
     with claim_output(outdir) as lock:
@@ -216,7 +216,7 @@ def claim_sweep(outdir: str | Path):
 def remove_stale_stores(outdir: str | Path) -> list[Path]:
     """Remove the ``.sweep.zarr.tmp-<pid>`` folders in ``outdir`` of processes that no
     longer run (or of this one); returns them."""
-    from .claim import _pid_alive, remove_tree
+    from ..store.folder_lock import _pid_alive, remove_tree
 
     outdir = Path(outdir)
     removed = []
@@ -237,10 +237,10 @@ def _labels(plan: SweepPlan) -> list[str]:
 
 
 def check_sweep_physics(plan: SweepPlan) -> list[str]:
-    """The physics sanity of every point (:func:`pmdsim.scene.sanity.check_each`), before
+    """The physics sanity of every point (:func:`pmdsim.studies.physics_checks.check_each`), before
     anything is created: a sensor, display or BRDF that leaves no signal is refused naming
     the point, its values and the field; returns the notes, each naming its point."""
-    from ..scene.sanity import check_each
+    from ..studies.physics_checks import check_each
 
     return check_each([p.config for p in plan.points], _labels(plan))
 
@@ -479,7 +479,7 @@ def _read_store(path: Path):
     about a CPU-second of a sweep's process)."""
     import xarray as xr
 
-    from .lazy import xarray_without_dask_import
+    from ..store.lazy_arrays import xarray_without_dask_import
 
     xarray_without_dask_import()
     return xr.open_zarr(path, consolidated=False, chunks=None)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..brdf.turning import TextureParameters, format_texture, texture_parameters
 from ..report.texture import plot_texture
-from .files import write_json
+from ..store.tables import write_json
 
 
 @dataclass(frozen=True)
@@ -39,7 +39,7 @@ def run_texture(outdir=None, *, figure: bool = True, wavelengths_nm=(610.0, 545.
 
 @dataclass(frozen=True)
 class TopographyRun:
-    analysis: "object"
+    analysis: object
     text: str
     json: Path | None
     figure: Path | None
@@ -65,13 +65,19 @@ def run_topography(path, outdir=None, *, figure: bool = True, spacing_mm=None,
         a = tp.analyse(h, dx, dy, wavelength_nm, incidence_deg, source=str(path))
     except tp.FlatTopography as err:
         raise InputError(f"--from {path}: {err}") from None
-    text = tp.format_analysis(a)
+    n = t.heights.size
+    outliers = t.invalid - t.not_measured
+    text = tp.format_analysis(a) + (
+        f"\nfilled {t.invalid} of {n} points ({fill}): {t.not_measured} not measured (NaN/inf "
+        f"or the file's marker), {outliers} outliers" if t.invalid else
+        f"\nfilled 0 of {n} points: every point measured and finite")
     js = fig = None
     if outdir is not None:
         out = Path(outdir)
         out.mkdir(parents=True, exist_ok=True)
         js = out / "topography.json"
         write_json(js, a.as_dict() | {"reader": t.reader, "invalid_points": t.invalid,
+                                      "not_measured_points": t.not_measured,
                                       "radial_axis": radial_axis})
         (out / "topography.txt").write_text(text + "\n")
         if figure:

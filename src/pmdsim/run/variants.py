@@ -3,7 +3,6 @@ variants, read back from their folders."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from dataclasses import replace
@@ -13,12 +12,12 @@ import numpy as np
 from ..config import RunConfig
 from ..render import Simulation
 from ..report.text import summary_text_of
-from . import files as pio
-from .dataset import CONFIG_NAME
-from .manifest import write_run_manifest
-from .member import run_member
+from ..store.schema import CONFIG_NAME
+from ..store.manifest import write_run_manifest
+from .steps import run_member
 from .result import RunResult, draw_safely
-from .dataset import load_run
+from ..store.schema import load_run
+from ..store.tables import write_dot_csv, write_json
 
 
 def run_variants(plan, geometry, reference, tmp: Path, shared_timings: dict) -> RunResult:
@@ -81,7 +80,7 @@ def write_variant_outputs(cfg: RunConfig, tmp: Path, names: list[str], subs, fig
     datasets back lazily from their folders."""
     stats = {r.config.name: r.statistics for r in subs if r.statistics}
     if stats:
-        pio.write_json(tmp / "statistics.json", {"variants": stats})
+        write_json(tmp / "statistics.json", {"variants": stats})
         (tmp / "summary.txt").write_text("\n".join(summary_text_of(s) for s in stats.values()))
     decoded = any("directions" in s for s in stats.values())
     has_dots = cfg.patterns.dots is not None
@@ -96,20 +95,21 @@ def write_variant_outputs(cfg: RunConfig, tmp: Path, names: list[str], subs, fig
             tables[n] = [{k: (v if k == "variant" else (int(v) if k == "dot" else float(v)))
                           for k, v in r.items()} for r in part]
             rows += tables[n]
-        pio.write_dot_csv(tmp / "dots.csv", rows)
+        write_dot_csv(tmp / "dots.csv", rows)
     paths: list[Path] = []
     if not figures or not (decoded or has_dots):
         return paths
-    from ..report import chain as plot_chain
+    from ..report.dots import dot_figures
+    from ..report.overview import plot_variant_deviation
 
     datasets = {n: load_run(tmp / n) for n in names}
     if decoded:
         paths += draw_safely(notes if notes is not None else [], "deviation_variants.png",
-                             plot_chain.plot_variant_deviation, datasets,
+                             plot_variant_deviation, datasets,
                              tmp / "figures" / "deviation_variants.png", descriptions)
     if has_dots:
         images = {n: datasets[n]["dots"] for n in names}  # lazy: one dot image at a time
         paths += draw_safely(notes if notes is not None else [], "of the dots",
-                             plot_chain.dot_figures, tmp / "figures", images, tables, sim,
+                             dot_figures, tmp / "figures", images, tables, sim,
                              descriptions)
     return paths

@@ -1,4 +1,8 @@
-"""The scene: camera, monitor, surface, anisotropy frame, BRDF and bundle sampling."""
+"""The scene in world millimetres: camera (``camera``: pinhole, lens, distortion, sub-pixels),
+monitor and display (``monitor``, ``display``), surfaces (``surfaces``), the BRDF frame
+(``anisotropy``), spatially varying BRDF parameters (``brdf_variation``), the bundle's
+sample set (``sampling``, ``quadrature``), the sensor model (``sensor``) and the physics
+sanity of each section (``sanity``); :class:`Scene` composes them from their sections."""
 
 from __future__ import annotations
 
@@ -7,7 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..brdf import BRDF, Mirror, brdf_from_config
-from ..config import RunConfig
+from ..config import CameraConfig, SceneSections, SurfaceConfig
 from .sampling import ConeSampling, sampling_from_config
 from .anisotropy import AnisotropyFrame
 from .brdf_variation import BrdfVariation
@@ -42,7 +46,9 @@ class Scene:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {self.estimator!r}")
 
     @classmethod
-    def from_config(cls, cfg: RunConfig) -> "Scene":
+    def from_config(cls, cfg: SceneSections) -> "Scene":
+        """The scene of the sections ``camera``, ``monitor``, ``surface``, ``anisotropy``,
+        ``brdf`` and ``sampling`` (a :class:`~pmdsim.config.RunConfig` has them)."""
         s = cfg.sampling
         surface = surface_from_config(cfg.surface)
         anisotropy = AnisotropyFrame.from_config(cfg.anisotropy)
@@ -126,14 +132,15 @@ def auto_roi(camera: Camera, surface, margin_px: int = 4) -> tuple[int, int, int
     return (c0, r0, c1 - c0 + 1, r1 - r0 + 1)
 
 
-def resolve_roi(cfg: RunConfig) -> RunConfig:
-    """``cfg`` with ``camera.roi = "auto"`` replaced by its window (:func:`auto_roi`; None
-    when the camera does not see the surface), so that the estimate counts the rendered
-    pixels and the stored configuration names them."""
-    if cfg.camera.roi != "auto":
-        return cfg
-    win = auto_roi(Camera.from_config(cfg.camera), surface_from_config(cfg.surface))
-    return cfg.model_copy(update={"camera": cfg.camera.model_copy(update={"roi": win})})
+def resolved_camera(camera: CameraConfig, surface: SurfaceConfig) -> CameraConfig:
+    """``camera`` with ``roi = "auto"`` replaced by its window on ``surface``
+    (:func:`auto_roi`; None when the camera does not see the surface), so that the estimate
+    counts the rendered pixels and the stored configuration names them; ``camera`` itself
+    when its ``roi`` is not ``"auto"``."""
+    if camera.roi != "auto":
+        return camera
+    win = auto_roi(Camera.from_config(camera), surface_from_config(surface))
+    return camera.model_copy(update={"roi": win})
 
 
 def set_up_incidence_deg(camera, surface) -> float:
@@ -146,4 +153,4 @@ def set_up_incidence_deg(camera, surface) -> float:
     return float(np.degrees(np.arccos(min(c, 1.0))))
 
 
-__all__ = ["Scene", "auto_roi", "resolve_roi", "set_up_incidence_deg", "BrdfVariation", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]
+__all__ = ["Scene", "auto_roi", "resolved_camera", "set_up_incidence_deg", "BrdfVariation", "Camera", "Monitor", "FlatRectangle", "SagSurface", "AnisotropyFrame", "ESTIMATORS"]

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import files
+from ..config import MonitorConfig, files
 
 
 def read_response_lut(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -172,7 +172,7 @@ class DisplayGeometry:
         return p
 
 
-def display_from_config(cfg) -> tuple[DisplayResponse, DisplayGeometry]:
+def display_from_config(cfg: MonitorConfig) -> tuple[DisplayResponse, DisplayGeometry]:
     """The response and geometry of a :class:`~pmdsim.config.MonitorConfig`."""
     lut_d = lut_l = None
     if cfg.response_lut is not None:

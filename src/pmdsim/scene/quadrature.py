@@ -47,7 +47,7 @@ Error of the rendered rule: two **embedded** rules, of about 3/4 the order in ea
 coordinate (:func:`embedded_order`) and as far below that again
 (:func:`second_embedded_order`; 8 x 32 -> 6 x 24 -> 4 x 16: 81 % more rays), are rendered
 too (the second, which enters only medians, on a grid of pixels on large cameras:
-:func:`pmdsim.render.rows.convergence_stride`). ``dS1 = S - S_embedded`` is the error of the coarser rule, so
+:func:`pmdsim.render.convergence_grid.convergence_stride`). ``dS1 = S - S_embedded`` is the error of the coarser rule, so
 ``|Im(dS1 conj S)| / |S|^2 + 0.1 |dS1| / |S|`` (phase difference plus a floor for the
 pre-asymptotic case) bounds the rendered rule's phase error, by 10 to 1000 x where the rule
 converges fast. ``|dS1| / |dS2|`` (median over the pixels of a fringe) is the observed
@@ -159,7 +159,7 @@ def convergence_exponent(order: tuple[int, int], kind: str = "cone") -> float | 
     than the cone's product rule (``kind``): the scaling was validated on cone rules only; on
     the radiometric Gauss-Hermite rules (8 x 8 to 11 x 11, a Ward lobe with unequal alphas
     under 16 px fringes) the scaled statement bounded the true error in only 80-88 % of the
-    pixels (``tests/test_budget_error.py``), so they keep the unscaled embedded statement."""
+    pixels (``tests/studies/test_budget_error.py``), so they keep the unscaled embedded statement."""
     if kind != "cone":
         return None
     m1, m2 = embedded_order(order), second_embedded_order(order)

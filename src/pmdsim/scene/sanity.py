@@ -18,8 +18,9 @@ All checks are arithmetic on the configuration and the scene objects (no ray is 
   above 1 (an albedo above 1 reflects more light than falls on the surface), unless
   ``diagnostics.allow_albedo_above_one`` says it is meant.
 
-``simulate`` and ``budget`` check their configuration, every sweep point, ``converge`` and
-``fit`` theirs (:func:`check_each` names the point) before any ray is traced.
+The checks of a whole configuration, run by ``simulate``, ``budget``, ``sweep`` (every
+point), ``converge`` and ``fit`` before any ray is traced, are
+:mod:`pmdsim.studies.physics_checks`.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ import math
 
 import numpy as np
 
-from ..config import ConfigError
+from ..config import BrdfConfig, ConfigError
 
 #: Relative luminance below which a display direction counts as dark.
 DARK_FALLOFF = 1e-3
@@ -190,11 +191,11 @@ def check_display(monitor, target) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- BRDF
-def check_brdf(cfg) -> list[str]:
+def check_brdf(brdf: BrdfConfig, allow_albedo_above_one: bool = False) -> list[str]:
     """Refuse an albedo above 1: ``rho_s`` (the specular reflectance / Fresnel factor of every
     model that has one) times the largest ``rho_s_scale`` of ``[brdf.variation]`` (tables or
-    map), unless ``diagnostics.allow_albedo_above_one`` (then a note)."""
-    brdf = cfg.brdf
+    map), unless ``allow_albedo_above_one`` (``diagnostics.allow_albedo_above_one``; then a
+    note)."""
     rho = getattr(brdf, "rho_s", None)
     if rho is None:
         return []
@@ -216,57 +217,11 @@ def check_brdf(cfg) -> list[str]:
             else f"rho_s = {rho:g} times the largest rho_s_scale {biggest:g}")
     text = (f"{what} is an albedo of {albedo:.3g} > 1: the surface would reflect more light "
             "than falls on it")
-    if getattr(cfg.diagnostics, "allow_albedo_above_one", False):
+    if allow_albedo_above_one:
         return [f"{field}: {text} (accepted: diagnostics.allow_albedo_above_one = true)"]
     fix = ("keep rho_s <= 1" if biggest is None else f"keep rho_s_scale <= {1 / rho:.4g}")
     raise _refuse(field, f"{text}; {fix}, or set diagnostics.allow_albedo_above_one = true "
                   "to use it as a relative brightness on purpose")
 
 
-def check_physics(cfg, scene=None) -> list[str]:
-    """All checks of this module for a run configuration (and its
-    :class:`~pmdsim.scene.Scene`, when built: only its monitor is used; without one the
-    monitor is built from ``cfg``); raises :class:`ConfigError` naming the field, returns
-    notes (each naming the field and the share it affects)."""
-    from .monitor import Monitor
-    from .sensor import Sensor
-
-    notes = check_sensor(Sensor.from_config(cfg.sensor))
-    target = cfg.camera.look_at_mm
-    if target is None:
-        target = getattr(cfg.surface, "centre_mm", (0.0, 0.0, 0.0))
-    monitor = scene.monitor if scene is not None else Monitor.from_config(cfg.monitor)
-    notes += check_display(monitor, np.asarray(target, np.float64))
-    notes += check_brdf(cfg)
-    return notes
-
-
-def physics_key(cfg) -> str:
-    """What :func:`check_physics` reads of ``cfg`` (configurations with the same key get the
-    same answer): the sensor (but its seed), monitor, BRDF, camera target, surface and the
-    diagnostics' overrides."""
-    d = cfg.model_dump(mode="json", include={"sensor", "monitor", "brdf", "camera", "surface",
-                                               "diagnostics"})
-    (d.get("sensor") or {}).pop("seed", None)
-    return repr(sorted(d.items()))
-
-
-def check_each(configs, labels) -> list[str]:
-    """:func:`check_physics` of every configuration of a study (sweep points, ...), each
-    distinct one once; a refusal names the configuration by its label
-    (``invalid configuration (<label>):``); returns the notes, each with its label."""
-    seen: dict[str, list[str]] = {}
-    notes: list[str] = []
-    for cfg, label in zip(configs, labels):
-        key = physics_key(cfg)
-        if key not in seen:
-            try:
-                seen[key] = check_physics(cfg)
-            except ConfigError as err:
-                head, _, rest = str(err).partition("\n")
-                raise ConfigError(f"invalid configuration ({label}):\n{rest or head}") from None
-            notes += [f"{label}: {n}" for n in seen[key]]
-    return notes
-
-
-__all__ = ["check_physics", "check_each", "check_sensor", "check_display", "check_brdf"]
+__all__ = ["check_sensor", "check_display", "check_brdf"]

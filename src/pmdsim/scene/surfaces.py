@@ -13,7 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..config import ConfigError, FlatSurfaceConfig
+from ..config import ConfigError, FlatSurfaceConfig, SurfaceConfig
 from ..geometry import normalize
 from ..topofile import is_instrument_file, read_topography
 
@@ -86,7 +86,7 @@ class FlatRectangle:
         return np.array([self.centre + a * self.x_axis + b * self.y_axis for a, b in corners])
 
 
-def surface_from_config(cfg) -> Surface:
+def surface_from_config(cfg: SurfaceConfig) -> Surface:
     if cfg.type == "flat":
         return FlatRectangle.from_config(cfg)
     if cfg.type in SAG_TYPES:
@@ -190,7 +190,7 @@ class SagSurface:
         object.__setattr__(self, "_params", self._build_params())
 
     @classmethod
-    def from_config(cls, cfg) -> "SagSurface":
+    def from_config(cls, cfg: SurfaceConfig) -> "SagSurface":
         n = normalize(np.asarray(cfg.normal, np.float64))
         x = np.asarray(cfg.x_axis, np.float64)
         x = normalize(x - (x @ n) * n)

@@ -11,7 +11,7 @@ the rendering integral, whose per-pixel error the budget carries to every statis
   gamma != 1 or a LUT: its images are not linear in the fringe sums), the surface is
   decoded once more through the same chain (same sensor noise) and ``e`` is the decoded
   difference (:func:`difference_error`): for a randomised set (``rqmc``, and the nearest
-  monitor's control variate ``rule+rqmc``, :mod:`pmdsim.render.control`) with an
+  monitor's control variate ``rule+rqmc``, :mod:`pmdsim.render.control_variate`) with an
   independent seed at the same order (about sqrt(2) times the random part of either), for
   a deterministic rule with half the nodes (the lower order's error, larger than the
   rendered one's) (:func:`second_estimate`). Through a sensor the same decoded
@@ -36,7 +36,6 @@ the rendering integral, whose per-pixel error the budget carries to every statis
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -105,7 +104,7 @@ HEIGHT_STATS = ("slope_rms_x_urad", "slope_rms_y_urad", "slope_p95_x_urad", "slo
 def node_errors(err, shifted) -> dict:
     """Per reconstruction node, the numerical error of the slope errors (urad) and of the
     height error after removal (nm): the larger change between ``err`` and the
-    :class:`~pmdsim.studies.budget.HeightError` of each decoding moved by ``+-e``."""
+    :class:`~pmdsim.studies.height_rows.HeightError` of each decoding moved by ``+-e``."""
     out = {}
     for key in ("slope_x_urad", "slope_y_urad", "height_nm"):
         base = getattr(err, key)

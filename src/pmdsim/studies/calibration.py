@@ -108,7 +108,8 @@ def calibration_rows(cfg, scene, decoded, rec0, spec, disc) -> list[dict]:
     """Height rows (``part = "calibration"``) of every group of ``cfg.budget.calibration``
     with a non-zero uncertainty, and their quadrature sum; ``decoded``/``rec0``: the ideal
     mirror's decoding through the ideal system and its reconstruction."""
-    from .budget import SurfaceMaps, height_error, height_row, prior_of, reconstruct_decoded
+    from .height_rows import SurfaceMaps, height_error, height_row, prior_of, reconstruct_decoded
+    from .budget_areal import areal_of
 
     unc = cfg.budget.calibration
     base = SurfaceMaps.of(rec0)
@@ -123,6 +124,7 @@ def calibration_rows(cfg, scene, decoded, rec0, spec, disc) -> list[dict]:
             rec = reconstruct_decoded(cfg, scene, decoded, camera=cam, monitor=mon, prior=prior)
             err = height_error(SurfaceMaps.of(rec), base, spec, disc, shift_mm=shift)
             r = height_row(field_name, name, "calibration", err)
+            r["areal"] = areal_of(err, rec.spacing)  # of the component's maps (no numerical error)
             for k in ("zernike_noll_nm", "zernike_fringe_nm"):
                 r.pop(k)
             comps.append(r)

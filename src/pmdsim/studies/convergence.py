@@ -11,17 +11,24 @@ the configured fringes (directions, widths, K shifts)
 
 decodes each (``pmdsim.decode.phase_shift``) and compares it with the ideal mirror
 (``Scene.specular()``): the wrapped phase difference (rad), its RMS, mean and 95th
-percentile of the absolute value over the valid pixels, the median modulation, and the RMS
-phase difference from the *converged* answer (the radiometric run with the largest N). The
+percentile of the absolute value over the valid pixels, the median modulation, the row's own
+numerical phase error (the rule's statement, :meth:`pmdsim.render.FringeResult.phase_error`,
+RMS over the valid pixels, capped at pi per pixel: a phase cannot be wronger; NaN for a mode
+without an error estimate) and the RMS phase difference from the *reference*: the
+radiometric run with the largest N. The reference carries its own stated numerical error
+(``reference_error_rms_rad``, RMS over the same pixels); a difference at or below it cannot
+be told from the reference's own error and the row is ``resolved = False`` ("not resolved").
+A reference whose error exceeds :data:`REFERENCE_CONVERGED_RAD` for a fringe is not
+converged there (``meta["reference"]["fringes"]``), and nothing calls it converged. The
 configured N and theta_max are added to the sweeps, so the paper's N = 100 / 1 deg can be
-read off against the converged result.
+read off against the reference.
 
 ``paper`` and ``weighted_mean`` differ by a factor per pixel (N / sum f), which cancels in
 the decoded phase and in the modulation B / A: one render serves both and their rows are
 identical (they are listed for completeness).
 
 With ``diagnostics`` (default) the configured settings are also checked
-(:func:`pmdsim.studies.diagnostics.diagnose` and :func:`~pmdsim.studies.diagnostics.check` on the reduced
+(:func:`pmdsim.studies.diagnostics.diagnose` and :func:`~pmdsim.studies.diagnostic_warnings.check` on the reduced
 camera, bounds from ``[diagnostics]``): the warnings name the setting that fixes them.
 
 Outputs (written atomically: into a temporary sibling folder renamed at the end):
@@ -53,8 +60,14 @@ ALL_ESTIMATORS = ("paper", "weighted_mean", "radiometric")
 COLUMNS = (
     "estimator", "theta_max_deg", "n_rays", "direction", "width_px", "n_valid",
     "phase_rms_rad", "phase_mean_rad", "phase_p95_rad", "modulation_median",
-    "phase_rms_vs_converged_rad", "seconds",
+    "phase_error_rms_rad", "phase_rms_vs_reference_rad", "reference_error_rms_rad",
+    "resolved", "seconds",
 )
+
+#: A fringe's reference counts as converged when its stated numerical phase error (RMS over
+#: the valid pixels) is at most this (rad): 1 mrad, ten times the sampling's default target
+#: (0.1 mrad); above it the table calls it "not converged" and says by how much.
+REFERENCE_CONVERGED_RAD = 1e-3
 
 
 def reduced_config(cfg: RunConfig, camera_size: tuple[int, int] = (160, 128)) -> RunConfig:
@@ -76,6 +89,9 @@ def reduced_config(cfg: RunConfig, camera_size: tuple[int, int] = (160, 128)) ->
     if cam.projection == "telecentric" and cam.camera_matrix is None:
         # the same field on the part: larger pixels at the same magnification
         upd = {"resolution": (nw, nh), "pixel_pitch_mm": cam.pixel_pitch_mm / sx}
+    elif cam.f_number is not None:  # a thin lens keeps its focal length: larger pixels instead
+        upd = {"resolution": (nw, nh), "focal_length_px": None,
+               "pixel_pitch_mm": cam.focal_length_mm / (cam.focal_px * sx)}
     else:
         upd = {"resolution": (nw, nh), "focal_length_px": cam.focal_px * sx,
                "focal_length_mm": None, "pixel_pitch_mm": None}
@@ -88,6 +104,22 @@ def reduced_config(cfg: RunConfig, camera_size: tuple[int, int] = (160, 128)) ->
     return RunConfig.model_validate(data)
 
 
+
+
+def _phase_error(fr) -> np.ndarray | None:
+    """(nd, nw, H, W) stated numerical phase error (rad) of a render, capped at pi (a phase
+    is never wronger than that); None without an estimate."""
+    pe = fr.phase_error()
+    return None if pe is None else np.minimum(pe, np.pi)
+
+
+def _rms_over(a: np.ndarray | None, ok: np.ndarray) -> float:
+    if a is None or not ok.any():
+        return float("nan")
+    v = a[ok]
+    if not np.all(np.isfinite(v)):
+        return float("inf")
+    return float(np.sqrt(np.mean(v * v)))
 
 
 def _decode(images: np.ndarray):
@@ -114,7 +146,7 @@ def _stats(dev: np.ndarray, valid: np.ndarray):
 @dataclass(frozen=True)
 class ConvergenceStudy:
     """Rows of the study (dicts with :data:`COLUMNS`), its settings and the diagnostics of
-    the configured settings (summary and :func:`~pmdsim.studies.diagnostics.check` warnings)."""
+    the configured settings (summary and :func:`~pmdsim.studies.diagnostic_warnings.check` warnings)."""
 
     rows: list
     meta: dict
@@ -188,7 +220,8 @@ def convergence_study(
     considered = geom.monitor_mask
     samp = base.sampling
 
-    runs = []  # (estimators, theta_deg or None, n, phase, modulation, seconds)
+    runs = []  # (estimators, theta_deg or None, n, phase, modulation, seconds, phase error)
+    ref_sampling: dict = {}
     cone = [e for e in estimators if e != "radiometric"]
     if cone:
         for th in theta_values:
@@ -198,59 +231,86 @@ def convergence_study(
                                         target_error=None),
                     estimator="paper")
                 t0 = time.perf_counter()
-                ph, mod = _decode(sim_of(scene).render_fringes(widths, directions, shifts).images)
-                runs.append((cone, th, n, ph, mod, time.perf_counter() - t0))
+                fr = sim_of(scene).render_fringes(widths, directions, shifts)
+                ph, mod = _decode(fr.images)
+                runs.append((cone, th, n, ph, mod, time.perf_counter() - t0, _phase_error(fr)))
                 say(f"cone theta_max = {th:g} deg, N = {n}")
     if "radiometric" in estimators:
         for n in n_values:
             scene = base.replace(sampling=dc_replace(samp, n_rays=n, target_error=None),
                                  estimator="radiometric")
             t0 = time.perf_counter()
-            ph, mod = _decode(sim_of(scene).render_fringes(widths, directions, shifts).images)
-            runs.append((["radiometric"], None, n, ph, mod, time.perf_counter() - t0))
+            fr = sim_of(scene).render_fringes(widths, directions, shifts)
+            ph, mod = _decode(fr.images)
+            runs.append((["radiometric"], None, n, ph, mod, time.perf_counter() - t0,
+                         _phase_error(fr)))
+            ref_sampling = dict(fr.sampling or {})
             say(f"radiometric N = {n}")
-    converged = next((r[3] for r in reversed(runs) if r[1] is None), None)
+    ref_run = next((r for r in reversed(runs) if r[1] is None), None)
+    reference = ref_run[3] if ref_run is not None else None
+    reference_err = ref_run[6] if ref_run is not None else None
 
     warnings, diag_summary = [], {}
     if diagnostics:
         from . import diagnostics as dg
+        from .diagnostic_warnings import check as warnings_of
 
         diag = dg.diagnose(sim_of(base), widths, directions, grid=small.diagnostics.grid,
                            phase_method=small.diagnostics.phase_method)
-        warnings = dg.check(diag, bounds=small.diagnostics)
+        warnings = warnings_of(diag, bounds=small.diagnostics)
         diag_summary = diag.summary
         say("diagnostics")
 
     rows = []
-    for ests, th, n, ph, mod, secs in runs:
+    for ests, th, n, ph, mod, secs, perr in runs:
         for di, d in enumerate(directions):
             for wi, wd in enumerate(widths):
                 valid = considered & np.isfinite(ph[di, wi]) & np.isfinite(ref_phase[di, wi])
                 dev = wrap(ph[di, wi] - ref_phase[di, wi])
                 rms, mean, p95 = _stats(dev, valid)
                 m = mod[di, wi][valid]
-                vs = float("nan")
-                if converged is not None:
-                    ok = valid & np.isfinite(converged[di, wi])
+                own = _rms_over(None if perr is None else perr[di, wi], valid)
+                vs = ref_err = float("nan")
+                if reference is not None:
+                    ok = valid & np.isfinite(reference[di, wi])
                     if ok.any():
-                        dc = wrap(ph[di, wi] - converged[di, wi])[ok]
+                        dc = wrap(ph[di, wi] - reference[di, wi])[ok]
                         vs = float(np.sqrt(np.mean(dc * dc)))
+                    ref_err = _rms_over(None if reference_err is None else reference_err[di, wi], ok)
+                # a difference within the reference's own error (or against a reference
+                # whose error is unknown) says nothing about this row
+                resolved = bool(np.isfinite(vs) and np.isfinite(ref_err) and vs > ref_err)
                 for e in ests:
                     rows.append({
                         "estimator": e, "theta_max_deg": th if th is not None else float("nan"),
                         "n_rays": n, "direction": d, "width_px": wd, "n_valid": int(valid.sum()),
                         "phase_rms_rad": rms, "phase_mean_rad": mean, "phase_p95_rad": p95,
                         "modulation_median": float(np.median(m)) if m.size else float("nan"),
-                        "phase_rms_vs_converged_rad": vs, "seconds": secs,
+                        "phase_error_rms_rad": own, "phase_rms_vs_reference_rad": vs,
+                        "reference_error_rms_rad": ref_err, "resolved": resolved,
+                        "seconds": secs,
                     })
+    ref_fringes = []
+    if ref_run is not None:
+        for r in rows:
+            if r["estimator"] == "radiometric" and r["n_rays"] == n_values[-1]:
+                e = r["phase_error_rms_rad"]
+                ref_fringes.append({
+                    "direction": r["direction"], "width_px": r["width_px"],
+                    "error_rms_rad": e if np.isfinite(e) else None,
+                    "converged": bool(np.isfinite(e) and e <= REFERENCE_CONVERGED_RAD)})
 
     meta = {
         "name": cfg.name, "camera_size": list(small.camera.resolution),
         "n_values": list(n_values), "theta_values_deg": list(theta_values),
         "estimators": list(estimators), "widths_px": list(widths),
         "directions": list(directions), "shifts": shifts,
-        "reference": "ideal mirror (Scene.specular())",
-        "converged": "radiometric, N = %d" % n_values[-1] if converged is not None else None,
+        "mirror": "ideal mirror (Scene.specular())",
+        "reference": None if ref_run is None else {
+            "run": "radiometric, N = %d" % n_values[-1],
+            "sampling": {k: ref_sampling.get(k) for k in ("mode", "rule", "nodes", "error")},
+            "converged_below_rad": REFERENCE_CONVERGED_RAD,
+            "fringes": ref_fringes},
         "diagnostics": diag_summary,
         "warnings": [{"code": w.code, "message": w.message, "setting": w.setting,
                       "suggested": w.suggested} for w in warnings],

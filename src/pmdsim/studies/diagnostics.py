@@ -421,7 +421,7 @@ def phase_error_rule(sim, grid: PixelGrid, widths: Sequence[float] = (50.0,),
     from ..render.results import convergence_factor, phase_error
     from ..scene.quadrature import convergence_exponent, student_t975
 
-    from ..render import control
+    from ..render import control_variate as control
 
     nearest = sim.scene.monitor.pixel_model == "nearest"
     rows, cols = grid.pixel_rows, grid.pixel_cols
@@ -575,7 +575,11 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
     delta = scene.brdf.is_delta
     energy = None if delta else energy_fraction(scene, pgrid, None, target_fraction, n_samples)
     rays = None if delta else ray_statistics(sim, pgrid, widths, directions)
-    if delta:
+    # a deterministic rule (mode "rule") has no sampling noise: no effective sample size,
+    # no noise floor; its phase error is the render's own statement (the pilot), not judged
+    # here again
+    deterministic = not delta and scene.sampling.mode == "rule"
+    if delta or deterministic:
         phase_se = None
     elif phase_method == "delta":
         phase_se = rays.phase_se
@@ -607,7 +611,9 @@ def diagnose(sim, widths: Sequence[float] | None = None, directions: Sequence[st
     }
     if energy is not None:
         summary["energy"] = energy.summary()
-    if rays is not None:
+    if deterministic:
+        summary["deterministic_rule"] = True
+    elif rays is not None:
         summary["ess_median"] = _pct(judged(rays.ess), 50)
         summary["ess_min"] = float(np.nanmin(rays.ess)) if np.isfinite(rays.ess).any() else float("nan")
     if phase_se is not None:
@@ -648,6 +654,3 @@ def _with_specular_peak(brdf, phase_se, rays):
     rays = replace(rays, modulation=(a + h * m) / (a + h), phase_se=rays.phase_se * share)
     return (None if phase_se is None else phase_se * share), rays
 
-
-from .diagnostic_checks import (MAX_SUGGESTED_RAYS, MIN_ESS, DiagnosticWarning,  # noqa: E402,F401
-                                _nice_up, _wider_width, check)

@@ -54,7 +54,7 @@ from ..render import Simulation
 from .fit_stats import (NoiseModel, fringe_signal_ratio, harmonic_noise_variance,
                         parameter_covariance)
 
-__all__ = ["FIT_FIELDS", "NoiseModel", "FitResult", "fit_fringe_images", "fit_config",
+__all__ = ["FIT_FIELDS", "FitResult", "fit_fringe_images", "fit_config",
            "check_fit_resources", "fit_levels", "decoded_modulation", "median_modulation", "closed_form_start",
            "slope_jacobian", "format_fit"]
 
@@ -63,6 +63,8 @@ FIT_FIELDS = {"ward": ("alpha_x", "alpha_y"), "beckmann": ("alpha_u", "alpha_v")
               "slope_density": ("alpha_x", "alpha_y")}
 #: Bounds of the fitted alphas (the configuration accepts (0, 2]).
 ALPHA_BOUNDS = (1e-5, 2.0)
+#: The model's sample set unless the configuration names one (:func:`fit_config`).
+FIT_MODE = "rule"
 #: Default largest reduced chi-square (against noise + model error) of an accepted fit.
 MAX_CHI2 = 2.0
 #: A direction's fringes count as signal when the first harmonic's power exceeds what
@@ -80,6 +82,9 @@ REFINE_FACTOR = 4
 REFINE_TOLERANCE = 0.5
 #: ... with at most this many model evaluations per refinement.
 REFINE_NFEV = 20
+#: Simulated images' numerical error: their render against one with this many times the
+#: nodes (:func:`images_error`).
+IMAGES_REFINE = 16
 
 
 @dataclass(frozen=True)
@@ -170,14 +175,17 @@ def median_modulation(images) -> np.ndarray:
 
 
 def fit_config(cfg: RunConfig) -> RunConfig:
-    """The fit's configuration: estimator ``radiometric``, mode ``stratified`` (the Gauss rule
-    at 100 nodes misfit lobes cut by the monitor's edge: chi2 1.27, lattice 1.06) and no error
-    passes unless set or a target error needs them (the fit refines instead); no variants."""
+    """The fit's configuration: estimator ``radiometric``, mode ``rule`` (:data:`FIT_MODE`)
+    and no error passes unless set or a target error needs them (the fit refines instead);
+    no variants. The rule, not the lattice: on the coverage study with noise-free 16-bit
+    images (:mod:`pmdsim.studies.fit_coverage`) the lattice's model error was not bounded
+    by its refinement (17 of 20 covered at k = 2, a case 24 u off), the rule's was (19 of
+    20)."""
     d = cfg.model_dump()
     given = cfg.sampling.model_fields_set
     d["sampling"]["estimator"] = cfg.sampling.estimator if "estimator" in given else "radiometric"
     if "mode" not in given and cfg.sampling.target_error_mrad is None:
-        d["sampling"]["mode"] = "stratified"
+        d["sampling"]["mode"] = FIT_MODE
     if "error_estimate" not in given and cfg.sampling.target_error_mrad is None:
         d["sampling"]["error_estimate"] = False  # the fit estimates its model's error itself
     d["variants"] = []
@@ -292,6 +300,42 @@ def model_error_variance(render, values, n_rays: int, model, valid) -> np.ndarra
     return d * d
 
 
+def images_error(cfg: RunConfig, images_sampling: dict, values, widths, directions, shifts,
+                 valid) -> tuple[np.ndarray, dict]:
+    """The numerical error of simulated images (n,) at the fitted ``values`` (alpha_x,
+    alpha_y, scale), in image units, over the fitted ``valid`` values: the images' own
+    render (``images_sampling``: their ``[sampling]`` fields) minus one with
+    ``IMAGES_REFINE`` times the nodes (the same mode), scaled; and what it rests on."""
+    fields = {k: v for k, v in images_sampling.items() if k in type(cfg.sampling).model_fields}
+    fields.setdefault("target_error_mrad", None)
+    fields["error_estimate"] = False
+    own = with_sampling(cfg, **fields)
+    n = own.sampling.n_rays
+    finer = with_sampling(own, n_rays=IMAGES_REFINE * n, max_rays=max(own.sampling.max_rays,
+                                                                      IMAGES_REFINE * n))
+
+    def render(c):
+        sim = Simulation.from_config(_with_alphas(c, values[0], values[1]))
+        fr = sim.render_fringes(widths, directions, shifts)
+        return fr.images.astype(np.float64), fr.sampling or {}
+
+    a, info_a = render(own)
+    b, _ = render(finer)
+    mid, _ = render(with_sampling(own, n_rays=REFINE_FACTOR * n, max_rays=max(
+        own.sampling.max_rays, REFINE_FACTOR * n)))
+    err = values[2] * (np.nan_to_num(a[valid]) - np.nan_to_num(b[valid]))
+    # the estimate's own error (the finer render's): below the middle render's error
+    err_of_err = values[2] * (np.nan_to_num(mid[valid]) - np.nan_to_num(b[valid]))
+    info = {"sampling": {k: own.sampling.model_dump().get(k) for k in
+                         ("mode", "n_rays", "estimator", "theta_max_deg", "scheme")},
+            "rule": info_a.get("rule"),
+            "method": (f"the images' render at the fitted alphas minus one with "
+                       f"{IMAGES_REFINE} x the nodes, carried to the parameters"),
+            "error_rms": float(np.sqrt(np.mean(err * err))),
+            "estimate_error_rms": float(np.sqrt(np.mean(err_of_err * err_of_err)))}
+    return err, err_of_err, info
+
+
 def fit_levels(cfg: RunConfig, max_rays: int = None) -> list[int]:
     """The rays per pixel the fit may render with: ``sampling.n_rays`` and its refinements
     (x ``REFINE_FACTOR`` up to ``max_rays``)."""
@@ -333,7 +377,8 @@ def check_fit_resources(cfg: RunConfig, max_rays: int = None, max_nfev: int = 60
     return cpu
 
 
-def _noise_scale(sol, images, valid, meas, noise: NoiseModel | None, sigma):
+def _noise_scale(sol, images, valid, meas, noise: NoiseModel | None, sigma,
+                 floor: float | None = None):
     """The noise behind the weights of ``sol`` (a least-squares solution): with a sensor
     model, its check against the residual's part no phase-shifted sinusoid makes; without
     one, that part's variance, which scales the (unit-weighted) Jacobian and residuals.
@@ -355,7 +400,10 @@ def _noise_scale(sol, images, valid, meas, noise: NoiseModel | None, sigma):
                 (sol.jac, sol.fun, 1.0))
     # floor: noise-free (simulated, float) images are fitted to the optimiser's precision
     # (xtol 1e-6 in the logarithms), not to 0
-    s = max(np.sqrt(var), PRECISION_FLOOR * float(np.sqrt(np.mean(meas**2))))
+    s = max(np.sqrt(var), PRECISION_FLOOR * float(np.sqrt(np.mean(meas**2))), floor or 0.0)
+    if floor is not None and s == floor:
+        info["note"] = ("the images' quantisation (step / sqrt(12)) exceeds the noise seen in "
+                        "the residual: it is taken as the noise")
     return info | {"sigma": float(s), "dof": dof}, True, (sol.jac / s, sol.fun / s, s)
 
 
@@ -390,7 +438,8 @@ def _signal_check(images, noise: NoiseModel | None, directions, widths) -> dict:
 def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
                       noise: NoiseModel | None = None, start=None, diff_step: float = 2e-3,
                       max_nfev: int = 60, max_chi2: float = MAX_CHI2,
-                      max_rays: int = MAX_RAYS) -> FitResult:
+                      max_rays: int = MAX_RAYS, quantisation_step: float | None = None,
+                      images_sampling: dict | None = None) -> FitResult:
     """Fit (alpha_x, alpha_y, scale) to fringe images; see the module docstring.
 
     Parameters
@@ -411,6 +460,18 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
     max_rays : int
         Most rays per pixel of the refinement that estimates (and shrinks) the model's
         numerical error.
+    quantisation_step : float, optional
+        The images' quantisation step in their units (1 for integer images): its
+        uniform error, ``step / sqrt(12)`` per value, is the least noise the images can
+        have (it floors the noise estimated from noise-free images; a sensor model has it).
+    images_sampling : dict, optional
+        ``[sampling]`` fields the images were rendered with (simulated images: a pmdsim
+        run's own settings, e.g. ``{"mode": "rule", "n_rays": 256, "estimator":
+        "paper"}``). The images then carry that rule's numerical error, a pattern
+        correlated over all values: at the fitted alphas it is estimated as the images'
+        render minus one with ``IMAGES_REFINE`` times the nodes, carried to the parameters
+        (part of ``std_model``; ``model["images"]["std"]``) and, value by value, into the
+        chi-square.
 
     Raises
     ------
@@ -505,7 +566,8 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
         # correlate with: a bias of the order of the uncertainty at low exposures)
         sigma = noise.sigma(sol.fun * sigma + meas)
         sol = solve(sol.x, n_rays, max_nfev)
-    noise_info, tested, sol_w = _noise_scale(sol, images, valid, meas, noise, sigma)
+    floor = None if quantisation_step is None else float(quantisation_step) / np.sqrt(12.0)
+    noise_info, tested, sol_w = _noise_scale(sol, images, valid, meas, noise, sigma, floor)
     # the model's numerical error: refit with four times the rays until the alphas move
     # less than REFINE_TOLERANCE of their noise uncertainty (or max_rays is reached)
     ladder = [{"n_rays": n_rays, "values": np.exp(sol.x).tolist(), "evaluations": n_eval[0]}]
@@ -516,7 +578,7 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
         sol_next = solve(sol.x, n_next, REFINE_NFEV)
         shift = sol_next.x - sol.x
         n_rays, sol = n_next, sol_next
-        noise_info, tested, sol_w = _noise_scale(sol, images, valid, meas, noise, sigma)
+        noise_info, tested, sol_w = _noise_scale(sol, images, valid, meas, noise, sigma, floor)
         ladder.append({"n_rays": n_rays, "values": np.exp(sol.x).tolist(),
                        "evaluations": n_eval[0]})
         if np.all(np.abs(shift[:2]) <= REFINE_TOLERANCE * std_noise[:2]):
@@ -526,14 +588,34 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
     fitted_raw = render(values[0], values[1], n_rays)
     fitted = fitted_raw * values[2]
     var_model = model_error_variance(render, values, n_rays, fitted_raw, valid)
-    cv = parameter_covariance(sol_w[0], sol_w[1], shift=shift,
-                              model_variance=var_model / (sigma * sol_w[2]) ** 2)
+    # the images' own numerical error (simulated images): a signed pattern over all values,
+    # carried to the parameters through the fit's linear map (a column of U)
+    img_err, img_err_err, images_info = None, None, None
+    if images_sampling is not None:
+        img_err, img_err_err, images_info = images_error(cfg, images_sampling, values, widths,
+                                                         directions, shifts, valid)
+    u_img = None if img_err is None else (img_err / (sigma * sol_w[2]))[:, None]
+    # ... and in the chi-square also value by value (the pattern is an estimate: the
+    # residual it leaves is that estimate's error, of its size at most)
+    var_data = var_model if img_err is None else var_model + img_err**2 + img_err_err**2
+    cv = parameter_covariance(sol_w[0], sol_w[1], shift=shift, model_error=u_img,
+                              model_variance=var_data / (sigma * sol_w[2]) ** 2)
     jac_exp = np.diag(values)
     cov = jac_exp @ cv.cov @ jac_exp
     std = np.sqrt(np.diag(cov))
     std_noise = np.sqrt(np.diag(jac_exp @ cv.cov_noise @ jac_exp))
     std_model = np.sqrt(np.diag(jac_exp @ cv.cov_model @ jac_exp))
+    if u_img is not None:
+        g = np.linalg.pinv(sol_w[0].T @ sol_w[0]) @ sol_w[0].T @ u_img
+        images_info["std"] = (np.abs(g[:, 0]) * values).tolist()
     chi2 = cv.chi2_reduced if tested else float("nan")  # no noise estimate: no test
+    chi2_values = chi2
+    if tested and img_err is not None:
+        # simulated images: their numerical error and the model's are estimates of a pattern
+        # (their value-by-value size is not known to the noise level noise-free images
+        # have), so the test is of the residual's power against theirs plus the noise's
+        wv = var_data / (sigma * sol_w[2]) ** 2
+        chi2 = float(np.sum(sol_w[1] ** 2) / max(np.sum(1.0 + wv) - sol.x.size, 1.0))
     model_info = {"estimator": cfg.sampling.estimator, "mode": cfg.sampling.mode,
                   "n_rays": n_rays, "ladder": ladder, "birge_factor": cv.birge,
                   "method": ("the change of the fitted values from the last refinement (rays "
@@ -541,7 +623,10 @@ def fit_fringe_images(cfg: RunConfig, images, widths, directions=("x", "y"),
                              "not estimated (max_rays reached at the start)"),
                   "converged": refined, "pixels": edge_rule, "target": target,
                   "pixels_fitted": int(valid[0, 0, 0].sum()),
-                  "pixels_seen": int(seen[0, 0, 0].sum())}
+                  "pixels_seen": int(seen[0, 0, 0].sum()),
+                  "images": images_info,
+                  "chi2_value_by_value": chi2_values,
+                  "quantisation_step": quantisation_step}
     noise_info |= signal
 
     reasons = []
@@ -597,4 +682,14 @@ def format_fit(res: FitResult, frame: str = "fixed") -> str:
                      f"{res.model.get('method')}"
                      + ("" if res.model.get("converged") else
                         " (not below half the noise uncertainty at the largest ray count)"))
+        im = res.model.get("images")
+        if im:
+            smp = im["sampling"]
+            lines.append(f"images: rendered with the {smp['estimator']} estimator, "
+                         f"{smp['mode']} {im.get('rule') or ''} ({smp['n_rays']} nodes); their "
+                         f"numerical error (RMS {im['error_rms']:.3g}, {im['method']}) is in u "
+                         "model: " + ", ".join(f"{n} {v:.3g}" for n, v in zip(res.names, im["std"])))
+        if res.model.get("quantisation_step"):
+            lines.append(f"quantisation step {res.model['quantisation_step']:g} (its "
+                         "step / sqrt(12) floors the noise)")
     return "\n".join(lines)

@@ -2,7 +2,9 @@
 
 Each case (:func:`coverage_cases`) draws, from one seed, Ward alphas (log-uniform, unequal
 in x and y), the angle of incidence (camera and monitor tilted about the plate's x axis)
-and the noise (exposure and dark noise of a 12-bit EMVA sensor). Its "measured" images are
+and the noise (exposure and dark noise of a 12-bit EMVA sensor), or (half the cases) none:
+noise-free 16-bit images of a 256-node Gauss rule, whose own numerical error and
+quantisation are all they carry (:data:`NOISE_FREE_RAYS`). Its "measured" images are
 rendered with a converged model (radiometric estimator, the Gauss rule with ``TRUTH_RAYS``
 nodes: another kind of sample set than the fit's lattice, 40x larger) and captured by the sensor; the fit then runs
 with the **default settings** (a configuration without a ``[sampling]`` section: the fit's
@@ -15,7 +17,7 @@ Returns results and writes nothing (``pmdsim.run.fit_coverage`` writes them).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -27,6 +29,9 @@ from .fit_stats import NoiseModel
 
 #: Nodes of the converged "truth" renders (Gauss rule; the fit's default is 100 rays).
 TRUTH_RAYS = 4096
+#: Nodes of the noise-free cases' images (Gauss-Hermite 16 x 16, as the Fig. 3 example's 256): another order than any of
+#: the fit's model (100, 400, ... rays of its lattice), with a numerical error of its own.
+NOISE_FREE_RAYS = 256
 WIDTHS = (12.0, 25.0, 50.0, 100.0, 200.0)
 SHIFTS = 4
 
@@ -39,6 +44,10 @@ class CoverageCase:
     incidence_deg: float
     exposure_electrons: float
     dark_noise_electrons: float
+    #: noise-free 16-bit images (no sensor) rendered by the Gauss rule of ``images_rays``
+    #: nodes: they carry that rule's numerical error and their quantisation, nothing else
+    noise_free: bool = False
+    images_rays: int = TRUTH_RAYS
 
 
 @dataclass(frozen=True)
@@ -67,14 +76,19 @@ class CoverageResult:
 
 def coverage_cases(n: int = 20, seed: int = 0) -> list[CoverageCase]:
     """``n`` seeded cases: alphas log-uniform in [0.004, 0.04] each, incidence uniform in
-    [15, 40] deg, exposure log-uniform in [1500, 9000] e-, dark noise uniform in [2, 20] e-."""
+    [15, 40] deg, exposure log-uniform in [1500, 9000] e-, dark noise uniform in [2, 20] e-;
+    cases 1, 2, 5, 6, ... (i mod 4 in 1, 2) are noise-free 16-bit images of a
+    ``NOISE_FREE_RAYS``-node Gauss rule instead (the sensor numbers unused)."""
     rng = np.random.default_rng([seed, 2026])
     out = []
     for i in range(n):
         ax, ay = np.exp(rng.uniform(np.log(0.004), np.log(0.04), 2))
-        out.append(CoverageCase(i, float(ax), float(ay), float(rng.uniform(15.0, 40.0)),
-                                float(np.exp(rng.uniform(np.log(1500.0), np.log(9000.0)))),
-                                float(rng.uniform(2.0, 20.0))))
+        case = CoverageCase(i, float(ax), float(ay), float(rng.uniform(15.0, 40.0)),
+                            float(np.exp(rng.uniform(np.log(1500.0), np.log(9000.0)))),
+                            float(rng.uniform(2.0, 20.0)))
+        if i % 4 in (1, 2):  # half the cases: a simulated study's noise-free images
+            case = replace(case, noise_free=True, images_rays=NOISE_FREE_RAYS)
+        out.append(case)
     return out
 
 
@@ -111,8 +125,14 @@ def truth_images(case: CoverageCase) -> tuple[np.ndarray, RunConfig]:
     truth = parse_config(d | {"brdf": {"model": "ward", "alpha_x": case.alpha_x,
                                        "alpha_y": case.alpha_y, "rho_s": 0.4},
                               "sampling": {"estimator": "radiometric", "mode": "rule",
-                                           "n_rays": TRUTH_RAYS}})
+                                           "n_rays": case.images_rays}})
     values = Simulation.from_config(truth).render_fringes(WIDTHS, ("x", "y"), SHIFTS).images
+    if case.noise_free:  # 16-bit counts as a run writes them (brightest at 0.95 full scale)
+        finite = np.isfinite(values)
+        exposure = 0.95 * 65535.0 / float(values[finite].max())
+        counts = np.rint(np.clip(np.where(finite, values, 0.0) * exposure, 0.0, 65535.0))
+        cfg = parse_config(d | {"sensor": {"enabled": False}})
+        return np.where(np.isfinite(values), counts, np.nan), cfg
     sensor = Sensor.from_config(cfg.sensor)
     dn = sensor.capture(values).dn
     noise = NoiseModel.from_sensor(sensor)
@@ -122,8 +142,13 @@ def truth_images(case: CoverageCase) -> tuple[np.ndarray, RunConfig]:
 def run_case(case: CoverageCase, k: float = 2.0) -> CoverageResult:
     """Fit one case with the default settings; covered: both alphas within k std."""
     images, cfg = truth_images(case)
-    noise = NoiseModel.from_sensor(Sensor.from_config(cfg.sensor))
-    res = fit_fringe_images(cfg, images, WIDTHS, ("x", "y"), noise)
+    if case.noise_free:  # what `pmdsim fit` reads from a run's 16-bit fringe images
+        res = fit_fringe_images(cfg, images, WIDTHS, ("x", "y"), None, quantisation_step=1.0,
+                                images_sampling={"estimator": "radiometric", "mode": "rule",
+                                                 "n_rays": case.images_rays})
+    else:
+        noise = NoiseModel.from_sensor(Sensor.from_config(cfg.sensor))
+        res = fit_fringe_images(cfg, images, WIDTHS, ("x", "y"), noise)
     truth = np.array([case.alpha_x, case.alpha_y])
     covered = bool(np.all(np.abs(res.values[:2] - truth) <= k * res.std[:2]))
     sm = res.std_model if res.std_model is not None else np.zeros(3)

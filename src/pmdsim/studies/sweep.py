@@ -258,7 +258,7 @@ def plan_sweep(cfg: RunConfig, sweep: SweepConfig | None = None) -> SweepPlan:
         if c.variants:
             raise ConfigError("a sweep runs one configuration per point: remove [[variants]] "
                               "(sweep brdf/anisotropy/sampling fields instead)")
-        problem = decode_problem(c)
+        problem = decode_problem(c.patterns.fringes, c.decode, c.monitor.resolution)
         if problem is not None:
             raise ConfigError(f"sweep point {p.index} ({p.values}): the measurement chain "
                               f"cannot decode it: {problem}")
@@ -383,6 +383,7 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
 
     from ..measure import chain
     from ..render import Simulation
+    from .specular_reference import decode_specular_reference
 
     from dataclasses import replace
 
@@ -392,7 +393,7 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
     sim = Simulation(sim.scene, sim.tile_rows, scheduler, None)
     geometry = GEOMETRIES.get(geometry_key(cfg), sim.geometry)
     ref_decoded, distance = REFERENCES.get(
-        reference_key(cfg), lambda: chain.decode_specular_reference(cfg, sim, geometry))
+        reference_key(cfg), lambda: decode_specular_reference(cfg, sim, geometry))
     fr_cfg = cfg.patterns.fringes
     fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts)
     sensor = Sensor.from_config(cfg.sensor)
@@ -440,4 +441,4 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
 
 __all__ = ["SweepPoint", "SweepPlan", "plan_sweep", "point_seed", "measure_point", "reference_key",
            "geometry_key", "KeyedCache", "GEOMETRIES", "REFERENCES",
-           "POINT_VARIABLES", "MAP_VARIABLES", "QUANTITIES", "STATISTICS"]
+           "POINT_VARIABLES", "MAP_VARIABLES"]

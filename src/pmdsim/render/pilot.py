@@ -1,0 +1,451 @@
+"""The numerical error of a Gauss rule measured by a pilot on a sparse grid of pixels, and
+the rule's order chosen from a target by that pilot (issue 36).
+
+A pixel's fringe sum is an integral over the lobe (docs/physics.md, "Sampling as
+quadrature"); its integrand changes slowly from pixel to pixel, and so does the error of a
+fixed rule. The pilot measures that error where it is cheap and carries it to every pixel:
+
+- **grid**: one pixel in every ``s x s`` block (:func:`grid_stride`, ``s = 8``: 1/64 of the
+  pixels; smaller steps only on cameras narrower than 3 blocks), rendered with the rule
+  and with a finer rule of :data:`FINE_FACTOR` x the nodes (about twice the order in each
+  coordinate: its error is far below the rule's where the rule converges);
+- **measured error** at a grid pixel: the phase difference ``|arg(Z_rule / Z_fine)|`` of
+  the quantity the decoder takes the phase of (``Z = sum_k I_k exp(-i delta_k)`` of the K
+  shifted images; the complex fringe sum itself on a linear display);
+- **envelope**: every pixel's statement is :data:`SAFETY` times the largest measured error
+  over the 3 x 3 grid pixels around its block (the block's own and its eight neighbours':
+  every pixel of the block lies between them);
+- **local fallback** where the grid says nothing: pixels whose 3 x 3 grid pixels are not
+  all valid (the surface's or the mask's edge, a grid pixel off the monitor): there the
+  two rules are rendered at the pixel itself and the statement is :data:`SAFETY` times
+  their own difference;
+- **the monitor's edge**: where it cuts a lobe the integrand has a step, across which the
+  rules converge only erratically (a rule and the one 4 x finer can agree to 1/30 of
+  their error): such pixels are measured against rules 4 x and 16 x finer
+  (:data:`CUT_MEASURED` < off share <= :data:`MAX_OFF`), or add the bound
+  :func:`edge_bound` of what misplacing the weight beyond the edge can do (a share below
+  :data:`CUT_MEASURED`, or above :data:`MAX_OFF`, where the chain masks them);
+- **floors** that do not shrink with the order, added: the images' float32 storage
+  (``2^-24 sum_k |I_k| / |Z|`` per pixel: every image rounded to nearest, a bound) and the
+  kernels' arithmetic (:data:`~pmdsim.render.results.ROUNDOFF_PHASE`).
+
+Rules of fewer than :data:`MIN_NODES` nodes have no regime in which the difference to a
+finer rule bounds their error (a 1-node rule and its 4-node refinement can agree by
+accident): their phase is stated as known to within pi, with a warning naming
+``sampling.n_rays``.
+
+**The order from a target** (:func:`choose_order`): the pilot renders the grid at
+``n0, 2 n0, 4 n0, ...`` nodes (``n0 = sampling.n_rays``), each rule's error against the
+rule four times finer, until the statement's P95 over the grid (worst fringe, pixels whose
+fringe keeps a modulation >= 0.05) is below the target or the next rule would pass
+``max_rays``; the camera is then rendered once, with that rule.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..kernels import bundle as kb
+from .results import MAX_OFF, ROUNDOFF_PHASE, in_blocks
+from .geometry_rows import reduce_subrays, scene_geometry_rows, vision_geometry_rows
+
+#: Grid step (camera px): one pilot pixel in every ``GRID_STRIDE^2`` (1/64).
+GRID_STRIDE = 8
+#: The finer rule's nodes per node of the rule (about twice the order in each coordinate).
+FINE_FACTOR = 4
+#: Safety factor on the envelope of the measured error (validated by
+#: tests/render/test_pilot.py: >= 95 % of pixels bounded, median stated / true <= 5).
+SAFETY = 2.0
+#: Where the monitor's edge cuts a lobe, a share of its weight above this off the monitor
+#: (and at most :data:`~pmdsim.render.results.MAX_OFF`, beyond which the chain masks
+#: a pixel) is measured at the pixel against rules 4 x and 16 x
+#: finer (a rule and the one 4 x finer can agree to 1/30 of their error across the step;
+#: the one 16 x finer did not); below it, and above :data:`MAX_OFF`, the analytic
+#: :func:`edge_bound` is added.
+CUT_MEASURED = 1e-6
+#: Rules below this many nodes state no error (pi: the phase is known to within pi).
+MIN_NODES = 16
+#: Relative rounding of a float32 image value (round to nearest).
+F32_EPS = 2.0**-24
+
+
+def grid_stride(shape) -> int:
+    """The grid step of a camera ``shape`` (H, W): :data:`GRID_STRIDE`, halved until the
+    camera holds at least 3 blocks each way."""
+    h, w = shape
+    s = GRID_STRIDE
+    while s > 1 and (h < 3 * s or w < 3 * s):
+        s //= 2
+    return s
+
+
+def grid_nodes(n: int, s: int) -> np.ndarray:
+    """The pilot pixels' coordinates along an axis of ``n`` px: the centre of every block
+    of ``s`` (the last block's within the camera)."""
+    return np.minimum(np.arange(0, n, s) + s // 2, n - 1)
+
+
+@dataclass
+class Layout:
+    """What a fringe render's columns hold (the continuous monitor's harmonic layout):
+    ``cols`` the first column of each fringe (direction, width) block; ``harm`` harmonic
+    pairs per fringe (1 on a linear display); ``coef``/``g`` the display response's cosine
+    series and samples (non-linear displays), ``deltas`` the phase shifts."""
+
+    cols: np.ndarray
+    linear: bool
+    deltas: np.ndarray
+    black: float = 0.0
+    white: float = 1.0
+    harm: int = 1
+    coef: np.ndarray | None = None
+    g: np.ndarray | None = None
+
+    @property
+    def lmax(self) -> float:
+        """The largest luminance the display shows (the weight's worth at most)."""
+        if self.g is not None:
+            return float(np.max(np.abs(self.g)))
+        return float(max(abs(self.black), abs(self.white)))
+
+    def phasors(self, out: np.ndarray, norm: np.ndarray):
+        """``(Z, floor, mod, edge)`` (B, P) of raw sums ``out`` (P, C) normalised by ``norm`` (P,):
+        ``Z = sum_k I_k exp(-i delta_k)`` whose argument the decoder returns (on a linear
+        display the fringe sum itself), the images' float32 floor (:func:`image_floor`) and the
+        fringe's modulation ``B / A`` as the decoder sees it (``2 |Z| / K`` over the images'
+        mean) and the phase change per unit share of the weight misplaced
+        (:func:`edge_bound`)."""
+        f_hit = out[:, kb.OUT_FHIT] * norm
+        nb = len(self.cols)
+        z = np.empty((nb, out.shape[0]), np.complex128)
+        floor = np.empty((nb, out.shape[0]))
+        mod = np.empty((nb, out.shape[0]))
+        edge = np.empty((nb, out.shape[0]))
+        span = self.white - self.black
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for b, c in enumerate(self.cols):
+                if self.linear:
+                    s = (out[:, c] + 1j * out[:, c + 1]) * norm
+                    z[b] = s
+                    base = (self.black + 0.5 * span) * f_hit
+                    imgs = [base + 0.5 * span * (s * np.exp(1j * d)).real for d in self.deltas]
+                else:
+                    zs = [(out[:, c + 2 * m] + 1j * out[:, c + 2 * m + 1]) * norm
+                          for m in range(self.harm)]
+                    imgs = []
+                    for d in self.deltas:
+                        acc = self.coef[0] * f_hit
+                        for m, zm in enumerate(zs, start=1):
+                            acc = acc + self.coef[m] * (zm * np.exp(1j * m * d)).real
+                        imgs.append(np.clip(acc, self.g.min() * f_hit, self.g.max() * f_hit))
+                    z[b] = sum(im * np.exp(-1j * d) for im, d in zip(imgs, self.deltas))
+                floor[b] = _f32_floor(imgs, self.deltas)
+                k = len(self.deltas)
+                if self.linear:  # the images' Z is (span K / 4) S
+                    mod[b] = 2.0 * np.abs(0.25 * span * k * z[b]) / k / (sum(imgs) / k)
+                else:
+                    mod[b] = 2.0 * np.abs(z[b]) / k / (sum(imgs) / k)
+                ftot = np.abs(out[:, kb.OUT_FTOTAL] * norm)
+                zi = sum(im * np.exp(-1j * d) for im, d in zip(imgs, self.deltas))
+                edge[b] = k * ftot * self.lmax / np.abs(zi)
+        return z, floor, mod, edge
+
+
+def image_floor(images: np.ndarray, deltas) -> np.ndarray:
+    """(nd, nw, H, W) rad: the phase error of the float32 storage of the shifted images
+    (nd, nw, K, H, W): each value rounded to nearest, an error uniform within half its
+    spacing ``u_k`` (``numpy.spacing``), independent from image to image, gives the phase
+    ``arg Z`` an error of standard deviation ``sigma = sqrt(sum_k (u_k^2 / 12)
+    sin^2(phi + delta_k)) / |Z|``; stated as :data:`F32_SIGMAS` sigma."""
+    nd, nw, k = images.shape[:3]
+    out = np.empty((nd, nw) + images.shape[3:])
+    for di in range(nd):
+        for wi in range(nw):
+            out[di, wi] = _f32_floor([images[di, wi, j] for j in range(k)], deltas)
+    return out
+
+
+#: Standard deviations of the float32 rounding stated (:func:`image_floor`): the
+#: difference of two renders' roundings (independent) stays within it in >= 95 % of
+#: pixels (2.8 sigma would be the normal 95 % of their difference).
+F32_SIGMAS = 3.0
+
+
+def _f32_floor(imgs, deltas) -> np.ndarray:
+    """:func:`image_floor` of one fringe's K images (each float32 or float64, rounded to
+    float32 here)."""
+    z = 0.0
+    f32 = [np.asarray(im, np.float32) for im in imgs]
+    for im, d in zip(f32, deltas):
+        z = z + im.astype(np.float64) * np.exp(-1j * d)
+    phi = np.angle(z)
+    var = 0.0
+    for im, d in zip(f32, deltas):
+        u = np.spacing(np.abs(im)).astype(np.float64)
+        var = var + (u * u / 12.0) * np.sin(phi + d) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return F32_SIGMAS * np.sqrt(var) / np.abs(z)
+
+
+def edge_bound(images: np.ndarray, deltas, f_total, off, lmax: float) -> np.ndarray:
+    """(nd, nw, H, W) rad: a bound of the phase error a step in the integrand at the
+    monitor's edge can add where a share ``off`` of the lobe's weight ``f_total`` falls
+    beyond it: the rule can misplace at most twice that weight (its own share and the true
+    one), each image then moves by at most that weight times the display's largest
+    luminance ``lmax``, and the decoded ``Z = sum_k I_k exp(-i delta_k)`` by K times it."""
+    k = images.shape[2]
+    rot = np.exp(-1j * np.asarray(deltas))
+    w = 2.0 * np.nan_to_num(np.asarray(off, np.float64), nan=1.0).clip(0.0, 1.0) * np.abs(f_total)
+    out = np.empty(images.shape[:2] + images.shape[3:])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for di in range(images.shape[0]):
+            for wi in range(images.shape[1]):
+                z = sum(images[di, wi, j].astype(np.float64) * rot[j] for j in range(k))
+                out[di, wi] = np.where(w > 0, k * w * lmax / np.abs(z), 0.0)
+    return out
+
+
+def render_pixels(sim, samp, rows, cols, mode, ncols, patterns) -> np.ndarray:
+    """Raw sums (P, ncols) of camera pixels ``(rows, cols)`` with sample set ``samp``: the
+    same geometry rows, kernels and sub-ray reduction as the whole-camera render
+    (:meth:`pmdsim.render.Simulation._render_set`), pixel by pixel (a specular peak's
+    mirror pass added)."""
+    from .specular import add_specular, specular_reflectance
+
+    scene = sim.scene.replace(sampling=samp)
+    out = _pixels_brdf(sim, scene, rows, cols, mode, ncols, patterns)
+    if specular_reflectance(scene.brdf) > 0:
+        mirror = _pixels_brdf(sim, scene.specular(), rows, cols, mode, ncols, patterns)
+        out = add_specular(out, mirror, scene.brdf, scene.estimator, scene.rays_per_pixel)
+    return out
+
+
+def _pixels_brdf(sim, scene, rows, cols, mode, ncols, patterns):
+    cam = scene.camera
+    rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
+    out = np.empty((rows.size, ncols))
+    if rows.size == 0:
+        return out
+    kernel = sim._kernel(scene, mode, ncols, **patterns)
+    simple, n_sub = cam.is_simple_pinhole, cam.rays_per_pixel
+    geos, where = [], []
+    for r in np.unique(rows):
+        idx = np.nonzero(rows == r)[0]
+        if simple:
+            geo, _ = scene_geometry_rows(scene, int(r), int(r) + 1)
+            geos.append(geo[cols[idx]])
+        else:
+            geo, _ = vision_geometry_rows(scene, int(r))
+            geos.append(geo.reshape(cam.width, n_sub, -1)[cols[idx]].reshape(-1, kb.G_SIZE))
+        where.append(idx)
+    geo = np.ascontiguousarray(np.concatenate(geos))
+    idx = np.concatenate(where)
+    raw = np.empty((geo.shape[0], ncols))
+    rot = np.zeros((0, 2))
+    step = n_sub * max(1, -(-rows.size // 16))
+
+    def block(p0, p1):
+        kernel(geo[p0:p1], rot, raw[p0:p1])
+
+    if geo.shape[0] > step:
+        in_blocks(geo.shape[0], block, workers=sim.num_workers or 2)
+    else:
+        block(0, geo.shape[0])
+    if not simple:
+        raw = reduce_subrays(raw.reshape(-1, n_sub, ncols), scene.estimator)
+    out[idx] = raw
+    return out
+
+
+def normalise(out: np.ndarray, estimator: str, n_rays: int) -> np.ndarray:
+    """(P,) the estimator's normalisation of raw sums (P, C) (``Simulation._normalise``)."""
+    ftot = out[:, kb.OUT_FTOTAL]
+    if estimator in ("paper", "radiometric"):
+        return np.full(ftot.shape, 1.0 / n_rays)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ftot > 0, 1.0 / ftot, np.nan)
+
+
+@dataclass
+class Probe:
+    """One rule's phasors at the pilot pixels: ``z`` (B, P) complex, ``floor`` (B, P) its
+    float32 floor, ``mod`` (B, P) the fringe's modulation, ``edge`` (B, P) the phase
+    change per unit of the lobe's weight share misplaced (:func:`edge_bound`), ``off`` (P,) the share of each lobe's weight off the monitor and
+    ``nodes`` per pixel."""
+
+    z: np.ndarray
+    floor: np.ndarray
+    mod: np.ndarray
+    edge: np.ndarray
+    off: np.ndarray
+    nodes: int
+
+
+@dataclass
+class Pilot:
+    """The pilot of one render (module docstring): the grid (``stride``, node rows and
+    columns), its rules' probes by ``n_rays``, and the rays it traced."""
+
+    sim: object
+    layout: Layout
+    mode: int
+    ncols: int
+    patterns: dict
+    shape: tuple
+    stride: int = 0
+    rows: np.ndarray = field(default=None)
+    cols: np.ndarray = field(default=None)
+    probes: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        h, w = self.shape
+        self.stride = grid_stride(self.shape)
+        self.rows = grid_nodes(h, self.stride)
+        self.cols = grid_nodes(w, self.stride)
+
+    # ------------------------------------------------------------------ probes
+    def sampling(self, n_rays: int):
+        s = self.sim.scene.sampling
+        return replace(s, n_rays=int(n_rays), part=0, error_estimate=False, target_error=None,
+                       max_rays=max(s.max_rays, int(n_rays)))
+
+    def probe(self, n_rays: int, rows=None, cols=None) -> Probe:
+        """The probe of the rule of ``n_rays`` at the grid pixels (or at ``rows, cols``)."""
+        grid = rows is None
+        if grid and n_rays in self.probes:
+            return self.probes[n_rays]
+        if grid:
+            rr, cc = np.meshgrid(self.rows, self.cols, indexing="ij")
+            rows, cols = rr.ravel(), cc.ravel()
+        samp = self.sampling(n_rays)
+        out = render_pixels(self.sim, samp, rows, cols, self.mode, self.ncols, self.patterns)
+        norm = normalise(out, self.sim.scene.estimator, n_rays)
+        z, floor, mod, edge = self.layout.phasors(out, norm)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ft = np.abs(out[:, kb.OUT_FTOTAL])
+            off = np.where(ft > 0, 1.0 - np.abs(out[:, kb.OUT_FHIT]) / ft, 0.0)
+        p = Probe(z, floor, mod, edge, off, samp.rule(self.sim._lobe).n)
+        if grid:
+            self.probes[n_rays] = p
+        return p
+
+    def measured(self, n_rays: int, fine: int | None = None) -> np.ndarray:
+        """(B, gh, gw) the rule's phase error measured at the grid pixels against the rule
+        of ``fine`` (default :data:`FINE_FACTOR` x) nodes; NaN where either is invalid."""
+        a = self.probe(n_rays)
+        b = self.probe(fine or FINE_FACTOR * n_rays)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = np.abs(np.angle(a.z * np.conj(b.z)))
+        e[~(np.isfinite(a.z) & np.isfinite(b.z) & (np.abs(a.z) > 0) & (np.abs(b.z) > 0))] = np.nan
+        return e.reshape(e.shape[0], self.rows.size, self.cols.size)
+
+    # ------------------------------------------------------------------ statements
+    def envelope(self, n_rays: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(env, trusted)``: (B, gh, gw) :data:`SAFETY` times the largest measured error
+        over each block's 3 x 3 grid pixels, and (gh, gw) whether all nine are valid and
+        on the monitor (else the block's pixels take their own pilot)."""
+        from scipy.ndimage import maximum_filter, minimum_filter
+
+        e = self.measured(n_rays)
+        good = np.isfinite(e).all(axis=0)
+        trusted = minimum_filter(good.astype(np.uint8), size=3, mode="nearest") > 0
+        env = np.stack([maximum_filter(np.where(np.isfinite(x), x, 0.0), size=3, mode="nearest")
+                        for x in e])
+        return SAFETY * env, trusted
+
+    def grid_statement(self, n_rays: int) -> np.ndarray:
+        """(B, gh, gw) the statement at the grid pixels (the envelope where trusted, else the
+        pixel's own measured error times :data:`SAFETY`, plus its floors): what
+        :meth:`statement` gives there, for :func:`choose_order`."""
+        env, trusted = self.envelope(n_rays)
+        own = SAFETY * self.measured(n_rays)
+        p = self.probe(n_rays)
+        floor = (p.floor + 2.0 * np.nan_to_num(p.off, nan=1.0) * p.edge).reshape(own.shape)
+        floor = floor + ROUNDOFF_PHASE
+        out = np.where(trusted[None], env, own) + floor
+        if p.nodes < MIN_NODES:
+            out = np.where(np.isfinite(out), math.pi, out)
+        return out
+
+    def statement(self, n_rays: int, sums_ok: np.ndarray, images: np.ndarray, deltas,
+                  off: np.ndarray, f_total: np.ndarray) -> tuple[np.ndarray, int]:
+        """(B, H, W) rad: the stated phase error of the rendered rule of ``n_rays`` at every
+        pixel (module docstring), and the number of pixels that took their own pilot.
+        ``sums_ok`` (H, W): pixels with a valid render; ``images`` (nd, nw, K, H, W) the
+        rendered images (their float32 floor); ``off`` (H, W) the share of each lobe's
+        weight off the monitor in the render and ``f_total`` (H, W) its weight
+        (:func:`edge_bound`)."""
+        h, w = self.shape
+        s = self.stride
+        env, trusted = self.envelope(n_rays)
+        bi = np.minimum(np.arange(h) // s, self.rows.size - 1)
+        bj = np.minimum(np.arange(w) // s, self.cols.size - 1)
+        stated = env[:, bi][:, :, bj]
+        off = np.nan_to_num(np.asarray(off, np.float64), nan=1.0)
+        cut = sums_ok & (off > CUT_MEASURED) & (off <= MAX_OFF)
+        local = sums_ok & ~(trusted[bi][:, bj]) | cut
+        rr, cc = np.nonzero(local)
+        if rr.size:
+            a = self.probe(n_rays, rr, cc)
+            e = self._difference(a, self.probe(FINE_FACTOR * n_rays, rr, cc))
+            k = np.nonzero(cut[rr, cc])[0]
+            if k.size:  # across the step: the rule 16 x finer too
+                far = self._difference(self.probe(n_rays, rr[k], cc[k]),
+                                       self.probe(FINE_FACTOR**2 * n_rays, rr[k], cc[k]))
+                e[:, k] = np.maximum(e[:, k], far)
+            stated[:, rr, cc] = SAFETY * e
+        nd, nw = images.shape[:2]
+        stated = stated.reshape(nd, nw, h, w)
+        bounded = np.where((off <= CUT_MEASURED) | (off > MAX_OFF), off, 0.0)
+        stated = (stated + image_floor(images, deltas) + ROUNDOFF_PHASE
+                  + edge_bound(images, deltas, f_total, bounded, self.layout.lmax))
+        if self.probe(n_rays).nodes < MIN_NODES:
+            stated = np.where(np.isfinite(stated), math.pi, stated)
+        stated = np.minimum(stated, math.pi)
+        stated[:, :, ~sums_ok] = np.nan
+        return stated, int(rr.size)
+
+    @staticmethod
+    def _difference(a: Probe, b: Probe) -> np.ndarray:
+        """(B, P) ``|arg(Z_a / Z_b)|``, pi where either is not valid."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = np.abs(np.angle(a.z * np.conj(b.z)))
+        return np.where(np.isfinite(e) & (np.abs(a.z) > 0) & (np.abs(b.z) > 0), e, math.pi)
+
+    def rays(self) -> int:
+        """Rays the pilot traced so far (grid probes), per camera sub-ray."""
+        n_px = self.rows.size * self.cols.size
+        return sum(p.nodes for p in self.probes.values()) * n_px
+
+
+def worst_p95(stated: np.ndarray, mod: np.ndarray, min_modulation: float = 0.05) -> float | None:
+    """The largest over fringes (leading axes) of the P95 over pixels (last axes) of
+    ``stated``, over pixels whose modulation ``mod`` is at least ``min_modulation``."""
+    from ..quantiles import percentile
+
+    worst = None
+    for idx in np.ndindex(*stated.shape[:2]):
+        a = stated[idx][np.isfinite(stated[idx]) & (mod[idx] >= min_modulation)]
+        if a.size:
+            p = percentile(a, 95)
+            worst = p if worst is None else max(worst, p)
+    return worst
+
+
+def choose_order(pilot: Pilot, n0: int, target: float, max_rays: int) -> tuple[int, float | None, list]:
+    """``(n_rays, p95, tried)``: the cheapest rule ``n0 2^k`` (at most ``max_rays``) whose
+    statement's P95 over the grid (worst fringe, modulation >= 0.05) is at most ``target``
+    (rad), else the largest tried; ``tried``: [(n_rays, p95 or None)] in order."""
+    n, tried = int(n0), []
+    while True:
+        st = pilot.grid_statement(n)
+        fine = pilot.probe(FINE_FACTOR * n)
+        mod = np.where(np.nan_to_num(fine.off, nan=1.0) > MAX_OFF, 0.0, fine.mod).reshape(st.shape)
+        p95 = worst_p95(st, mod)
+        tried.append((n, p95))
+        if (p95 is not None and p95 <= target) or 2 * n > max_rays:
+            return n, p95, tried
+        n *= 2

@@ -1,0 +1,299 @@
+"""The run dataset's Zarr encoding and its writer: whole (:func:`write_dataset`) or in parts
+behind a run's chain (:class:`DatasetWriter`), with the same bytes.
+
+Encoding: every camera-image variable (``..., row, col``) is one chunk per image, float32,
+Blosc LZ4 with bit shuffling (:data:`CODEC`), rounded to :data:`KEEP_BITS` significant
+mantissa bits except the absolute coordinates and phases (:data:`FULL_PRECISION`);
+:func:`storage_form` gives a dataset as stored.
+
+Writing in parts: the rendered arrays are final when they are rendered, the chain's when
+they are computed: nothing needs to wait for the end of the run to be written. A run hands its dataset to the
+writer after every step (:meth:`DatasetWriter.offer`); one background thread writes the
+variables the store does not hold yet into ``run.zarr`` (the first time creating it, then
+adding to it), while the run decodes, compares, reconstructs and diagnoses. At the end
+(:meth:`DatasetWriter.finish`) the run waits for what is left, and the group's attributes
+and the consolidated metadata are written last: a store that has them is complete, and the
+run's manifest is written only after that.
+
+What is written is byte for byte what :func:`write_dataset` writes for
+the whole dataset at once (same variables, encodings, rounding and attributes): the
+store is only written in parts. Any variable added to the dataset (by any step) is
+written: the writer knows no names.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+import functools
+import numpy as np
+
+
+#: Variables of a part written per call of ``to_zarr`` up to this many bytes: xarray encodes
+#: (reads) every variable of a call before it writes any, so a call's variables are in
+#: memory at once (a variable larger than this is written alone).
+GROUP_BYTES = 64 * 2**20
+#: A camera-image variable larger than this (as stored) is written chunk by chunk through
+#: Dask (one image at a time, as all were before: 5 MP runs keep their memory) instead of
+#: from one converted copy; none of the Fig. 3 run's is (the largest, its fringe images,
+#: is 126 MB), so it never imports ``dask.array``.
+LARGE_BYTES = 256 * 2**20
+
+
+def _stored_bytes(var) -> int:
+    return var.size * (4 if var.dtype.kind == "f" else var.dtype.itemsize)
+
+
+def _groups(ds) -> list[list[str]]:
+    """The data variables of ``ds`` in groups of at most :data:`GROUP_BYTES` (as stored:
+    float32 for floats), in order; the small ones with the first group."""
+    small, big = [], []
+    for name, var in ds.data_vars.items():
+        (big if var.ndim >= 2 and var.dims[-2:] == ("row", "col") else small).append(name)
+    groups, size = [list(small)], 0
+    for name in big:
+        var = ds[name]
+        nbytes = _stored_bytes(var)
+        if size and size + nbytes > GROUP_BYTES:
+            groups.append([])
+            size = 0
+        groups[-1].append(name)
+        size += nbytes
+    return [g for g in groups if g]
+
+
+def _write_part(ds, path: Path, create: bool) -> None:
+    """Write ``ds`` (a part of a run dataset) into the store ``path``: create it, or add
+    the part's variables to it. No consolidated metadata (see :func:`finish_store`). The
+    camera-image variables are rounded as they are read (:func:`pmdsim.store.lazy_arrays.converted`),
+    a group of at most :data:`GROUP_BYTES` at a time, and Zarr compresses their chunks in
+    its own threads; a part holding Dask arrays (a loaded run's) is computed on Dask's
+    threaded scheduler, passed explicitly (not through ``dask.config``, which is global:
+    the run's other threads use their own)."""
+    import sys
+
+
+    from . import lazy_arrays as lazy
+
+    stored = storage_form(ds, lazy=True)
+    large = {n: lazy.as_dask(v.variable._data) for n, v in stored.data_vars.items()
+             if _stored_bytes(v) > LARGE_BYTES and lazy.is_lazy(v.variable._data)}
+    if large:  # chunk by chunk, as a loaded run's Dask arrays below
+        stored = stored.assign({n: stored[n].copy(data=a) for n, a in large.items()})
+    da = sys.modules.get("dask.array")
+    if da is not None and any(isinstance(v.data, da.Array) for v in stored.variables.values()):
+        from ..render import local_scheduler
+
+        stored.to_zarr(path, mode="w-" if create else "a", consolidated=False,
+                       encoding=_encoding(ds), zarr_format=3, compute=False).compute(
+            scheduler=local_scheduler("threads"))
+        return
+    written: set = set()
+    for k, names in enumerate(_groups(stored)):
+        part = stored[names]
+        # coordinates of the part that came without a variable of this group
+        part = part.assign_coords({c: stored.coords[c] for c in stored.coords
+                                   if c not in part.coords and k == 0})
+        part = part.drop_vars([c for c in part.coords if c in written])
+        part.to_zarr(path, mode="w-" if create and k == 0 else "a", consolidated=False,
+                     encoding=_encoding(part), zarr_format=3)
+        written.update(part.coords)
+
+
+def finish_store(path: Path, attrs: dict) -> None:
+    """Write the group attributes ``attrs`` and the consolidated metadata of the store
+    ``path`` (so that a plain ``xarray.open_zarr(path)`` opens it without a warning)."""
+    import warnings
+
+    import xarray as xr
+    import zarr
+
+    with warnings.catch_warnings():
+        # zarr-python notes that consolidated metadata is not (yet) in the v3 spec; xarray
+        # and zarr-python read it, other readers ignore it and list the store instead
+        warnings.filterwarnings("ignore", message="Consolidated metadata", category=UserWarning)
+        xr.Dataset(attrs=attrs).to_zarr(path, mode="a", consolidated=False, zarr_format=3)
+        zarr.consolidate_metadata(str(path), zarr_format=3)
+
+
+class DatasetWriter:
+    """Writes a run dataset into ``path`` in the background, part by part.
+
+    :meth:`offer` (after each step of the run) queues the variables and coordinates of the
+    dataset that are not written yet; a single thread writes them in order (offers that
+    find nothing new cost nothing). :meth:`finish` waits for every part and writes the
+    attributes and the consolidated metadata. :meth:`close` (on an error or an interrupt)
+    drops what is queued and waits for the part being written, so that no thread writes
+    into a folder being removed."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="pmdsim-dataset")
+        self._latest = None
+        self._written: set = set()
+        self._futures: list[Future] = []
+        self._lock = threading.Lock()
+        self._busy = threading.Lock()  # held while a part is written
+
+    def offer(self, ds) -> None:
+        """Queue the variables of ``ds`` that the store does not hold yet. ``ds`` is
+        copied (shallow): the run may go on changing its own."""
+        with self._lock:
+            self._latest = ds.copy(deep=False)
+        self._futures.append(self._pool.submit(self._write_new))
+
+    @contextlib.contextmanager
+    def paused(self):
+        """No part is being written inside this block (it waits for the current one).
+
+        A run forks its figure processes inside it: a fork copies the locks other threads
+        hold, and a part being written holds Dask's (``dask.tokenize``'s lock): a child
+        forked then waits for it forever."""
+        with self._busy:
+            yield
+
+    def _write_new(self) -> None:
+        with self._busy:
+            self._write_new_part()
+
+    def _write_new_part(self) -> None:
+        with self._lock:
+            ds = self._latest
+        new = [n for n in ds.data_vars if n not in self._written]
+        coords = [c for c in ds.coords if c not in self._written]
+        if not new and not coords:
+            return
+        part = ds[new]
+        # coordinates that came without a variable of their own (e.g. assigned alone)
+        part = part.assign_coords({c: ds.coords[c] for c in coords if c not in part.coords})
+        # index coordinates already in the store need not be written again (a variable
+        # names its dimensions, not them); other coordinates are written with the
+        # variables that list them
+        part = part.drop_vars([c for c in part.coords
+                               if c in self._written and c in part.indexes])
+        _write_part(part, self.path, create=not self._written)
+        self._written.update(part.variables)
+
+    def finish(self, ds) -> Path:
+        """Write what ``ds`` adds, wait for every part, then write the attributes of ``ds``
+        and the consolidated metadata. Raises the first error of a part."""
+        self.offer(ds)
+        try:
+            for f in self._futures:
+                f.result()
+        finally:
+            self._pool.shutdown(wait=True)
+        finish_store(self.path, dict(ds.attrs))
+        return self.path
+
+    def close(self) -> None:
+        """Cancel what is queued and wait for the part being written (after an error)."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+__all__ = ["DatasetWriter", "finish_store"]
+
+
+#: Significant mantissa bits kept (of float32's 23) for the stored camera values, sums,
+#: deviations, modulations, phases within a period and flags' companions: relative
+#: precision 2**-17 = 7.6e-6, finer than a 16-bit camera (1.5e-5 of full scale) and far
+#: below any deviation the chain reports; the zeroed low bits make the data compress ~2x.
+KEEP_BITS = 16
+#: Variables stored with full float32 precision (absolute coordinates and phases: their
+#: absolute precision matters, ~1e-4 monitor px at 2000 px).
+FULL_PRECISION = frozenset({
+    "absolute_phase", "reference_absolute_phase", "monitor_coord_px", "monitor_coord_mm",
+    "reference_monitor_coord_px", "reference_monitor_coord_mm", "specular_u", "specular_v",
+    "surface_to_monitor_mm",
+})
+
+
+def keep_bits(values: np.ndarray, bits: int = KEEP_BITS) -> np.ndarray:
+    """float32 ``values`` rounded (to nearest, ties to even) to ``bits`` significant
+    mantissa bits; NaN and inf unchanged. The relative rounding error is <= 2**-(bits+1).
+    Returns a new array (``values`` is never changed)."""
+    from ..kernels.bits import round_mantissa
+
+    a = np.array(values, dtype=np.float32, order="C", copy=True)
+    drop = 23 - bits
+    if drop > 0 and a.size:
+        round_mantissa(a.reshape(-1).view(np.uint32), drop)  # in place, one pass
+    return a
+
+
+#: Compressor of the camera-image variables: Blosc LZ4 with bit shuffling. On the Fig. 3
+#: run it encodes 512 MB of float32 in 0.5 CPU-s to 72 MB; zstd level 5 (the earlier
+#: choice) makes 50 MB but takes 3.7 CPU-s, zstd level 1 70 MB in 1.0 s. Noisy floats
+#: hardly compress further: the cheap codec is the right trade for a run folder.
+CODEC = dict(cname="lz4", clevel=5, shuffle="bitshuffle")
+
+
+def _image_like(var) -> bool:
+    return var.ndim >= 2 and var.dims[-2:] == ("row", "col")
+
+
+def _encoding(ds) -> dict:
+    """Storage of every (..., row, col) variable: one chunk per camera image, float32,
+    Blosc (:data:`CODEC`, Zarr v3's standard ``blosc`` codec)."""
+    from zarr.codecs import BloscCodec
+
+    enc = {}
+    for name, var in ds.data_vars.items():
+        if _image_like(var):
+            shape = var.shape
+            e = {"chunks": (1,) * (len(shape) - 2) + tuple(shape[-2:]),
+                 "compressors": (BloscCodec(**CODEC),)}
+            if var.dtype == np.float64:
+                e["dtype"] = "float32"
+            enc[name] = e
+    return enc
+
+
+def _stored(name: str, block: np.ndarray) -> np.ndarray:
+    """One chunk as stored: float32, :data:`KEEP_BITS` significant bits unless ``name`` is
+    in :data:`FULL_PRECISION`; other dtypes unchanged."""
+    if block.dtype.kind != "f":
+        return block
+    if name in FULL_PRECISION:
+        return block.astype(np.float32, copy=False)
+    return keep_bits(block)
+
+
+def storage_form(ds, lazy: bool = False):
+    """``ds`` as the run folder stores it: image-like float variables (camera rows x
+    columns) in float32 with :data:`KEEP_BITS` significant bits, except
+    :data:`FULL_PRECISION` (float32, all bits); everything else unchanged (a shallow copy).
+
+    With ``lazy`` the image-like variables are converted when read
+    (:func:`pmdsim.store.lazy_arrays.converted`): writing them holds a rounded copy of one variable
+    at a time instead of one of the whole dataset."""
+    from . import lazy_arrays as lazy
+
+    new = {}
+    for name, var in ds.data_vars.items():
+        if not _image_like(var):
+            continue
+        if lazy:
+            arr = lazy.converted(var.variable._data, functools.partial(_stored, name))
+            new[name] = var.copy(data=arr)
+        elif var.dtype.kind == "f":
+            new[name] = var.copy(data=_stored(name, np.asarray(var.values)))
+    return ds.assign(new)  # one merge (a merge per variable costs ~10 ms each)
+
+
+def write_dataset(ds, path: str | Path) -> Path:
+    """Write a run dataset to ``path`` (Zarr v3, chunked and compressed, consolidated
+    metadata so that a plain ``xarray.open_zarr(path)`` opens it without a warning);
+    see :func:`storage_form` for the precision.
+
+    The camera-image variables are rounded and compressed one image at a time on Dask's
+    threaded scheduler (NumPy and Blosc release the GIL), whatever scheduler is active
+    (a ``dask.distributed`` client would ship the run's arrays to its workers). A run
+    writes its dataset in parts while it computes (:class:`DatasetWriter`), with the same
+    bytes."""
+    path = Path(path)
+    _write_part(ds, path, create=True)
+    finish_store(path, dict(ds.attrs))
+    return path

@@ -1,0 +1,120 @@
+"""Image scaling, image files (TIFF, PNG) and atomic run folders (:mod:`pmdsim.io`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pmdsim.store.folder import atomic_run_dir, is_run_dir
+from pmdsim.store.images import (IMAGE_SUFFIX, exposure_factor, read_image, to_integer_image,
+                                 write_image)
+from pmdsim.store.manifest import write_manifest
+
+
+
+def test_exposure_factor_is_run_wide_and_ignores_nan():
+    a = np.array([[1.0, np.nan], [2.0, 0.5]], np.float32)
+    b = np.array([4.0, np.nan, -1.0])
+    assert exposure_factor([a, b]) == pytest.approx(0.95 * 65535 / 4.0)
+    assert exposure_factor([a], bit_depth=8, headroom=1.0) == pytest.approx(255 / 2.0)
+    assert exposure_factor([np.full(3, np.nan), np.zeros(2)]) == 1.0
+    assert exposure_factor([]) == 1.0
+    with pytest.raises(ValueError, match="bit_depth"):
+        exposure_factor([a], bit_depth=12)
+
+
+def test_to_integer_image_rounds_clips_and_zeroes_nan():
+    v = np.array([[np.nan, -1.0, 0.2, 0.7], [1.0, 2.0, np.inf, 0.5]])
+    img = to_integer_image(v, exposure=100.0, bit_depth=8)
+    assert img.dtype == np.uint8
+    np.testing.assert_array_equal(img, [[0, 0, 20, 70], [100, 200, 0, 50]])
+    img16 = to_integer_image(v, exposure=1e5, bit_depth=16)
+    assert img16.dtype == np.uint16 and img16[1, 0] == 65535 and img16[0, 2] == 20000
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("fmt", ["tiff", "png"])
+def test_image_files_round_trip(tmp_path, fmt, dtype):
+    rng = np.random.default_rng(1)
+    img = rng.integers(0, np.iinfo(dtype).max, size=(7, 11), endpoint=True).astype(dtype)
+    path = write_image(tmp_path / f"sub/img{IMAGE_SUFFIX[fmt]}", img, fmt,
+                           {"exposure": 2.5})
+    back = read_image(path)
+    assert back.dtype == dtype
+    np.testing.assert_array_equal(back, img)
+
+
+def test_png_is_readable_by_pillow(tmp_path):
+    Image = pytest.importorskip("PIL.Image")
+    img = (np.arange(12 * 5, dtype=np.uint16).reshape(5, 12) * 1000).astype(np.uint16)
+    path = write_image(tmp_path / "a.png", img, "png")
+    with Image.open(path) as im:
+        assert im.size == (12, 5)
+        np.testing.assert_array_equal(np.asarray(im).astype(np.uint16), img)
+    img8 = img.astype(np.uint8)
+    with Image.open(write_image(tmp_path / "b.png", img8, "png")) as im:
+        assert im.mode == "L"
+        np.testing.assert_array_equal(np.asarray(im), img8)
+
+
+def test_write_image_rejects_bad_input(tmp_path):
+    with pytest.raises(ValueError, match="image_format"):
+        write_image(tmp_path / "x.bmp", np.zeros((2, 2), np.uint8), "bmp")
+    with pytest.raises(ValueError, match="uint8/uint16"):
+        write_image(tmp_path / "x.png", np.zeros((2, 2), np.float32), "png")
+
+
+def _finish(folder):
+    (folder / "data.txt").write_text("payload")
+    write_manifest(folder, {"ok": True})
+
+
+def test_atomic_run_dir_success(tmp_path):
+    out = tmp_path / "run"
+    with atomic_run_dir(out) as tmp:
+        assert tmp.name.startswith("run.tmp-") and tmp.parent == out.parent
+        assert not out.exists()
+        _finish(tmp)
+    assert is_run_dir(out) and (out / "data.txt").read_text() == "payload"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_atomic_run_dir_failure_removes_temp(tmp_path):
+    out = tmp_path / "nested" / "run"
+    with pytest.raises(KeyError):
+        with atomic_run_dir(out) as tmp:
+            _finish(tmp)
+            raise KeyError("boom")
+    assert not out.exists() and list(out.parent.iterdir()) == []
+
+
+def test_atomic_run_dir_overwrite_rules(tmp_path):
+    out = tmp_path / "run"
+    with atomic_run_dir(out) as tmp:
+        _finish(tmp)
+    with pytest.raises(FileExistsError, match="--overwrite"):
+        with atomic_run_dir(out):
+            pytest.fail("must not start")
+    with atomic_run_dir(out, overwrite=True) as tmp:
+        (tmp / "new.txt").write_text("second")
+        write_manifest(tmp, {"ok": 2})
+    assert (out / "new.txt").exists() and not (out / "data.txt").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+    # An empty folder may be replaced; a non-run folder or a file never.
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with atomic_run_dir(empty, overwrite=True) as tmp:
+        _finish(tmp)
+    assert is_run_dir(empty)
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "keep.txt").write_text("keep")
+    with pytest.raises(FileExistsError, match="not a pmdsim run folder"):
+        with atomic_run_dir(other, overwrite=True):
+            pass
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    with pytest.raises(FileExistsError, match="not a folder"):
+        with atomic_run_dir(afile, overwrite=True):
+            pass
+    assert (other / "keep.txt").exists() and afile.read_text() == "x"
