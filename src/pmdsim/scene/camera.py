@@ -316,6 +316,15 @@ class Camera:
         scale = self.numerical_aperture if self.telecentric else 0.5 * self.aperture_mm
         return scale * np.concatenate(parts, axis=1)
 
+    def pixel_aperture_points(self, rows, cols) -> np.ndarray:
+        """(P, m, 2) :meth:`aperture_points` of the pixels (rows[k], cols[k]) (int arrays),
+        each from its own camera row's samples."""
+        out = np.empty((rows.size, self.aperture_samples, 2))
+        for r in np.unique(rows):
+            sel = rows == r
+            out[sel] = self.aperture_points(int(r), self.width)[cols[sel]]
+        return out
+
     def vision_rays(self, rows, cols):
         """Origins and unit directions (P, S, 3) of every pixel's S vision rays (sub-pixels
         x aperture samples, sub-pixel major) for pixels (rows[k], cols[k]); rows from the
@@ -334,10 +343,7 @@ class Camera:
         if self.focus_distance_mm is None:
             raise ValueError("camera.focus_distance_mm: not resolved; build the camera through "
                              "Scene.from_config or Camera.focused_on(surface)")
-        ap = np.empty((rows.size, self.aperture_samples, 2))
-        for r in np.unique(rows):
-            sel = rows == r
-            ap[sel] = self.aperture_points(int(r), self.width)[cols[sel]]
+        ap = self.pixel_aperture_points(rows, cols)
         focus = chief * self.focus_distance_mm  # (P, n2, 3), Z_c = s_f
         a3 = np.concatenate([ap, np.zeros(ap.shape[:-1] + (1,))], axis=-1)  # (P, m, 3)
         dcam = focus[:, :, None, :] - a3[:, None, :, :]  # (P, n2, m, 3)
@@ -359,10 +365,7 @@ class Camera:
         if self.focus_distance_mm is None:
             raise ValueError("camera.focus_distance_mm: not resolved; build the camera through "
                              "Scene.from_config or Camera.focused_on(surface)")
-        sines = np.empty((rows.size, self.aperture_samples, 2))
-        for r in np.unique(rows):
-            sel = rows == r
-            sines[sel] = self.aperture_points(int(r), self.width)[cols[sel]]
+        sines = self.pixel_aperture_points(rows, cols)
         lz = np.sqrt(1.0 - np.sum(sines * sines, axis=-1, keepdims=True))
         dcam = np.concatenate([sines, lz], axis=-1)  # (P, m, 3) unit
         sf = self.focus_distance_mm
@@ -386,10 +389,7 @@ class Camera:
         if self.focus_distance_mm is None:
             raise ValueError("camera.focus_distance_mm: not resolved; build the camera through "
                              "Scene.from_config or Camera.focused_on(surface)")
-        ap = np.empty((rows.size, self.aperture_samples, 2))
-        for r in np.unique(rows):
-            sel = rows == r
-            ap[sel] = self.aperture_points(int(r), self.width)[cols[sel]]
+        ap = self.pixel_aperture_points(rows, cols)
         return chief, ap, float(self.focus_distance_mm)
 
     def focused_on(self, surface) -> "Camera":
