@@ -73,10 +73,16 @@ def test_ctrl_c_during_start_up_is_one_line_and_130(tmp_path):
         p.send_signal(signal.SIGINT)
         _, stderr = p.communicate(timeout=300)
         assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, (delay_s, stderr)
-        assert p.returncode in (0, 130), (delay_s, p.returncode, stderr)
-        if p.returncode == 130:
-            said += "interrupted" in stderr
+        # 130, or killed by SIGINT (-2; the shell shows 130 too): CPython ends a process that
+        # way when a KeyboardInterrupt passed through an exec() of a string, as the standard
+        # library's dataclasses do while a module is imported, even when it was handled
+        assert p.returncode in (0, 130, -signal.SIGINT), (delay_s, p.returncode, stderr)
+        if "interrupted" in stderr:
+            said += 1
+            assert p.returncode != 0, stderr
             assert not out.exists() and not list(tmp_path.glob(f"dec{k}.tmp-*"))
+        else:  # finished before the signal (or during the interpreter's exit): complete
+            assert (out / "statistics.json").exists(), (delay_s, p.returncode, stderr)
     assert said >= 3
 
 

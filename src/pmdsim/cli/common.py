@@ -49,9 +49,11 @@ def _guard():
     temporary folder is already removed); anything else propagates (traceback, exit 1)."""
     from ..store.folder_lock import Terminated
 
+    bad_input = _bad_input()  # imported here, never in an except clause (a Ctrl-C inside an
+    # import leaves the module half loaded, and importing it again would be a new error)
     try:
         yield
-    except _bad_input() as err:
+    except bad_input as err:
         _fail(str(err))
     except KeyboardInterrupt as err:
         term = isinstance(err, Terminated)
@@ -102,6 +104,12 @@ def _main(
     """Simulate Phase Measuring Deflectometry (PMD) of scattering surfaces by reverse ray
     tracing with a BRDF-weighted ray bundle per camera pixel."""
     from . import interrupt
+
+    # What every command's guard needs (NumPy, the configuration, the run's claim) is loaded
+    # while the start-up handler still holds SIGINT: a Ctrl-C inside these imports is the
+    # start-up's one line, never a half-imported NumPy that the guard would import again.
+    _bad_input()
+    from ..run.claim import Terminated  # noqa: F401
 
     interrupt.release()  # the start-up is over: SIGINT unwinds the command (KeyboardInterrupt)
     _warnings_as_messages()

@@ -21,10 +21,15 @@ EXIT_INTERRUPTED = 130
 
 
 def _interrupted(signum, frame) -> None:
-    sys.stderr.write("interrupted: stopped before the command began its work; nothing was "
-                     "written\n")
-    sys.stderr.flush()
-    raise SystemExit(EXIT_INTERRUPTED)
+    """Exit at once: nothing has been written yet, and an exception raised here would unwind
+    through whatever was being imported (a half-loaded NumPy, a pydantic schema being built
+    in compiled code, which wraps it into an error of its own and a traceback)."""
+    try:
+        sys.stderr.write("interrupted: stopped before the command began its work; nothing was "
+                         "written\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(EXIT_INTERRUPTED)
 
 
 def _is_program() -> bool:
