@@ -109,7 +109,7 @@ def _main(
     # while the start-up handler still holds SIGINT: a Ctrl-C inside these imports is the
     # start-up's one line, never a half-imported NumPy that the guard would import again.
     _bad_input()
-    from ..run.claim import Terminated  # noqa: F401
+    from ..store.folder_lock import Terminated  # noqa: F401
 
     interrupt.release()  # the start-up is over: SIGINT unwinds the command (KeyboardInterrupt)
     _warnings_as_messages()
