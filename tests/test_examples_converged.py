@@ -54,7 +54,8 @@ def test_example_states_its_numerical_error(path):
         if dots is not None and fr_cfg is None:
             from pmdsim.patterns import resolve_dots
 
-            images, err = sim.render_dots(resolve_dots(small)[:2], with_error=True)
+            images, err = sim.render_dots(resolve_dots(dots, small.monitor.resolution)[:2],
+                                          with_error=True)
             assert err is not None and np.all(np.isfinite(err[np.isfinite(images)]))
 
 

@@ -240,7 +240,7 @@ MALFORMED = {
     "image files as one string": FIG3 + '\n[patterns.images]\nfiles = "a.png"\n',
     "images as a number": FIG3 + "\n[patterns]\nimages = 3\n",
     "a NUL in a file name": FIG3 + '\n[patterns.images]\nfiles = ["a\\u0000b.png"]\n',
-    "n_rays a boolean": FIG3.replace("n_rays = 256", "n_rays = true"),
+    "n_rays a boolean": FIG3.replace("target_error_mrad = 0.1", "n_rays = true"),
     "gamma NaN": FIG3.replace("gamma = 1.0", "gamma = nan"),
     "position inf": FIG3.replace("position_mm = [-845.236523481399", "position_mm = [-inf"),
 }
@@ -260,6 +260,7 @@ EXPECTED_FIELD = {
 
 @pytest.mark.parametrize("case", list(MALFORMED))
 def test_malformed_sections_fail_with_a_config_error(case, tmp_path):
+    assert MALFORMED[case] != FIG3, "the edit did not apply: the example's text changed"
     path = tmp_path / "bad.toml"
     path.write_text(MALFORMED[case])
     with pytest.raises(ConfigError) as info:

@@ -80,15 +80,15 @@ cfg = parse_config(merge(base_dict(), {{
 sim = Simulation.from_config(cfg)
 res = sim.render_fringes((23.0, 184.0), ("x", "y"), 4)
 from numba.core.registry import cpu_target
-np.savez({out!r}, images=res.images, sums=res.sums, err=res.sums_err)
+np.savez({out!r}, images=res.images, sums=res.sums, err=res.stated_phase_error)
 print(json.dumps(cpu_target.target_context.codegen()._tm_features.endswith("-prefer-256-bit")))
 """
 
 
 def test_the_render_does_not_depend_on_the_vector_width(tmp_path):
     """The Fig. 3 kernel path (cone rule, Ward, continuous monitor: the harmonic sums) with
-    LLVM's 256-bit vectors and with pmdsim's choice: the same complex sums and their
-    numerical errors to 1e-12 of the largest sum, the float32 images to their rounding
+    LLVM's 256-bit vectors and with pmdsim's choice: the same complex sums to 1e-12 of the
+    largest sum, the float32 images and the stated phase errors to their rounding
     (reassociated sums round differently per vector width)."""
     if _jit.wide_vector_features() is None and "-prefer-256-bit" not in os.environ.get(
             "NUMBA_CPU_FEATURES", ""):
@@ -111,6 +111,7 @@ def test_the_render_does_not_depend_on_the_vector_width(tmp_path):
     for key in ("images", "sums", "err"):  # images float32: to their rounding
         a, b = runs["256"][key], runs["auto"][key]
         assert np.array_equal(np.isnan(a), np.isnan(b)) and np.isfinite(a).any()
-        tol = (1e-6 if a.dtype == np.float32 else 1e-12) * np.nanmax(np.abs(runs["256"][
-            "sums" if key == "err" else key]))
+        # the stated phase error (rad) from the pilot: its floors read the float32 images
+        tol = (1e-6 if a.dtype == np.float32 or key == "err" else 1e-12) * np.nanmax(
+            np.abs(runs["256"][key]))
         assert np.nanmax(np.abs(a - b)) <= tol, key

@@ -78,7 +78,7 @@ def test_stated_dot_errors_cover_a_render_with_16_times_the_rays():
 
     cfg = dict(load_config(ROOT / "examples" / "dot_scan.toml").expand())["kinematic"]
     small = reduced_config(cfg, (64, 52))
-    dots = resolve_dots(small)[10:14]
+    dots = resolve_dots(small.patterns.dots, small.monitor.resolution)[10:14]
     tables = []
     for n, seed in ((400, 1), (6400, 2)):
         sim = Simulation.from_config(with_sampling(small, n_rays=n, seed=seed))

@@ -156,3 +156,45 @@ def test_image_edge_is_a_rim_too():
     near_edge = m & ((pix[..., 0] < 1.5) | (pix[..., 0] > w - 2.5) | (pix[..., 1] < 1.5)
                      | (pix[..., 1] > h - 2.5))
     assert near_edge.sum() > 100 and (rec.node_status[near_edge] == NODE_RIM_FIT).all()
+
+
+def test_rim_fit_equals_a_least_squares_fit_of_its_block():
+    """The compiled rim fit against numpy.linalg.lstsq of the same block, node by node: the
+    cubic's value at the node and its noise gain sqrt((A^T A)^-1 [0, 0]); a block whose
+    valid pixels lie on one row (the cubic in the row direction not fixed) is not served."""
+    from pmdsim.measure.interpolate import _RIM_TERMS, rim_fit
+
+    rng = np.random.default_rng(7)
+    h, w = 23, 31  # h != w: a swapped axis fails
+    rr, cc = np.mgrid[0:h, 0:w]
+    u = 0.3 * cc + 0.02 * cc * rr - 3e-4 * rr**3 + rng.normal(0, 0.01, (h, w))
+    v = -0.2 * rr + 1e-3 * cc**2 + rng.normal(0, 0.01, (h, w))
+    valid = ((cc - 14.0) ** 2 / 150 + (rr - 10.0) ** 2 / 60) < 1
+    valid[12, :] = False
+    cols = np.concatenate([rng.uniform(0, w - 1, 300), [3.2]])
+    rows = np.concatenate([rng.uniform(0, h - 1, 300), [20.4]])
+    line = np.zeros_like(valid)
+    line[20, :] = True  # only the last node's own row
+    for window in (6, 8):
+        ru, rv, gain = rim_fit(u, v, valid, cols, rows, window)
+        half = window // 2
+        served = 0
+        for k in range(cols.size - 1):
+            c0, r0 = int(np.floor(cols[k])) - half + 1, int(np.floor(rows[k])) - half + 1
+            pr, pc = np.mgrid[r0:r0 + window, c0:c0 + window]
+            ok = (pr >= 0) & (pr < h) & (pc >= 0) & (pc < w)
+            ok[ok] = valid[pr[ok], pc[ok]]
+            dc, dr = (pc[ok] - cols[k]) / half, (pr[ok] - rows[k]) / half
+            a = np.stack([dc**i * dr**j for i, j in _RIM_TERMS], axis=1)
+            if ok.sum() < len(_RIM_TERMS) or np.linalg.matrix_rank(a) < len(_RIM_TERMS):
+                assert not np.isfinite(gain[k]) and np.isnan(ru[k]), k
+                continue
+            served += 1
+            cu = np.linalg.lstsq(a, u[pr[ok], pc[ok]], rcond=None)[0][0]
+            cv = np.linalg.lstsq(a, v[pr[ok], pc[ok]], rcond=None)[0][0]
+            g = np.sqrt(np.linalg.inv(a.T @ a)[0, 0])
+            assert ru[k] == pytest.approx(cu, abs=1e-9) and rv[k] == pytest.approx(cv, abs=1e-9)
+            assert gain[k] == pytest.approx(g, rel=1e-9)
+        assert served > 100
+        lu, _, lg = rim_fit(u, v, line, cols[-1:], rows[-1:], window)
+        assert np.isnan(lu[0]) and lg[0] == np.inf

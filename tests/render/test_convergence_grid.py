@@ -43,6 +43,9 @@ def _render(cfg, monkeypatch, grid_pixels: int, fused: bool = True):
     with monkeypatch.context() as mp:
         mp.setattr(rows, "CONVERGENCE_GRID_PIXELS", grid_pixels)
         mp.setattr(simulation_mod, "convergence_of_ratios", spy)
+        # the embedded rules' path (Fig. 3's fringes take the pilot's: this one remains for
+        # a rule on a non-smooth integrand below 2 x replicates nodes)
+        mp.setattr(simulation_mod.Simulation, "pilot_applies", lambda self: False)
         if not fused:
             mp.setattr(simulation_mod, "fuses", lambda *args: False)
         sim = Simulation.from_config(cfg)

@@ -91,8 +91,11 @@ def test_rows_within_the_reference_error_are_not_resolved(study):
 
 
 def test_a_reference_that_is_not_converged_is_not_called_converged(study):
-    """At N = 64 every fringe's reference is within 1 mrad; a reference of 16 nodes is not,
-    for the x 12 px fringes (their phase runs along the wide lobe), and says so."""
+    """A fringe is called converged only where the reference's stated error is within
+    1 mrad: at N = 64 the wide fringes are; a reference of 16 nodes is not for the x 12 px
+    fringes (their phase runs along the wide lobe), and says so. (At N = 64 the y 12 px
+    reference is 0.8 mrad RMS from the 1024-node render and states 1.6 mrad, the pilot's
+    safety factor of 2: not called converged.)"""
     cfg, res = study
     low = convergence_study(cfg, n_values=(4, 16), estimators=("radiometric",),
                             camera_size=(20, 16), diagnostics=False)
@@ -103,7 +106,9 @@ def test_a_reference_that_is_not_converged_is_not_called_converged(study):
         assert set(by) == {(d, w) for d in ("x", "y") for w in WIDTHS}
         for f in by.values():
             assert f["converged"] == (f["error_rms_rad"] <= REFERENCE_CONVERGED_RAD)
-    assert all(f["converged"] for f in res.meta["reference"]["fringes"])
+    called = {(f["direction"], f["width_px"]) for f in res.meta["reference"]["fringes"]
+              if f["converged"]}
+    assert {("x", 160.0), ("y", 160.0), ("x", 12.0)} <= called
     assert [(f["direction"], f["width_px"]) for f in low.meta["reference"]["fringes"]
             if not f["converged"]] == [("x", 12.0)]
 

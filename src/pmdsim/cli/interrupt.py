@@ -24,10 +24,10 @@ def _interrupted(signum, frame) -> None:
     """Exit at once: nothing has been written yet, and an exception raised here would unwind
     through whatever was being imported (a half-loaded NumPy, a pydantic schema being built
     in compiled code, which wraps it into an error of its own and a traceback)."""
-    try:
-        sys.stderr.write("interrupted: stopped before the command began its work; nothing was "
-                         "written\n")
-        sys.stderr.flush()
+    try:  # straight to the file descriptor: sys.stderr may be inside a write of its own
+        # (a reentrant call of its buffer is an error, and the line would be lost)
+        os.write(2, b"interrupted: stopped before the command began its work; nothing was "
+                    b"written\n")
     finally:
         os._exit(EXIT_INTERRUPTED)
 

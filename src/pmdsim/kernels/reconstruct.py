@@ -221,3 +221,117 @@ def node_support(valid, cols, rows, margin, status):
                     if not valid[r0 + a, c0 + b]:
                         full = False
         status[k] = SUPPORT_SPLINE if full else SUPPORT_RIM
+
+
+#: The smallest Cholesky pivot (of the normal matrix scaled to a unit diagonal) that
+#: :func:`rim_fit_nodes` takes as determined: a block whose valid pixels do not fix the cubic
+#: (too few, or all on a line) has a pivot of the order of the rounding, 1e-16.
+RIM_MIN_PIVOT = 1e-10
+
+
+@parallel_jit(fastmath=False)
+def rim_fit_nodes(u, v, valid, cols, rows, window, ti, tj, out_u, out_v, gain):
+    """The rim fit at the fractional pixels (cols[k], rows[k]): the polynomial
+    ``sum_t c_t dc^ti[t] dr^tj[t]`` (dc, dr: the pixel's offset from the node / (window //
+    2)) fitted by least squares to the valid pixels of ``u`` and ``v`` in the ``window`` x
+    ``window`` block floor - window/2 + 1 .. floor + window/2 about the node, evaluated at
+    the node (``c_0``: the term ti = tj = 0 comes first): ``out_u``, ``out_v``; ``gain`` =
+    sqrt(e0^T G^-1 e0) (G the normal matrix: the value's standard deviation per unit noise
+    of each pixel). NaN / inf where the block holds fewer valid pixels than terms or G's
+    unit-diagonal Cholesky pivot falls below :data:`RIM_MIN_PIVOT`. NumPy reference:
+    ``numpy.linalg.lstsq`` of the same block (tests/measure)."""
+    h, w = valid.shape
+    half = window // 2
+    nt = ti.shape[0]
+    for k in numba.prange(cols.shape[0]):
+        g = np.zeros((nt, nt))
+        bu = np.zeros(nt)
+        bv = np.zeros(nt)
+        a = np.empty(nt)
+        pc = np.empty(4)
+        pr = np.empty(4)
+        c = cols[k]
+        r = rows[k]
+        c0 = math.floor(c) - (half - 1)
+        r0 = math.floor(r) - (half - 1)
+        count = 0
+        for jr in range(window):
+            rr = r0 + jr
+            if rr < 0 or rr >= h:
+                continue
+            dr = (rr - r) / half
+            for jc in range(window):
+                cc = c0 + jc
+                if cc < 0 or cc >= w or not valid[rr, cc]:
+                    continue
+                dc = (cc - c) / half
+                pc[0] = 1.0
+                pr[0] = 1.0
+                for p in range(1, 4):
+                    pc[p] = pc[p - 1] * dc
+                    pr[p] = pr[p - 1] * dr
+                for t in range(nt):
+                    a[t] = pc[ti[t]] * pr[tj[t]]
+                fu = u[rr, cc]
+                fv = v[rr, cc]
+                for t in range(nt):
+                    bu[t] += a[t] * fu
+                    bv[t] += a[t] * fv
+                    for s in range(t + 1):
+                        g[t, s] += a[t] * a[s]
+                count += 1
+        out_u[k] = np.nan
+        out_v[k] = np.nan
+        gain[k] = np.inf
+        if count < nt:
+            continue
+        # Cholesky of D^-1/2 G D^-1/2 (lower triangle of g, unit diagonal), in place
+        d = np.empty(nt)
+        ok = True
+        for t in range(nt):
+            if not g[t, t] > 0.0:
+                ok = False
+                break
+            d[t] = 1.0 / math.sqrt(g[t, t])
+        if not ok:
+            continue
+        for t in range(nt):
+            for s in range(t + 1):
+                g[t, s] *= d[t] * d[s]
+        for j in range(nt):
+            x = g[j, j]
+            for p in range(j):
+                x -= g[j, p] * g[j, p]
+            if not x > RIM_MIN_PIVOT:
+                ok = False
+                break
+            g[j, j] = math.sqrt(x)
+            for i in range(j + 1, nt):
+                y = g[i, j]
+                for p in range(j):
+                    y -= g[i, p] * g[j, p]
+                g[i, j] = y / g[j, j]
+        if not ok:
+            continue
+        # z = G^-1 e0 = D (L L^T)^-1 D e0: forward then back substitution
+        z = np.zeros(nt)
+        z[0] = d[0]
+        for i in range(nt):
+            y = z[i]
+            for p in range(i):
+                y -= g[i, p] * z[p]
+            z[i] = y / g[i, i]
+        for i in range(nt - 1, -1, -1):
+            y = z[i]
+            for p in range(i + 1, nt):
+                y -= g[p, i] * z[p]
+            z[i] = y / g[i, i]
+        su = 0.0
+        sv = 0.0
+        for t in range(nt):
+            z[t] *= d[t]
+            su += z[t] * bu[t]
+            sv += z[t] * bv[t]
+        out_u[k] = su
+        out_v[k] = sv
+        gain[k] = math.sqrt(abs(z[0]))

@@ -28,6 +28,7 @@ from ..kernels.reconstruct import (
     SUPPORT_RIM,
     SUPPORT_SPLINE,
     node_support,
+    rim_fit_nodes,
 )
 from ..kernels.surface import bspline_eval_pair
 from .integrate import _lstsq
@@ -152,47 +153,20 @@ RIM_MAX_GAIN = 1.0
 _RIM_TERMS = tuple((i, j) for d in range(RIM_DEGREE + 1) for j in range(d + 1) for i in (d - j,))
 
 
-def rim_fit(u, v, valid, cols, rows, window=RIM_WINDOWS[0], block=1024):
+def rim_fit(u, v, valid, cols, rows, window=RIM_WINDOWS[0]):
     """(u, v, gain) at the fractional pixels (cols, rows) (K,) by the rim fit on the
     ``window`` x ``window`` block (see :data:`RIM_WINDOWS`); gain inf (and u, v NaN) where
-    the valid pixels of the block do not determine the cubic. ``block`` nodes at a time
-    (about 4 kB of temporaries each)."""
-    h, w = valid.shape
-    n = int(window)
-    half = n // 2
-    off = np.arange(n)
-    out_u = np.full(cols.shape, np.nan)
-    out_v = np.full(cols.shape, np.nan)
-    gain = np.full(cols.shape, np.inf)
-    nt = len(_RIM_TERMS)
-    for s0 in range(0, cols.size, block):
-        c = cols[s0:s0 + block]
-        r = rows[s0:s0 + block]
-        cc = (np.floor(c).astype(np.int64) - (half - 1))[:, None, None] + off[None, None, :]
-        rr = (np.floor(r).astype(np.int64) - (half - 1))[:, None, None] + off[None, :, None]
-        inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
-        ci = np.clip(cc, 0, w - 1)
-        ri = np.clip(rr, 0, h - 1)
-        wgt = (inside & valid[ri, ci]).reshape(len(c), -1)
-        # local coordinates about the node, scaled to about [-1, 1]
-        dc = np.broadcast_to((cc - c[:, None, None]) / half, (len(c), n, n)).reshape(len(c), -1)
-        dr = np.broadcast_to((rr - r[:, None, None]) / half, (len(c), n, n)).reshape(len(c), -1)
-        a = np.stack([dc**i * dr**j for i, j in _RIM_TERMS], axis=-1) * wgt[..., None]
-        g = np.einsum("kpt,kps->kts", a, a)
-        fu = np.where(wgt, u[ri, ci].reshape(len(c), -1), 0.0)
-        fv = np.where(wgt, v[ri, ci].reshape(len(c), -1), 0.0)
-        bu = np.einsum("kpt,kp->kt", a, fu)
-        bv = np.einsum("kpt,kp->kt", a, fv)
-        lam, vec = np.linalg.eigh(g)
-        ok = (wgt.sum(axis=1) >= nt) & (lam[:, 0] > 1e-10 * lam[:, -1])
-        inv0 = np.where(ok[:, None], vec[:, 0, :] / np.where(ok[:, None], lam, 1.0), 0.0)
-        # (G^-1 b)[0] = sum_t V[0, t] (V[:, t] . b) / lam_t; (G^-1)[0, 0] = sum_t V[0, t]^2 / lam_t
-        out_u[s0:s0 + block] = np.where(ok, np.einsum("kt,kst,ks->k", inv0, vec, bu), np.nan)
-        out_v[s0:s0 + block] = np.where(ok, np.einsum("kt,kst,ks->k", inv0, vec, bv), np.nan)
-        gain[s0:s0 + block] = np.where(ok, np.sqrt(np.abs(np.einsum("kt,kt->k", inv0, vec[:, 0, :]))), np.inf)
+    the valid pixels of the block do not determine the cubic (compiled:
+    :func:`pmdsim.kernels.reconstruct.rim_fit_nodes`)."""
+    ti = np.array([i for i, _ in _RIM_TERMS], np.int64)
+    tj = np.array([j for _, j in _RIM_TERMS], np.int64)
+    cols = np.ascontiguousarray(cols, np.float64)
+    rows = np.ascontiguousarray(rows, np.float64)
+    out_u, out_v, gain = np.empty(cols.shape), np.empty(cols.shape), np.empty(cols.shape)
+    rim_fit_nodes(np.ascontiguousarray(u, np.float64), np.ascontiguousarray(v, np.float64),
+                  np.ascontiguousarray(valid, np.bool_), cols, rows, int(window), ti, tj,
+                  out_u, out_v, gain)
     return out_u, out_v, gain
-
-
 
 
 def maps_at(u, v, valid, cu, cv, cols, rows, status):

@@ -305,29 +305,37 @@ class Simulation:
                     if fin is not None:
                         fin(r0, r1, full)
                     return None
-                return kernel(geo, rot).reshape(r1 - r0, width, ncols)
+                counts: list[int] = []
+                return kernel(geo, rot, counts=counts).reshape(r1 - r0, width, ncols), sum(counts)
             # camera optics: S vision rays per pixel, each with its own scattered bundle,
             # one camera row per kernel call; the pixel's sums are the mean over its rays
             res = full[r0:r1] if full is not None else np.empty((r1 - r0, width, ncols))
+            counts = None if full is not None else []
             for r in range(r0, r1):
                 geo, _ = vision_geometry_rows(scene, r)
                 if delta or samp.mode != "random":
                     rot = np.zeros((0, 2))
                 else:
                     rot = np.random.default_rng([samp.seed, r]).random((geo.shape[0], 2))
-                out = kernel(geo, rot).reshape(width, n_sub, ncols)
+                out = kernel(geo, rot, counts=counts).reshape(width, n_sub, ncols)
                 res[r - r0] = reduce_subrays(out, scene.estimator)
             if fin is not None:
                 fin(r0, r1, full)
-            return None if full is not None else res
+            return None if full is not None else (res, sum(counts))
 
         parts = self._compute(tile, self._tiles(), progress)
-        return full if full is not None else np.concatenate(parts, axis=0)
+        if full is not None:
+            return full
+        # a cluster's tiles count their rays in the worker's process: they come back with
+        # the sums (appended there, they would be lost)
+        self._traced.extend(int(n) for _, n in parts)
+        return np.concatenate([res for res, _ in parts], axis=0)
 
     def _kernel(self, scene, mode, ncols, table_u=None, table_v=None, k_u=None, k_v=None,
                 images=None, dots=None, orient=True):
         """The bundle kernel of ``scene`` (its sample set) for ``mode``: ``kernel(geo, rot,
-        out=None)`` writes the sums (P, ncols) of the geometry rows ``geo``; with
+        out=None, counts=None)`` writes the sums (P, ncols) of the geometry rows ``geo`` and
+        appends the rays it traced to ``counts`` (default: this simulation's count); with
         ``orient`` it first turns their cone bases onto the lobe's axis in place (as each
         pass needs it; :meth:`~pmdsim.scene.sampling.ConeSampling.orient` is not
         idempotent)."""
@@ -357,9 +365,10 @@ class Simulation:
         var = None if delta else scene.brdf_variation
         per_row, traced = int(w_ray.size), self._traced
 
-        def kernel(geo, rot, out=None):
+        def kernel(geo, rot, out=None, counts=None):
             out = np.empty((geo.shape[0], ncols)) if out is None else out
-            traced.append(per_row * int(np.count_nonzero(geo[:, kb.G_VALID] > 0)))
+            (traced if counts is None else counts).append(
+                per_row * int(np.count_nonzero(geo[:, kb.G_VALID] > 0)))
             if orient and not (lobe or delta):  # phi = 0 on the lobe's long axis (the rule)
                 samp.orient(geo, brdf)
             if var is not None:  # spatially varying alpha/rho_s: per-pixel parameters
@@ -540,7 +549,8 @@ class Simulation:
                 break
             # the grid did not see what the whole camera states (its local pixels, the
             # monitor's edge): the next order the pilot accepts from twice this one
-            n, _, more = pl.choose_order(pilot, 2 * n, samp.target_error, samp.max_rays)
+            n_next, _, more = pl.choose_order(pilot, 2 * n, samp.target_error, samp.max_rays)
+            n = max(n_next, 2 * n)  # always a higher order: the loop ends at max_rays
             tried += more
         info = main.describe_sampling(True)
         rule = main.scene.sampling.rule(self._lobe)

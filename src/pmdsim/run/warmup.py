@@ -39,10 +39,10 @@ _BASE = {
                 "look_at_mm": [0.0, 0.0, 0.0]},
     "surface": {"size_mm": [300.0, 200.0]},
     "brdf": {"model": "ward", "alpha_x": 0.025, "alpha_y": 0.002},
-    "sampling": {"n_rays": 8},
+    "sampling": {"n_rays": 16},  # the smallest Gauss rule that states its error
     "patterns": {"fringes": {"widths_px": [50.0, 400.0, 3200.0]},
                  "dots": {"positions_px": [[960.0, 540.0]], "size_px": 241}},
-    # the runs only compile the kernels: 8 rays on a 24 x 20 camera decode few pixels,
+    # the runs only compile the kernels: 16 rays on a 24 x 20 camera decode few pixels,
     # which is no result but no error either here
     "diagnostics": {"grid": [3, 2], "allow_no_valid_pixels": True},
     "output": {"write_images": False, "figures": False},
@@ -53,17 +53,17 @@ CASES = {
     "ward-nearest-paper": {},
     "ward-continuous-random": {"monitor": dict(_BASE["monitor"], pixel_model="continuous"),
                                "sampling": {"n_rays": 8, "mode": "random"}},
-    "ward-radiometric-heterodyne": {"sampling": {"n_rays": 8, "estimator": "radiometric"},
+    "ward-radiometric-heterodyne": {"sampling": {"n_rays": 16, "estimator": "radiometric"},
                                     "patterns": {"fringes": {"widths_px": [50.0, 56.0, 64.0]}},
                                     "decode": {"method": "heterodyne", "enabled": "auto"}},
     "beckmann-weighted-gamma": {"brdf": {"model": "beckmann", "alpha_u": 0.02, "alpha_v": 0.004},
-                                "sampling": {"n_rays": 8, "estimator": "weighted_mean"},
+                                "sampling": {"n_rays": 16, "estimator": "weighted_mean"},
                                 "monitor": dict(_BASE["monitor"], gamma=2.2),
                                 "patterns": {"fringes": {"widths_px": [21.0, 25.0, 32.0]}},
                                 "decode": {"method": "number_theoretic"}},
     "beckmann-radiometric-continuous-gamma": {
         "brdf": {"model": "beckmann", "alpha_u": 0.02, "alpha_v": 0.004},
-        "sampling": {"n_rays": 8, "estimator": "radiometric"},
+        "sampling": {"n_rays": 16, "estimator": "radiometric"},
         "monitor": dict(_BASE["monitor"], pixel_model="continuous", gamma=2.2)},
     # camera optics (sub-pixels, distortion), a curved surface, display physics, the sensor
     "optics-sphere-display-sensor": {
