@@ -346,9 +346,12 @@ def fig3_converge() -> tuple:
     (mrad)."""
     from pmdsim.studies.convergence import convergence_study
 
-    st = convergence_study(_fig3_config(), n_values=(1600,), theta_values=(1.0,),
+    from pmdsim.config import with_sampling
+
+    cfg = with_sampling(_fig3_config(), n_rays=256)  # the rule the docs name (no target)
+    st = convergence_study(cfg, n_values=(1600,), theta_values=(1.0,),
                            estimators=("paper", "radiometric"), diagnostics=False)
-    n = _fig3_config().sampling.n_rays
+    n = cfg.sampling.n_rays
     out = []
     for d, w in (("x", 50.0), ("x", 400.0), ("x", 3200.0), ("y", 50.0), ("y", 400.0)):
         row = {r["estimator"]: r for r in st.rows if r["direction"] == d and r["width_px"] == w
@@ -396,7 +399,7 @@ def fig3_stratified_error() -> tuple:
         out += [1e3 * se[key]["median"], 1e3 * se[key]["p95"]]
     small = reduced_config(_fig3_config(), (320, 256))
     ph = []
-    for kw in ({"mode": "stratified", "n_rays": 100}, {}):
+    for kw in ({"mode": "stratified", "n_rays": 100}, {"n_rays": 256}):
         sim = Simulation.from_config(with_sampling(small, target_error_mrad=None, **kw))
         ph.append(np.angle(sim.render_fringes([50.0], ["x"], 4).sums[0, 0]))
     mask = Simulation.from_config(small).geometry().monitor_mask

@@ -65,6 +65,10 @@ FIT_FIELDS = {"ward": ("alpha_x", "alpha_y"), "beckmann": ("alpha_u", "alpha_v")
 ALPHA_BOUNDS = (1e-5, 2.0)
 #: The model's sample set unless the configuration names one (:func:`fit_config`).
 FIT_MODE = "rule"
+#: The first rung of the refinement where the configuration names neither ``n_rays`` nor a
+#: target (``pmdsim simulate``'s default target does not apply: the fit refines the model
+#: itself, :data:`REFINE_FACTOR`).
+FIT_START_RAYS = 100
 #: Default largest reduced chi-square (against noise + model error) of an accepted fit.
 MAX_CHI2 = 2.0
 #: A direction's fringes count as signal when the first harmonic's power exceeds what
@@ -181,13 +185,19 @@ def fit_config(cfg: RunConfig) -> RunConfig:
     images (:mod:`pmdsim.studies.fit_coverage`) the lattice's model error was not bounded
     by its refinement (17 of 20 covered at k = 2, a case 24 u off), the rule's was (19 of
     20)."""
+    from ..config.sampling import DEFAULT_TARGET_MRAD, DEFAULT_TARGET_START
+
     d = cfg.model_dump()
     given = cfg.sampling.model_fields_set
-    d["sampling"]["estimator"] = cfg.sampling.estimator if "estimator" in given else "radiometric"
-    if "mode" not in given and cfg.sampling.target_error_mrad is None:
-        d["sampling"]["mode"] = FIT_MODE
-    if "error_estimate" not in given and cfg.sampling.target_error_mrad is None:
-        d["sampling"]["error_estimate"] = False  # the fit estimates its model's error itself
+    s = d["sampling"]
+    if (s["mode"] == "rule" and s["n_rays"] == DEFAULT_TARGET_START
+            and s["target_error_mrad"] == DEFAULT_TARGET_MRAD):  # simulate's default target
+        s.update(n_rays=FIT_START_RAYS, target_error_mrad=None)
+    s["estimator"] = s["estimator"] if "estimator" in given else "radiometric"
+    if "mode" not in given and s["target_error_mrad"] is None:
+        s["mode"] = FIT_MODE
+    if "error_estimate" not in given and s["target_error_mrad"] is None:
+        s["error_estimate"] = False  # the fit estimates its model's error itself
     d["variants"] = []
     return RunConfig.model_validate(d)
 
@@ -340,7 +350,7 @@ def fit_levels(cfg: RunConfig, max_rays: int = None) -> list[int]:
     """The rays per pixel the fit may render with: ``sampling.n_rays`` and its refinements
     (x ``REFINE_FACTOR`` up to ``max_rays``)."""
     max_rays = MAX_RAYS if max_rays is None else max_rays
-    levels = [cfg.sampling.n_rays]
+    levels = [fit_config(cfg).sampling.n_rays]
     while levels[-1] * REFINE_FACTOR <= max_rays:
         levels.append(levels[-1] * REFINE_FACTOR)
     return levels
