@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 import tifffile
 from typer.testing import CliRunner
 
@@ -58,3 +59,26 @@ def test_cli_fit_recovers_noise_free_alphas(tmp_path):
     bad = CliRunner().invoke(app, ["fit", str(cfg_path), *map(str, paths[:-1]), "-o",
                                    str(tmp_path / "fit2")])
     assert bad.exit_code == 2 and "32" in bad.output
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, OSError])
+def test_an_interrupted_texture_report_leaves_the_folder_as_it_was(tmp_path, monkeypatch, stop):
+    """Ctrl-C (or a full disk) while the figure is drawn: the folder keeps the previous
+    report's files byte for byte, no new file and no temporary appears (the three files
+    are renamed into place together, texture.json last)."""
+    from pmdsim.run import texture as run_texture_mod
+
+    out = tmp_path / "tex"
+    args = ["texture", "--feed-um", "20", "--nose-radius-mm", "0.5", "-o", str(out)]
+    assert CliRunner().invoke(app, args).exit_code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert set(before) == {"texture.json", "texture.txt", "texture.png"}
+
+    def broken(*a, **k):
+        raise stop("stopped while drawing")
+
+    monkeypatch.setattr(run_texture_mod, "plot_texture", broken)
+    res = CliRunner().invoke(app, ["texture", "--feed-um", "30", "--nose-radius-mm", "0.8",
+                                   "-o", str(out)])
+    assert res.exit_code != 0
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..brdf.turning import TextureParameters, format_texture, texture_parameters
 from ..report.texture import plot_texture
+from ..store.folder import staged_files
 from ..store.tables import write_json
 
 
@@ -28,12 +29,13 @@ def run_texture(outdir=None, *, figure: bool = True, wavelengths_nm=(610.0, 545.
     js = fig = None
     if outdir is not None:
         out = Path(outdir)
-        out.mkdir(parents=True, exist_ok=True)
+        with staged_files(out, ("texture.txt", "texture.png", "texture.json")) as tmp:
+            write_json(tmp["texture.json"], p.as_dict())
+            tmp["texture.txt"].write_text(text + "\n")
+            if figure:
+                plot_texture(p, tmp["texture.png"], wavelengths_nm, weights)
         js = out / "texture.json"
-        write_json(js, p.as_dict())
-        (out / "texture.txt").write_text(text + "\n")
-        if figure:
-            fig = plot_texture(p, out / "texture.png", wavelengths_nm, weights)
+        fig = out / "texture.png" if figure else None
     return TextureRun(p, text, js, fig)
 
 
@@ -74,12 +76,13 @@ def run_topography(path, outdir=None, *, figure: bool = True, spacing_mm=None,
     js = fig = None
     if outdir is not None:
         out = Path(outdir)
-        out.mkdir(parents=True, exist_ok=True)
+        with staged_files(out, ("topography.txt", "topography.png", "topography.json")) as tmp:
+            write_json(tmp["topography.json"], a.as_dict() | {
+                "reader": t.reader, "invalid_points": t.invalid,
+                "not_measured_points": t.not_measured, "radial_axis": radial_axis})
+            tmp["topography.txt"].write_text(text + "\n")
+            if figure:
+                plot_topography(a, h, dx, dy, tmp["topography.png"])
         js = out / "topography.json"
-        write_json(js, a.as_dict() | {"reader": t.reader, "invalid_points": t.invalid,
-                                      "not_measured_points": t.not_measured,
-                                      "radial_axis": radial_axis})
-        (out / "topography.txt").write_text(text + "\n")
-        if figure:
-            fig = plot_topography(a, h, dx, dy, out / "topography.png")
+        fig = out / "topography.png" if figure else None
     return TopographyRun(a, text, js, fig)

@@ -114,6 +114,30 @@ def atomic_run_dir(outdir: str | Path, overwrite: bool = False, marker: str = MA
             raise
 
 
+@contextlib.contextmanager
+def staged_files(folder: str | Path, names: tuple[str, ...]) -> Iterator[dict]:
+    """Files ``names`` of ``folder`` written together: yields {name: temporary path} (a
+    hidden sibling ``.<stem>.tmp-<pid><suffix>``, so a writer that reads the suffix still
+    sees it); on success each written one is renamed over its name, the last name last (the
+    file that says "done"); on an exception, SIGINT or SIGTERM the temporaries are removed
+    and nothing of ``folder`` changes. For commands that write a few files into a folder
+    of the user's (``pmdsim texture -o``), where a folder-level rename would replace
+    the user's other files."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = {n: folder / f".{Path(n).stem}.tmp-{os.getpid()}{Path(n).suffix}" for n in names}
+    try:
+        with claim.signals_as_interrupt():
+            yield tmp
+            for n in names:
+                if tmp[n].exists():
+                    os.replace(tmp[n], folder / n)
+    finally:
+        for t in tmp.values():
+            with contextlib.suppress(FileNotFoundError):
+                t.unlink()
+
+
 class StaleTemporaryWarning(UserWarning):
     """A temporary folder of an earlier, interrupted run was found next to the output."""
 
