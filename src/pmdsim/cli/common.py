@@ -49,8 +49,14 @@ def _guard():
     temporary folder is already removed); anything else propagates (traceback, exit 1)."""
     from ..store.folder_lock import Terminated
 
+    from . import interrupt
+
     bad_input = _bad_input()  # imported here, never in an except clause (a Ctrl-C inside an
     # import leaves the module half loaded, and importing it again would be a new error)
+    # the start-up is over (options parsed, the command's first imports done, nothing
+    # written): from here SIGINT unwinds the command (KeyboardInterrupt), which removes its
+    # temporary folder
+    interrupt.release()
     try:
         yield
     except bad_input as err:
@@ -103,15 +109,8 @@ def _main(
 ) -> None:
     """Simulate Phase Measuring Deflectometry (PMD) of scattering surfaces by reverse ray
     tracing with a BRDF-weighted ray bundle per camera pixel."""
-    from . import interrupt
-
-    # What every command's guard needs (NumPy, the configuration, the run's claim) is loaded
-    # while the start-up handler still holds SIGINT: a Ctrl-C inside these imports is the
-    # start-up's one line, never a half-imported NumPy that the guard would import again.
-    _bad_input()
-    from ..store.folder_lock import Terminated  # noqa: F401
-
-    interrupt.release()  # the start-up is over: SIGINT unwinds the command (KeyboardInterrupt)
+    # SIGINT stays with the start-up handler (pmdsim.cli.interrupt) until the command's
+    # guard (_guard) takes it: Ctrl-C before is one line and exit 130
     _warnings_as_messages()
 
 

@@ -13,7 +13,7 @@ from rich.progress import (
     TimeElapsedColumn,
 )
 
-from .common import _console
+from .common import _console, _guard
 
 
 def warmup() -> None:
@@ -26,7 +26,7 @@ def warmup() -> None:
     t0 = time.perf_counter()
     columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                TimeElapsedColumn())
-    with Progress(*columns, console=console, transient=False) as bar:
+    with _guard(), Progress(*columns, console=console, transient=False) as bar:
         task = bar.add_task("compiling kernels", total=len(CASES))
         run_warmup(lambda done, total: bar.update(task, completed=done))
     console.print(f"kernels compiled and cached in {time.perf_counter() - t0:.1f} s")

@@ -4,7 +4,8 @@ The command line's start-up (importing NumPy, pydantic, Typer; parsing the optio
 about a second; Python's default SIGINT handler would print a ``KeyboardInterrupt``
 traceback from whatever module was being imported. :func:`install` (the first thing
 ``pmdsim.cli`` does when it runs as the ``pmdsim`` program) replaces it until the options
-are parsed and the command is about to run (the app's callback calls :func:`release`):
+are parsed and the command enters its guard, before it writes anything
+(``pmdsim.cli.common._guard`` calls :func:`release`):
 from there SIGINT is Python's ``KeyboardInterrupt`` again, which the commands turn into
 "interrupted" and exit code 130 after removing their temporary folder. Only the standard
 library is imported here.
