@@ -33,9 +33,18 @@ def _invoke(tmp_path, command, changes, *extra):
     return res, out
 
 
-def test_budget_whose_rim_band_takes_every_node_is_refused(tmp_path):
+def test_budget_whose_rim_band_takes_every_node_is_refused(tmp_path, monkeypatch):
+    """A band as wide as the 100 x 80 mm plate's inscribed radius (40 mm): refused before
+    any rendering (the budget itself is never called)."""
+    import pmdsim.run.budget as run_budget
+
+    def never(*a, **k):
+        raise AssertionError("the budget ran before the refusal")
+
+    monkeypatch.setattr(run_budget, "budget", never)
     res, out = _invoke(tmp_path, "budget", {"budget": {"rim_exclusion_mm": 40.0}}, "--no-figure")
     assert res.exit_code == 2, res.output
+    assert "inscribed radius is 40 mm" in res.output
     assert "budget.rim_exclusion_mm = 40" in res.output and "lower it" in res.output
     assert not out.exists() and not list(tmp_path.glob("out.tmp-*"))
 

@@ -85,6 +85,38 @@ def _check_height_rows(cfg: RunConfig, rows) -> list[str]:
     raise ConfigError(f"invalid set-up:\n  {text}; nothing was written")
 
 
+def _inscribed_radius_mm(surface) -> float | None:
+    """The radius of the largest disc inside the surface's outline (mm): the half of the
+    shorter side of a flat plate or a rectangular aperture, a circular aperture's radius,
+    half an annulus's width; None where the configuration does not say (a height map's
+    own extent)."""
+    if getattr(surface, "type", None) == "flat":
+        return 0.5 * min(surface.size_mm)
+    ap = getattr(surface, "aperture", None)
+    if ap is None:
+        return None
+    if ap.shape == "circular":
+        return ap.radius_mm
+    if ap.shape == "annular":
+        return 0.5 * (ap.radius_mm - ap.inner_radius_mm)
+    return 0.5 * min(ap.size_mm)
+
+
+def _check_rim_band(cfg: RunConfig) -> None:
+    """Refuse, before any work, a rim band at least as wide as the part's inscribed radius:
+    the measured area lies inside the part, so the band would take every node
+    (:func:`_check_height_rows` catches, after the work, a band that takes the nodes of a
+    smaller view)."""
+    b = cfg.budget
+    inner = _inscribed_radius_mm(cfg.surface)
+    if b.rim_exclusion_mm > 0 and inner is not None and b.rim_exclusion_mm >= inner:
+        raise ConfigError(
+            f"invalid set-up:\n  budget.rim_exclusion_mm = {b.rim_exclusion_mm:g}: the rim band "
+            f"takes every node, since the part's inscribed radius is {inner:g} mm (the measured "
+            "area lies inside it); lower it below the measured area's inscribed radius (or use "
+            "budget.rim_exclusion_percent); nothing was written")
+
+
 @single_blas
 def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrite: bool = False,
                progress: Callable[[str], None] | None = None, truth: str = "centre") -> BudgetResult:
@@ -94,6 +126,7 @@ def run_budget(cfg: RunConfig, outdir: str | Path, figure: bool = True, overwrit
     final = Path(outdir).absolute()
     cfg = resolve_roi(physical_estimator(cfg))  # the rendering integral unless cfg names one; camera.roi = "auto": the window that sees the part
     check_resources(cfg)  # the budget's largest run, before anything is computed
+    _check_rim_band(cfg)
     check_output_dir(final, overwrite, MARKER)
     from ..scene import Scene
     from ..studies.physics_checks import check_physics
