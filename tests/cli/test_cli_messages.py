@@ -119,3 +119,28 @@ def test_output_naming_an_existing_file_same_advice_with_and_without_overwrite(t
         assert "is a file, not a folder" in res.output and "-o" in res.output, res.output
         assert "pass --overwrite" not in res.output
     assert readme.read_text() == "keep"
+
+
+def test_a_ctrl_c_swallowed_by_a_compiled_callback_still_stops_the_command(capsys):
+    """Numba's JIT calls Python through ctypes while it compiles; a KeyboardInterrupt raised
+    in such a callback is swallowed by ctypes ("Exception ignored ..." with a traceback) and
+    the command would run on. Inside a command's guard it is delivered again and stops the
+    command: exit 130, the one line, no traceback."""
+    import ctypes
+
+    import typer
+
+    from pmdsim.cli.common import _guard
+
+    def callback():
+        raise KeyboardInterrupt
+
+    thunk = ctypes.CFUNCTYPE(None)(callback)
+    with pytest.raises(typer.Exit) as stop:
+        with _guard():
+            thunk()  # the interrupt ends inside ctypes
+            for _ in range(500):  # the command's work goes on, until it is delivered again
+                time.sleep(0.01)
+    assert stop.value.exit_code == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "Traceback" not in err and "ignored" not in err, err

@@ -4,8 +4,9 @@ one red line (exit 2) and interrupts (exit 130/143)."""
 from __future__ import annotations
 
 import contextlib
-import os
+import functools
 import sys
+import os
 
 import typer
 import typer.rich_utils
@@ -57,6 +58,8 @@ def _guard():
     # written): from here SIGINT unwinds the command (KeyboardInterrupt), which removes its
     # temporary folder
     interrupt.release()
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = functools.partial(_interrupt_where_it_stops, previous_hook)
     try:
         yield
     except bad_input as err:
@@ -67,6 +70,29 @@ def _guard():
             f"{'terminated' if term else 'interrupted'}: stopped; nothing was written "
             "(the temporary folder was removed)", style="bold red", markup=False)
         raise typer.Exit(EXIT_TERMINATED if term else EXIT_INTERRUPTED) from None
+    finally:
+        sys.unraisablehook = previous_hook
+
+
+def _interrupt_where_it_stops(previous, unraisable) -> None:
+    """``sys.unraisablehook`` inside a command: a Ctrl-C that arrived in a callback from
+    compiled code (Numba's JIT calls Python through ctypes while it compiles or loads a
+    kernel) is swallowed there, with an "Exception ignored" traceback on stderr, and the
+    command would run on. It is delivered again to the main thread, where it stops the
+    command (exit 130, its temporary folder removed); other unraisable errors go to the
+    ``previous`` hook."""
+    if issubclass(unraisable.exc_type, KeyboardInterrupt):
+        import _thread
+        import threading
+
+        # from another thread, a moment later: raised here, in the main thread, it would
+        # land inside this hook (and be swallowed again); should it land in another
+        # callback, this hook sends it once more
+        later = threading.Timer(0.01, _thread.interrupt_main)
+        later.daemon = True
+        later.start()
+        return
+    previous(unraisable)
 
 
 def _warnings_as_messages() -> None:
