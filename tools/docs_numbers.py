@@ -553,17 +553,32 @@ def _fig3_run() -> dict:
     from pmdsim.run import run_simulation
 
     with tempfile.TemporaryDirectory() as tmp:
-        run_simulation(_fig3_config(), Path(tmp) / "run", diagnostics=False, figures=False)
-        st = json.loads((Path(tmp) / "run" / "statistics.json").read_text())["reconstruction"]
-        ds = load_run(Path(tmp) / "run")
+        folder = Path(tmp) / "run"
+        run_simulation(_fig3_config(), folder, diagnostics=False)
+        st = json.loads((folder / "statistics.json").read_text())["reconstruction"]
+        ds = load_run(folder)
         maps = {k: ds[k].values for k in ("slope_error_x_urad", "slope_error_y_urad")}
-    out = {"stats": st}
+        files = [f for f in folder.rglob("*") if f.is_file()]
+
+        def mb(keep):
+            return sum(f.stat().st_size for f in files if keep(f.relative_to(folder))) / 1e6
+
+        sizes = (mb(lambda r: True), mb(lambda r: r.parts[0] == "run.zarr"),
+                 mb(lambda r: r.suffix in (".tif", ".tiff")),
+                 mb(lambda r: r.parts[0] == "figures"))
+    out = {"stats": st, "folder_mb": sizes}
     for k, a in maps.items():
         f = a[np.isfinite(a)]
         d = np.abs(f - f.mean())
         out[k] = (float(np.sqrt(np.mean(f * f))), float(np.percentile(d, 95)),
                   float(np.percentile(d, 99.9)), float(np.ptp(f)))
     return out
+
+
+def fig3_folder_size() -> tuple:
+    """docs/outputs.md: the Fig. 3 run folder, MB: all of it, run.zarr, the TIFFs, the
+    figures."""
+    return _fig3_run()["folder_mb"]
 
 
 def fig3_rim_table() -> tuple:
@@ -679,6 +694,10 @@ CHECKS = [
           + r" mrad with the kinematic density[\s\S]*?and\s+" + NUMBER + r" / " + NUMBER
           + r" mrad with the diffractive orders", _turning_readme, fast=False,
           why="the full example run"),
+    Check("fig3-folder-size", "docs/outputs.md",
+          r"The Fig\. 3 run folder is " + NUMBER + r" MB \(run\.zarr " + NUMBER + r" MB, TIFFs "
+          + NUMBER + r" MB, figures " + NUMBER + r" MB\)", fig3_folder_size, rel_tol=0.02,
+          fast=False, why="the full Fig. 3 run, figures drawn"),
     Check("budget-scattering", "README.md",
           r"\| \*\*surface scattering \(ideal system\)\*\* \| " + NUMBER + r" ± " + NUMBER + r" / "
           + NUMBER + r" \| " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER
