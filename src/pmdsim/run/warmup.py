@@ -117,6 +117,21 @@ def warmup(progress=None) -> dict:
             out[name] = time.perf_counter() - t
             if progress is not None:
                 progress(k + 1, len(CASES))
+        # ``pmdsim decode`` of camera images, 8 and 16 bit: its kernels for such frames
+        # (the runs above decode float32 images only)
+        import tifffile
+
+        from .decode_run import decode_files, make_setup
+
+        setup = make_setup(widths=[50.0, 400.0], shifts=4, extent_px=300.0)
+        for dtype in (np.uint8, np.uint16):
+            name = np.dtype(dtype).name
+            paths = []
+            for k in range(8):
+                paths.append(Path(tmp) / f"{name}-{k}.tif")
+                tifffile.imwrite(paths[-1], (np.random.default_rng(k).random((12, 10)) * 200
+                                             ).astype(dtype))
+            decode_files(paths, Path(tmp) / f"decode-{name}", setup, figures=False)
     return out
 
 
