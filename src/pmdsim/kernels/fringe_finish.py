@@ -12,8 +12,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import prange
 
-from ._jit import jit
+from ._jit import jit, parallel_jit
 
 #: Floating point of :func:`fringe_rows`: contraction to FMA as before (bit-identical images),
 #: but no ``nnan``/``ninf``: its pixels off the plate are NaN and must stay NaN.
@@ -222,3 +223,46 @@ def half_width_rows(m2_re, m2_im, half, p0, p1, out):
         a = half * math.sqrt(m2_re[p])
         x = math.sqrt(m2_im[p])
         out[p] = complex(a + (hr * x - hi * 0.0), 0.0 + (hr * 0.0 + hi * x))
+
+
+#: ``numpy.spacing`` of a non-negative float32 by its 8 exponent bits ``E``: ``2^(E - 150)``
+#: for normal values, ``2^-149`` for zero and subnormals, NaN for inf and NaN.
+F32_SPACING = np.array([2.0**-149] + [2.0 ** (e - 150) for e in range(1, 255)] + [math.nan])
+
+
+@parallel_jit(fastmath=_FINISH_FLAGS)
+def phase_floor_rows(imgs, cos_d, sin_d, weight, lmax, sigmas, floor, edge):
+    """The phase floors of one fringe's K shifted float32 images ``imgs`` (K, P), in
+    parallel over pixels.
+
+    ``Z = sum_k I_k exp(-i delta_k)``; ``floor[p]`` is ``sigmas`` times the standard
+    deviation of ``arg Z`` that rounding every image to nearest float32 gives (errors
+    uniform within half the value's spacing ``u_k``, independent):
+    ``sqrt(sum_k (u_k^2 / 12) sin^2(arg Z + delta_k)) / |Z|``, with
+    ``sin(arg Z + delta) = (Im Z cos delta + Re Z sin delta) / |Z|`` (``arg 0 = 0``, as
+    NumPy's angle); ``edge[p]`` is the phase change that moving ``weight[p]`` of the lobe's
+    weight at luminance up to ``lmax`` can give, ``K weight lmax / |Z|`` (0 where
+    ``weight`` is not > 0). NaN images give NaN.
+    """
+    k, n = imgs.shape
+    bits = imgs.view(np.uint32)
+    for p in prange(n):
+        zr = 0.0
+        zi = 0.0
+        for j in range(k):
+            v = np.float64(imgs[j, p])
+            zr += v * cos_d[j]
+            zi -= v * sin_d[j]
+        a2 = zr * zr + zi * zi
+        a = math.sqrt(a2)
+        var = 0.0
+        for j in range(k):
+            u = F32_SPACING[(bits[j, p] >> 23) & 0xFF]
+            if a2 > 0.0:
+                t = (zi * cos_d[j] + zr * sin_d[j]) / a
+            else:
+                t = sin_d[j]
+            var += (u * u / 12.0) * t * t
+        floor[p] = sigmas * math.sqrt(var) / a
+        w = weight[p]
+        edge[p] = k * w * lmax / a if w > 0.0 else 0.0

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..kernels import bundle as kb
+from ..kernels.fringe_finish import phase_floor_rows
 from .results import MAX_OFF, ROUNDOFF_PHASE, in_blocks
 from .geometry_rows import reduce_subrays, scene_geometry_rows, vision_geometry_rows
 
@@ -142,15 +143,14 @@ class Layout:
                             acc = acc + self.coef[m] * (zm * np.exp(1j * m * d)).real
                         imgs.append(np.clip(acc, self.g.min() * f_hit, self.g.max() * f_hit))
                     z[b] = sum(im * np.exp(-1j * d) for im, d in zip(imgs, self.deltas))
-                floor[b] = _f32_floor(imgs, self.deltas)
+                ftot = np.abs(out[:, kb.OUT_FTOTAL] * norm)
+                # the float32 floor, and the phase change per unit share misplaced
+                floor[b], edge[b] = _floor_rows(np.stack(imgs), self.deltas, ftot, self.lmax)
                 k = len(self.deltas)
                 if self.linear:  # the images' Z is (span K / 4) S
                     mod[b] = 2.0 * np.abs(0.25 * span * k * z[b]) / k / (sum(imgs) / k)
                 else:
                     mod[b] = 2.0 * np.abs(z[b]) / k / (sum(imgs) / k)
-                ftot = np.abs(out[:, kb.OUT_FTOTAL] * norm)
-                zi = sum(im * np.exp(-1j * d) for im, d in zip(imgs, self.deltas))
-                edge[b] = k * ftot * self.lmax / np.abs(zi)
         return z, floor, mod, edge
 
 
@@ -159,13 +159,9 @@ def image_floor(images: np.ndarray, deltas) -> np.ndarray:
     (nd, nw, K, H, W): each value rounded to nearest, an error uniform within half its
     spacing ``u_k`` (``numpy.spacing``), independent from image to image, gives the phase
     ``arg Z`` an error of standard deviation ``sigma = sqrt(sum_k (u_k^2 / 12)
-    sin^2(phi + delta_k)) / |Z|``; stated as :data:`F32_SIGMAS` sigma."""
-    nd, nw, k = images.shape[:3]
-    out = np.empty((nd, nw) + images.shape[3:])
-    for di in range(nd):
-        for wi in range(nw):
-            out[di, wi] = _f32_floor([images[di, wi, j] for j in range(k)], deltas)
-    return out
+    sin^2(phi + delta_k)) / |Z|``; stated as :data:`F32_SIGMAS` sigma (compiled:
+    :func:`pmdsim.kernels.fringe_finish.phase_floor_rows`)."""
+    return image_floors(images, deltas, None, 0.0)[0]
 
 
 #: Standard deviations of the float32 rounding stated (:func:`image_floor`): the
@@ -174,62 +170,68 @@ def image_floor(images: np.ndarray, deltas) -> np.ndarray:
 F32_SIGMAS = 3.0
 
 
-def _f32_floor(imgs, deltas) -> np.ndarray:
-    """:func:`image_floor` of one fringe's K images (each float32 or float64, rounded to
-    float32 here)."""
-    z = 0.0
-    f32 = [np.asarray(im, np.float32) for im in imgs]
-    for im, d in zip(f32, deltas):
-        z = z + im.astype(np.float64) * np.exp(-1j * d)
-    phi = np.angle(z)
-    var = 0.0
-    for im, d in zip(f32, deltas):
-        u = np.spacing(np.abs(im)).astype(np.float64)
-        var = var + (u * u / 12.0) * np.sin(phi + d) ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return F32_SIGMAS * np.sqrt(var) / np.abs(z)
-
-
 def edge_bound(images: np.ndarray, deltas, f_total, off, lmax: float) -> np.ndarray:
     """(nd, nw, H, W) rad: a bound of the phase error a step in the integrand at the
     monitor's edge can add where a share ``off`` of the lobe's weight ``f_total`` falls
     beyond it: the rule can misplace at most twice that weight (its own share and the true
     one), each image then moves by at most that weight times the display's largest
     luminance ``lmax``, and the decoded ``Z = sum_k I_k exp(-i delta_k)`` by K times it."""
-    k = images.shape[2]
-    rot = np.exp(-1j * np.asarray(deltas))
-    w = 2.0 * np.nan_to_num(np.asarray(off, np.float64), nan=1.0).clip(0.0, 1.0) * np.abs(f_total)
-    out = np.empty(images.shape[:2] + images.shape[3:])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for di in range(images.shape[0]):
-            for wi in range(images.shape[1]):
-                z = sum(images[di, wi, j].astype(np.float64) * rot[j] for j in range(k))
-                out[di, wi] = np.where(w > 0, k * w * lmax / np.abs(z), 0.0)
-    return out
+    return image_floors(images, deltas, _edge_weight(f_total, off), lmax)[1]
 
 
-def render_pixels(sim, samp, rows, cols, mode, ncols, patterns) -> np.ndarray:
+def _edge_weight(f_total, off) -> np.ndarray:
+    """The weight an edge can misplace: twice the share ``off`` (NaN: all of it) of
+    ``|f_total|``."""
+    return 2.0 * np.nan_to_num(np.asarray(off, np.float64), nan=1.0).clip(0.0, 1.0) * np.abs(f_total)
+
+
+def image_floors(images: np.ndarray, deltas, weight, lmax: float):
+    """``(floor, edge)`` (nd, nw, H, W) of images (nd, nw, K, H, W) in one pass:
+    :func:`image_floor` and the edge term of :func:`edge_bound` for the misplaced
+    ``weight`` (H, W) (None: no edge term, zeros)."""
+    nd, nw, k = images.shape[:3]
+    floor = np.empty((nd, nw) + images.shape[3:])
+    edge = np.empty_like(floor)
+    for di in range(nd):
+        for wi in range(nw):
+            f, e = _floor_rows(images[di, wi].reshape(k, -1), deltas, weight, lmax)
+            floor[di, wi] = f.reshape(images.shape[3:])
+            edge[di, wi] = e.reshape(images.shape[3:])
+    return floor, edge
+
+
+def _floor_rows(imgs: np.ndarray, deltas, weight, lmax: float):
+    """``(floor, edge)`` (P,) of one fringe's images (K, P) (rounded to float32 first)."""
+    d = np.asarray(deltas, np.float64)
+    n = imgs.shape[1]
+    w = (np.zeros(n) if weight is None
+         else np.ascontiguousarray(np.broadcast_to(np.asarray(weight, np.float64).reshape(-1), (n,))))
+    floor, edge = np.empty(n), np.empty(n)
+    phase_floor_rows(np.ascontiguousarray(imgs, np.float32), np.cos(d), np.sin(d), w, float(lmax),
+                     F32_SIGMAS, floor, edge)
+    return floor, edge
+
+
+def render_pixels(sim, samp, rows, cols, mode, ncols, patterns, cache=None) -> np.ndarray:
     """Raw sums (P, ncols) of camera pixels ``(rows, cols)`` with sample set ``samp``: the
     same geometry rows, kernels and sub-ray reduction as the whole-camera render
     (:meth:`pmdsim.render.Simulation._render_set`), pixel by pixel (a specular peak's
-    mirror pass added)."""
+    mirror pass added). ``cache``: a dict that keeps the pixels' geometry rows between
+    calls for the same scene (they do not depend on the sampling or the BRDF)."""
     from .specular import add_specular, specular_reflectance
 
     scene = sim.scene.replace(sampling=samp)
-    out = _pixels_brdf(sim, scene, rows, cols, mode, ncols, patterns)
+    out = _pixels_brdf(sim, scene, rows, cols, mode, ncols, patterns, cache)
     if specular_reflectance(scene.brdf) > 0:
-        mirror = _pixels_brdf(sim, scene.specular(), rows, cols, mode, ncols, patterns)
+        mirror = _pixels_brdf(sim, scene.specular(), rows, cols, mode, ncols, patterns, cache)
         out = add_specular(out, mirror, scene.brdf, scene.estimator, scene.rays_per_pixel)
     return out
 
 
-def _pixels_brdf(sim, scene, rows, cols, mode, ncols, patterns):
+def _pixels_geometry(scene, rows, cols):
+    """The geometry rows of pixels ``(rows, cols)`` (their S vision rays each, pixel-major)
+    and the pixels' order in them."""
     cam = scene.camera
-    rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
-    out = np.empty((rows.size, ncols))
-    if rows.size == 0:
-        return out
-    kernel = sim._kernel(scene, mode, ncols, **patterns)
     simple, n_sub = cam.is_simple_pinhole, cam.rays_per_pixel
     geos, where = [], []
     for r in np.unique(rows):
@@ -241,8 +243,24 @@ def _pixels_brdf(sim, scene, rows, cols, mode, ncols, patterns):
             geo, _ = vision_geometry_rows(scene, int(r))
             geos.append(geo.reshape(cam.width, n_sub, -1)[cols[idx]].reshape(-1, kb.G_SIZE))
         where.append(idx)
-    geo = np.ascontiguousarray(np.concatenate(geos))
-    idx = np.concatenate(where)
+    return np.ascontiguousarray(np.concatenate(geos)), np.concatenate(where)
+
+
+def _pixels_brdf(sim, scene, rows, cols, mode, ncols, patterns, cache=None):
+    cam = scene.camera
+    rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
+    out = np.empty((rows.size, ncols))
+    if rows.size == 0:
+        return out
+    kernel = sim._kernel(scene, mode, ncols, **patterns)
+    simple, n_sub = cam.is_simple_pinhole, cam.rays_per_pixel
+    key = (rows.tobytes(), cols.tobytes())
+    if cache is not None and key in cache:
+        geo, idx = cache[key]
+    else:
+        geo, idx = _pixels_geometry(scene, rows, cols)
+        if cache is not None:
+            cache[key] = (geo, idx)
     raw = np.empty((geo.shape[0], ncols))
     rot = np.zeros((0, 2))
     step = n_sub * max(1, -(-rows.size // 16))
@@ -287,7 +305,8 @@ class Probe:
 @dataclass
 class Pilot:
     """The pilot of one render (module docstring): the grid (``stride``, node rows and
-    columns), its rules' probes by ``n_rays``, and the rays it traced."""
+    columns), its rules' probes by ``n_rays``, the probed pixels' geometry rows (traced
+    once, whatever the rule), and the rays it traced."""
 
     sim: object
     layout: Layout
@@ -299,6 +318,7 @@ class Pilot:
     rows: np.ndarray = field(default=None)
     cols: np.ndarray = field(default=None)
     probes: dict = field(default_factory=dict)
+    geometry: dict = field(default_factory=dict)
 
     def __post_init__(self):
         h, w = self.shape
@@ -321,7 +341,8 @@ class Pilot:
             rr, cc = np.meshgrid(self.rows, self.cols, indexing="ij")
             rows, cols = rr.ravel(), cc.ravel()
         samp = self.sampling(n_rays)
-        out = render_pixels(self.sim, samp, rows, cols, self.mode, self.ncols, self.patterns)
+        out = render_pixels(self.sim, samp, rows, cols, self.mode, self.ncols, self.patterns,
+                            self.geometry)
         norm = normalise(out, self.sim.scene.estimator, n_rays)
         z, floor, mod, edge = self.layout.phasors(out, norm)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -400,8 +421,9 @@ class Pilot:
         nd, nw = images.shape[:2]
         stated = stated.reshape(nd, nw, h, w)
         bounded = np.where((off <= CUT_MEASURED) | (off > MAX_OFF), off, 0.0)
-        stated = (stated + image_floor(images, deltas) + ROUNDOFF_PHASE
-                  + edge_bound(images, deltas, f_total, bounded, self.layout.lmax))
+        floor, edge = image_floors(images, deltas, _edge_weight(f_total, bounded),
+                                   self.layout.lmax)
+        stated = stated + floor + ROUNDOFF_PHASE + edge
         if self.probe(n_rays).nodes < MIN_NODES:
             stated = np.where(np.isfinite(stated), math.pi, stated)
         stated = np.minimum(stated, math.pi)
@@ -437,15 +459,33 @@ def worst_p95(stated: np.ndarray, mod: np.ndarray, min_modulation: float = 0.05)
 
 def choose_order(pilot: Pilot, n0: int, target: float, max_rays: int) -> tuple[int, float | None, list]:
     """``(n_rays, p95, tried)``: the cheapest rule ``n0 2^k`` (at most ``max_rays``) whose
-    statement's P95 over the grid (worst fringe, modulation >= 0.05) is at most ``target``
-    (rad), else the largest tried; ``tried``: [(n_rays, p95 or None)] in order."""
-    n, tried = int(n0), []
-    while True:
+    statement's P95 over the grid (per fringe over every grid pixel, the worst fringe,
+    modulation >= 0.05) is at most ``target`` (rad), else the largest tried; where
+    ``n0 2^(k-1)`` failed, the rule of ``3/4`` of ``n0 2^k`` is tried too and taken if it
+    meets the target (the rules' error falls steeply with the order: half the order can
+    miss the target by several times while three quarters of it meets it). ``tried``:
+    [(n_rays, p95 or None)] in order."""
+    def p95_of(n):
         st = pilot.grid_statement(n)
         fine = pilot.probe(FINE_FACTOR * n)
-        mod = np.where(np.nan_to_num(fine.off, nan=1.0) > MAX_OFF, 0.0, fine.mod).reshape(st.shape)
-        p95 = worst_p95(st, mod)
+        mod = np.where(np.nan_to_num(fine.off, nan=1.0) > MAX_OFF, 0.0, fine.mod)
+        # per fringe over all grid pixels: (B, gh, gw) -> (B, 1, gh gw)
+        return worst_p95(st.reshape(st.shape[0], 1, -1), mod.reshape(st.shape[0], 1, -1))
+
+    def met(p95):
+        return p95 is not None and p95 <= target
+
+    n, tried = int(n0), []
+    while True:
+        p95 = p95_of(n)
         tried.append((n, p95))
-        if (p95 is not None and p95 <= target) or 2 * n > max_rays:
-            return n, p95, tried
+        if met(p95) or 2 * n > max_rays:
+            break
         n *= 2
+    m = (3 * n) // 4
+    if met(p95) and len(tried) > 1 and m > n // 2:
+        pm = p95_of(m)
+        tried.append((m, pm))
+        if met(pm):
+            return m, pm, tried
+    return n, p95, tried
