@@ -97,6 +97,23 @@ def test_hermite_rule_moments_of_the_slopes():
     assert abs(E(a)) < 1e-9 and abs(E(a**3 * b)) < 1e-9
 
 
+@pytest.mark.parametrize("order", [(512, 384), (300, 520)])
+def test_hermite_rule_high_orders_are_finite_and_exact(order):
+    """Orders the pilot's finer rules reach (4 x and 16 x the nodes of a 128 x 128 rule):
+    every weight finite (NumPy's hermgauss gave NaN at 512), and the closed form
+    E[cos(p a) cos(q b)] = exp(-(p^2 + q^2) / 4) of the Gaussian slopes (alpha 1) holds."""
+    rule = q.hermite_rule(order)
+    assert np.all(np.isfinite(rule.w)) and np.all(rule.w >= 0)
+    assert np.all((rule.u1 >= 0) & (rule.u1 < 1))
+    live = rule.w > 0  # corner nodes whose weight underflows to 0 (r up to ~45)
+    r = np.sqrt(-np.log(rule.u1[live]))
+    a, b = r * np.cos(2 * math.pi * rule.u2[live]), r * np.sin(2 * math.pi * rule.u2[live])
+    E = lambda v: float(np.sum(rule.w[live] * v))  # noqa: E731
+    assert E(np.ones_like(a)) == pytest.approx(1.0, abs=1e-13)
+    assert E(np.cos(3.0 * a) * np.cos(1.3 * b)) == pytest.approx(math.exp(-(9.0 + 1.69) / 4), rel=1e-10)
+    assert E(a**4) == pytest.approx(0.75, rel=1e-10)
+
+
 def test_orders_and_embedded_orders():
     assert q.cone_order(256) == (8, 32)
     assert q.cone_order(100) == (5, 20)

@@ -247,10 +247,15 @@ def cone_rule(order: tuple[int, int], scheme: str = "polar", theta_max: float = 
 
 def hermite_rule(order: tuple[int, int]) -> Rule:
     """Product Gauss-Hermite rule in the normalised slopes (x, y) (weight exp(-x^2 - y^2)
-    / pi), as the kernel's unit-square points of the Walter slope map."""
+    / pi), as the kernel's unit-square points of the Walter slope map. Nodes and weights
+    from SciPy's ``roots_hermite`` (NumPy's ``hermgauss`` overflows above order ~300: NaN
+    weights at order 512, the pilot's finer rule of a 128 x 128 rule at the monitor's
+    edge, whose phase was then stated as known to within pi)."""
+    from scipy.special import roots_hermite
+
     nx, ny = order
-    x, wx = np.polynomial.hermite.hermgauss(nx)
-    y, wy = np.polynomial.hermite.hermgauss(ny)
+    x, wx = roots_hermite(nx)
+    y, wy = roots_hermite(ny)
     X, Y = np.meshgrid(x, y, indexing="ij")
     W = np.outer(wx, wy) / math.pi
     r2 = (X * X + Y * Y).ravel()

@@ -44,7 +44,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..config import MirrorConfig, RunConfig
+from ..config import MirrorConfig, RunConfig, with_sampling
 from ..measure.chain import SlopeGeometry, decode_fringes, slope_deviation_urad, surface_to_monitor_mm
 from ..measure.deviation import deviation_stats
 from ..measure.numerical import exceeds
@@ -52,7 +52,7 @@ from ..render import Simulation
 from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
 from .budget_areal import areal_of
-from .budget_error import (HEIGHT_STATS, ROW_STATS, at_order, difference_error, error_stats, estimator_label,
+from .budget_error import (HEIGHT_STATS, ROW_STATS, difference_error, error_stats, estimator_label,
                            height_error_bounds, node_errors, second_estimate, stat_error,
                            unknown_share)
 from .height_rows import (Decoded, HeightError, SurfaceMaps, form_spec, height_error, height_row,
@@ -291,7 +291,8 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
     (averaged over the pixel's vision rays). The surface is rendered with the radiometric
     estimator unless ``cfg`` names one (:func:`pmdsim.config.physical_estimator`); with
     ``sampling.target_error_mrad`` the ideal system's surface render raises the order until
-    its stated error meets the target, and the full system's render uses that order."""
+    its stated error meets the target, and the full system's render starts from that order
+    (raising it until its own statement meets the target)."""
     import warnings
 
     from ..config import physical_estimator
@@ -385,8 +386,12 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
         if err is None or c.sensor.enabled:  # the same chain once more (budget_error)
             other, how2 = second_estimate(c, n_used, (dec.sampling or {}).get("mode"))
             say(f"surface: {label}, {how2} (its numerical error)")
-            lo = decode_config(other, stream=1)
+            lo, lo_clean = decode_config(other, stream=1, noise_free=True)
             diff = difference_error(dec.coord, dec.valid, lo.coord, lo.valid)
+            if clean is not None and clean.error_px is None and lo_clean is not None:
+                # the noise-free row's own difference (the same two renders, no sensor)
+                clean = replace(clean, error_px=difference_error(
+                    clean.coord, clean.valid, lo_clean.coord, lo_clean.valid))
             if err is None:
                 err, how = diff, how2
             else:  # the sensor's discrete electrons and DN: the larger of the two
@@ -407,8 +412,12 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
 
     if not cfg.brdf.model == "mirror":
         n_ideal = surface("surface_ideal", "surface scattering, ideal system", ideal, ideal_dec, "ideal")
-        if target is not None:  # the order the ideal system's render chose
-            full = at_order(full, n_ideal)
+        if target is not None:  # from the order the ideal system's render chose, raised
+            # further where the full system's own statement needs it (a display's gamma,
+            # the nearest monitor's staircase): each row meets the target by itself
+            s = full.sampling
+            full = with_sampling(full, n_rays=max(n_ideal, s.n_rays), target_error_mrad=target,
+                                 max_rays=max(n_ideal, s.max_rays))
         surface("surface", "surface scattering, through the full system", full, ref_full, "all_system")
         for name, label in (("surface_ideal", "ideal system"), ("surface", "full system"),
                             ("surface_noise_free", "no sensor")):
