@@ -542,10 +542,10 @@ class Simulation:
                 off = 1.0 - np.abs(fr.f_hit) / np.abs(fr.f_total)
             ok = np.isfinite(fr.f_total) & np.isfinite(fr.f_hit)
             stated, n_local = pilot.statement(n, ok, fr.images, fr.shifts, off, fr.f_total)
-            if samp.target_error is None or 2 * n > samp.max_rays:
+            if samp.target_error is None:
                 break
             worst = worst_phase_error(replace(fr, stated_phase_error=stated))
-            if worst is not None and worst <= samp.target_error:
+            if (worst is not None and worst <= samp.target_error) or 2 * n > samp.max_rays:
                 break
             # the grid did not see what the whole camera states (its local pixels, the
             # monitor's edge): the next order the pilot accepts from twice this one
@@ -568,8 +568,7 @@ class Simulation:
                 f"numerical error (it is stated as unknown, pi); raise sampling.n_rays to >= "
                 f"{pl.MIN_NODES} (or set sampling.target_error_mrad)", RuleTooSmall,
                 stacklevel=3)
-        if samp.target_error is not None:
-            worst = worst_phase_error(fr)
+        if samp.target_error is not None:  # worst: of this render's statement (the loop's)
             met = worst is not None and worst <= samp.target_error
             info.update(target_error_mrad=samp.target_error * 1e3,
                         achieved_p95_mrad=None if worst is None else worst * 1e3, n_rays=n,

@@ -6,10 +6,10 @@ principal ray of every vision ray (no quadrature); the surface's render is a qua
 the rendering integral, whose per-pixel error the budget carries to every statistic:
 
 - **per pixel**: the render's own stated phase error of the finest fringe
-  (:meth:`pmdsim.render.FringeResult.phase_error`: the embedded rule or the rqmc replicates)
-  as monitor px, ``e = delta phi w / (2 pi)``. Where the render states none (a display with
-  gamma != 1 or a LUT: its images are not linear in the fringe sums), the surface is
-  decoded once more through the same chain (same sensor noise) and ``e`` is the decoded
+  (:meth:`pmdsim.render.FringeResult.phase_error`: the pilot's statement of a Gauss rule,
+  on linear and non-linear displays alike, or the rqmc replicates) as monitor px,
+  ``e = delta phi w / (2 pi)``. Where the render states none, the surface is decoded once
+  more through the same chain (same sensor noise) and ``e`` is the decoded
   difference (:func:`difference_error`): for a randomised set (``rqmc``, and the nearest
   monitor's control variate ``rule+rqmc``, :mod:`pmdsim.render.control_variate`) with an
   independent seed at the same order (about sqrt(2) times the random part of either), for
