@@ -1,7 +1,8 @@
 """``pmdsim export`` never loses a result nor exports a damaged one (issue 38, items 7-9, 15):
-damaged and unfinished runs refused naming the file, output-path errors as one message,
-two processes exporting into one folder never both report the same file, stale
-temporaries removed with a note, a run name with a newline kept inside its comment line."""
+damaged and unfinished runs refused naming the file (a byte changed inside a chunk too: the
+run writer checksums every chunk), output-path errors as one message, two processes
+exporting into one folder never both report the same file, stale temporaries removed with
+a note, a run name with a newline kept inside its comment line."""
 
 from __future__ import annotations
 
@@ -25,9 +26,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _run(tmp_path, name="run", title="pmdsim run export-test", scale=1.0, chunked=True,
-         created="2026-01-02T03:04:05+00:00"):
-    """A complete fake run (manifest written), 2 chunks per map along y."""
+         created="2026-01-02T03:04:05+00:00", checksums=True):
+    """A complete fake run (manifest written), 2 chunks per map along y, its store written
+    by the run writer (every chunk with its crc32c checksum) or, without ``checksums``, as
+    pmdsim wrote stores before them (xarray's defaults)."""
     import xarray as xr
+
+    from pmdsim.store.writer import write_dataset
 
     x, y, maps = _maps()
     maps = dict(maps, slope_error_y_urad=maps["slope_error_x_urad"] * 0.5,
@@ -41,7 +46,10 @@ def _run(tmp_path, name="run", title="pmdsim run export-test", scale=1.0, chunke
         ds = ds.chunk({"surface_y": 4})
     run = tmp_path / name
     run.mkdir()
-    ds.to_zarr(run / "run.zarr", consolidated=True)
+    if checksums:
+        write_dataset(ds, run / "run.zarr")
+    else:
+        ds.to_zarr(run / "run.zarr", consolidated=True, zarr_format=3)
     (run / "pmdsim-run.json").write_text('{"format": "pmdsim-run/1"}\n')
     return run
 
@@ -262,17 +270,20 @@ def test_two_processes_never_both_write_the_same_file(tmp_path):
 def test_random_damage_of_any_file_never_escapes_as_a_traceback(tmp_path):
     """30 runs, each with one file of run.zarr truncated, overwritten in a few bytes, zeroed
     or deleted (seeded): exit 2 naming a file of the run, or exit 0 with complete files and
-    no temporary (a byte flip inside a chunk that still decodes cannot be seen: the store
-    has no checksums)."""
+    no temporary. A chunk whose bytes changed is always refused naming that file (every
+    chunk carries a crc32c checksum: a flipped byte that still decompresses is seen too);
+    exit 0 is left to a zarr.json still valid after the change (a digit of an attribute)."""
     good = _run(tmp_path / "good" if (tmp_path / "good").mkdir() is None else None)
     rng = np.random.default_rng(38)
+    flipped_chunks = 0
     for k in range(30):
         d = tmp_path / f"c{k}"
         shutil.copytree(good.parent, d)
         run = d / "run"
         files = sorted(p for p in (run / "run.zarr").rglob("*") if p.is_file())
         f = files[rng.integers(len(files))]
-        data = bytearray(f.read_bytes())
+        before = f.read_bytes()
+        data = bytearray(before)
         op = k % 4
         if op == 0:
             f.write_bytes(bytes(data[: rng.integers(0, max(1, len(data)))]))
@@ -290,8 +301,74 @@ def test_random_damage_of_any_file_never_escapes_as_a_traceback(tmp_path):
             pytest.importorskip("x3pio")
         res = _export(run, "--format", fmt, "-o", d / "out")
         assert res.exit_code in (0, 2), (f, res.output)
+        changed_chunk = f.name != "zarr.json" and f.exists() and f.read_bytes() != before
+        if changed_chunk:
+            flipped_chunks += op == 1
+            assert res.exit_code == 2 and str(f) in res.output, (f, res.output)
+            assert "damaged" in res.output and "simulate again" in res.output, res.output
         if res.exit_code == 2:
             assert str(run) in res.output, res.output
         else:
             assert all(p.stat().st_size > 0 for p in (d / "out").iterdir())
         assert not list((d / "out").glob(".*tmp-*")) if (d / "out").exists() else True
+    assert flipped_chunks >= 2  # the seed overwrites bytes inside chunks, not only zarr.json
+
+
+def _flip_inside(chunk: Path) -> int:
+    """Change one byte near the middle of the zstd-compressed chunk ``chunk`` (codecs bytes,
+    zstd, then crc32c where the store has it) such that its zstd payload still decompresses,
+    to other numbers: a change that only a checksum sees. Returns the byte's offset."""
+    import numcodecs
+
+    data = chunk.read_bytes()
+    array = next(p for p in chunk.parents if (p / "zarr.json").is_file())
+    meta = json.loads((array / "zarr.json").read_text())
+    names = [c["name"] for c in meta["codecs"]]
+    assert names[:2] == ["bytes", "zstd"], names
+    tail = 4 if names[-1] == "crc32c" else 0
+    payload, crc = data[:len(data) - tail], data[len(data) - tail:]
+    original = numcodecs.Zstd().decode(payload)
+    mid = len(payload) // 2
+    for pos in sorted(range(len(payload)), key=lambda i: abs(i - mid)):
+        bad = bytearray(payload)
+        bad[pos] ^= 0x5A
+        try:
+            if numcodecs.Zstd().decode(bytes(bad)) != original:
+                chunk.write_bytes(bytes(bad) + crc)
+                return pos
+        except RuntimeError:
+            continue
+    raise AssertionError(f"no byte of {chunk} changes its numbers and still decompresses")
+
+
+def test_a_byte_flipped_inside_a_chunk_is_refused_naming_the_file(tmp_path):
+    run = _run(tmp_path)
+    chunk = run / "run.zarr" / "height_error_nm" / "c" / "1" / "0"
+    _flip_inside(chunk)
+    out = tmp_path / "out"
+    res = _export(run, "--format", "csv", "-o", out)
+    assert res.exit_code == 2, res.output
+    text = " ".join(res.output.split())
+    assert str(chunk) in text and "'height_error_nm'" in text and "checksum" in text, text
+    assert f"the run {run} is damaged" in text and "simulate again" in text, text
+    assert "Traceback" not in res.output
+    assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.filterwarnings("ignore:Consolidated metadata:UserWarning")
+def test_a_run_written_before_the_checksums_is_exported_with_a_note(tmp_path):
+    """A store without crc32c (pmdsim before the checksums) is still read: exported as
+    before, with a note that a changed byte cannot be seen; a checked run has no note."""
+    import zarr
+
+    old = _run(tmp_path, name="old", checksums=False)
+    codecs = [c.to_dict()["name"] for c in zarr.open_array(old / "run.zarr" / "height_error_nm").metadata.codecs]
+    assert "crc32c" not in codecs
+    res = _export(old, "--format", "csv")
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    assert "note:" in text and "without checksums" in text and str(old / "run.zarr") in text, text
+    assert (old / "export" / "surface.csv").is_file()
+    new = _run(tmp_path, name="new")
+    res = _export(new, "--format", "csv")
+    assert res.exit_code == 0 and "without checksums" not in res.output, res.output

@@ -1,5 +1,6 @@
 """Failures are not results: ``pmdsim report`` on a damaged run folder names the array and
-the file that are broken (exit code 2), and ``--variant`` must name a variant of the run."""
+the file that are broken (exit code 2; a byte changed inside a chunk too: its checksum
+fails), and ``--variant`` must name a variant of the run."""
 
 from __future__ import annotations
 
@@ -20,6 +21,32 @@ def run_folder(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("report") / "run"
     run_simulation(make_config(), out, figures=False, diagnostics=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def reconstructed_run(tmp_path_factory):
+    """A run with a reconstruction (height_error_nm): Fig. 3's geometry at 48 x 40 camera
+    px (tests/run/test_pipeline.py's tiny scene)."""
+    import math
+
+    from pmdsim.config import parse_config
+    from pmdsim.run import run_simulation
+
+    s, c = math.sin(math.radians(25)), math.cos(math.radians(25))
+    out = tmp_path_factory.mktemp("reconstructed") / "run"
+    run_simulation(parse_config({
+        "name": "tiny",
+        "camera": {"resolution": [48, 40], "focal_length_px": 390.625,
+                   "position_mm": [-2000 * s, 0.0, 2000 * c], "look_at_mm": [0, 0, 0]},
+        "monitor": {"resolution": [160, 90], "pixel_pitch_mm": 3.0,
+                    "centre_mm": [600 * s, 0.0, 600 * c], "look_at_mm": [0, 0, 0]},
+        "surface": {"type": "flat", "size_mm": [300.0, 200.0]},
+        "anisotropy": {"frame": "fixed", "x_direction": [1, 0, 0]},
+        "brdf": {"model": "ward", "alpha_x": 0.025, "alpha_y": 0.002, "rho_s": 0.4},
+        "sampling": {"n_rays": 10, "theta_max_deg": 1.0, "mode": "stratified"},
+        "patterns": {"fringes": {"widths_px": [10, 40, 160], "shifts": 4}},
+        "compute": {"tile_rows": 16}}), out, figures=False, diagnostics=False)
     return out
 
 
@@ -59,6 +86,48 @@ def test_a_truncated_chunk_names_the_array_and_file(damaged):
     result = _report(damaged)
     assert result.exit_code == 2, result.output
     assert "'fringes'" in result.output and str(chunk) in result.output
+
+
+def test_a_byte_flipped_inside_a_chunk_is_refused_by_report_and_export(reconstructed_run,
+                                                                          tmp_path):
+    """One byte near the middle of a compressed chunk of height_error_nm, changed such that
+    the chunk still decompresses (to other heights): only its crc32c sees it. Both commands
+    that read run.zarr refuse the run, naming the run, the array and the file."""
+    from test_export_safety import _flip_inside
+
+    damaged = tmp_path / "run"
+    shutil.copytree(reconstructed_run, damaged)
+    chunk = _chunk(damaged, "height_error_nm")
+    _flip_inside(chunk)
+    for args in (["report", str(damaged), "--figure", "fringes"],
+                 ["export", str(damaged), "--format", "csv", "-o", str(tmp_path / "out")]):
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        text = " ".join(result.output.split())
+        assert str(chunk) in text and "'height_error_nm'" in text and "checksum" in text, text
+        assert f"the run {damaged} is damaged" in text and "simulate again" in text, text
+        assert "Traceback" not in result.output
+    assert not (damaged / "figures").exists() and not (tmp_path / "out" / "surface.csv").exists()
+
+
+@pytest.mark.filterwarnings("ignore:Consolidated metadata:UserWarning")
+def test_a_run_written_before_the_checksums_is_redrawn_with_a_note(run_folder, tmp_path):
+    """A run.zarr without crc32c (as pmdsim wrote before the checksums) is still read."""
+    import xarray as xr
+
+    old = tmp_path / "old"
+    shutil.copytree(run_folder, old, ignore=shutil.ignore_patterns("run.zarr"))
+    ds = xr.open_zarr(run_folder / "run.zarr").load()
+    for v in ds.variables.values():
+        v.encoding = {}
+    ds.to_zarr(old / "run.zarr", consolidated=True, zarr_format=3)
+    assert "crc32c" not in (old / "run.zarr" / "fringes" / "zarr.json").read_text()
+    result = _report(old)
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.output.split())
+    assert "note:" in text and "without checksums" in text, text
+    assert (old / "figures" / "fringes.png").is_file()
+    assert "without checksums" not in _report(run_folder, "-o", str(tmp_path / "f")).output
 
 
 def test_a_zeroed_chunk_names_the_array_and_file(damaged):

@@ -52,8 +52,11 @@ def report(
               + " (give a run folder written by pmdsim simulate)")
     which = figure or ("all" if all_figures else "summary")
     t0 = time.perf_counter()
+    notes: list[str] = []
     with _guard():  # a damaged folder: the array and file that are broken, exit 2
-        opened = [(folder, *open_run_checked(folder)) for folder in members]
+        opened = [(folder, *open_run_checked(folder, notes=notes)) for folder in members]
+    for n in notes:  # a run written before the checksums
+        _console(stderr=True).print(f"note: {n}", style="yellow", markup=False)
     for folder, ds, cfg in opened:
         try:
             names = figure_names(ds, which)

@@ -21,7 +21,8 @@ Formats:
 
 Safety (:func:`export_run`): the run must be complete (its ``pmdsim-run.json``, or its
 parent's listing it as a variant: a ``.tmp-<pid>`` folder of an unfinished run is refused),
-its metadata parse, the exported variables exist and decode chunk by chunk, and each holds
+its metadata parse, the exported variables exist and decode chunk by chunk with matching
+checksums (a run written before them: a note says a changed byte cannot be seen), and each holds
 measured nodes, the same chunks as the height error; every failure names the variable and
 the file. The output folder is claimed (a lock, :func:`pmdsim.store.folder_lock.claim_output`)
 while the targets are checked and written; every file is written under a temporary name
@@ -140,11 +141,12 @@ def _check_complete(run: Path) -> None:
         raise InputError(f"{unfinished}; {_AGAIN}")
 
 
-def _check_store(store: Path, names: list[str]) -> dict:
+def _check_store(store: Path, names: list[str], notes: list[str] | None = None) -> dict:
     """Metadata of every node parses; the exported variables are on disk, decode chunk by
-    chunk and have the same chunks on disk as height_error_nm. Returns the root's
-    metadata."""
-    from .integrity import check_arrays, check_metadata
+    chunk (their checksums match) and have the same chunks on disk as height_error_nm.
+    Returns the root's metadata; ``notes`` receives a note for a run written without
+    checksums."""
+    from .integrity import check_arrays, check_metadata, unchecked_note
 
     root = check_metadata(store)
     listed = set((root.get("consolidated_metadata") or {}).get("metadata") or {})
@@ -162,6 +164,9 @@ def _check_store(store: Path, names: list[str]) -> dict:
             raise InputError(f"{store / k}: the reconstruction grid's coordinate {k!r} is "
                              f"missing; {_AGAIN}")
     check_arrays(store, root, names=[*have, "surface_x", "surface_y"])
+    note = unchecked_note(store, root, [*have, "surface_x", "surface_y"])
+    if note is not None and notes is not None:
+        notes.append(note)
     chunks = {k: {p.relative_to(store / k) for p in (store / k).rglob("*")
                   if p.is_file() and p.name != "zarr.json"} for k in have}
     ref = chunks["height_error_nm"]
@@ -294,7 +299,7 @@ def export_run(run: str | Path, fmt: str, output: str | Path | None = None,
     run = Path(run)
     _check_complete(run)
     store = run / DATASET_NAME
-    _check_store(store, list(QUANTITIES))
+    _check_store(store, list(QUANTITIES), notes)
     try:
         ds = load_run(run)
         x, y, maps = surface_maps(ds)

@@ -4,7 +4,10 @@ behind a run's chain (:class:`DatasetWriter`), with the same bytes.
 Encoding: every camera-image variable (``..., row, col``) is one chunk per image, float32,
 Blosc LZ4 with bit shuffling (:data:`CODEC`), rounded to :data:`KEEP_BITS` significant
 mantissa bits except the absolute coordinates and phases (:data:`FULL_PRECISION`);
-:func:`storage_form` gives a dataset as stored.
+:func:`storage_form` gives a dataset as stored. Every array (coordinates included) ends its
+codecs with Zarr v3's ``crc32c`` checksum (a standard codec of the Zarr v3 specification,
+in zarr-python 3.0 on, through google-crc32c): a byte changed in a chunk after the run wrote
+it fails the chunk's read, and :mod:`pmdsim.store.integrity` names the file.
 
 Writing in parts: the rendered arrays are final when they are rendered, the chain's when
 they are computed: nothing needs to wait for the end of the run to be written. A run hands its dataset to the
@@ -87,7 +90,8 @@ def _write_part(ds, path: Path, create: bool) -> None:
         from ..render import local_scheduler
 
         stored.to_zarr(path, mode="w-" if create else "a", consolidated=False,
-                       encoding=_encoding(ds), zarr_format=3, compute=False).compute(
+                       encoding=_encoding(ds, None if create else path), zarr_format=3,
+                       compute=False).compute(
             scheduler=local_scheduler("threads"))
         return
     written: set = set()
@@ -98,7 +102,8 @@ def _write_part(ds, path: Path, create: bool) -> None:
                                    if c not in part.coords and k == 0})
         part = part.drop_vars([c for c in part.coords if c in written])
         part.to_zarr(path, mode="w-" if create and k == 0 else "a", consolidated=False,
-                     encoding=_encoding(part), zarr_format=3)
+                     encoding=_encoding(part, None if create and k == 0 else path),
+                     zarr_format=3)
         written.update(part.coords)
 
 
@@ -234,20 +239,29 @@ def _image_like(var) -> bool:
     return var.ndim >= 2 and var.dims[-2:] == ("row", "col")
 
 
-def _encoding(ds) -> dict:
-    """Storage of every (..., row, col) variable: one chunk per camera image, float32,
-    Blosc (:data:`CODEC`, Zarr v3's standard ``blosc`` codec)."""
-    from zarr.codecs import BloscCodec
+def _encoding(ds, path: Path | None = None) -> dict:
+    """Storage of every variable of ``ds`` (coordinates included) that the store ``path``
+    does not hold yet (xarray refuses an encoding for a variable it appends to): its
+    compressors end with Zarr v3's standard ``crc32c`` checksum codec (4 bytes a chunk:
+    a chunk changed on disk fails its read, :mod:`pmdsim.store.integrity`);
+    every (..., row, col) variable is one chunk per camera image, float32, Blosc
+    (:data:`CODEC`, Zarr v3's standard ``blosc`` codec), the others Zarr's default
+    compressor (zstd)."""
+    from zarr.codecs import BloscCodec, Crc32cCodec, ZstdCodec
 
     enc = {}
-    for name, var in ds.data_vars.items():
-        if _image_like(var):
+    for name, var in ds.variables.items():
+        if path is not None and (Path(path) / str(name) / "zarr.json").is_file():
+            continue
+        if name in ds.data_vars and _image_like(var):
             shape = var.shape
             e = {"chunks": (1,) * (len(shape) - 2) + tuple(shape[-2:]),
-                 "compressors": (BloscCodec(**CODEC),)}
+                 "compressors": (BloscCodec(**CODEC), Crc32cCodec())}
             if var.dtype == np.float64:
                 e["dtype"] = "float32"
-            enc[name] = e
+        else:
+            e = {"compressors": (ZstdCodec(), Crc32cCodec())}
+        enc[name] = e
     return enc
 
 
