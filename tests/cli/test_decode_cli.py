@@ -152,3 +152,26 @@ def test_simulate_decode_flag_errors_and_statistics_table(tmp_path):
     assert result.exit_code == 0, text
     assert "deviation from the ideal specular reference" in text
     assert (tmp_path / "c" / "statistics.json").is_file()
+
+
+def test_from_run_with_a_flipped_byte_in_its_coordinates_is_refused(run, tmp_path):
+    """--from-run compares with the run's own decoding: a byte changed inside a chunk of
+    that run's monitor_coord_px (still decompressing, to other numbers) is refused by its
+    checksum, naming the chunk (exit 2, no traceback)."""
+    import shutil
+
+    from test_export_safety import _flip_inside
+
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    files = sorted(p for p in (copy / "wide" / "run.zarr" / "monitor_coord_px" / "c").rglob("*")
+                   if p.is_file())
+    for chunk in files:  # whichever holds the decoded direction
+        _flip_inside(chunk)
+    result, text = invoke("decode", *frames(copy), "--from-run", copy, "-o", tmp_path / "out",
+                          "--no-figures")
+    flat = " ".join(text.split())
+    assert result.exit_code == 2, text
+    assert any(str(c) in flat for c in files), flat
+    assert "checksum" in flat and "'monitor_coord_px'" in flat, flat
+    assert "Traceback" not in text

@@ -199,8 +199,18 @@ def _compare_with_run(res: dec.DecodeResult, run: Path, variant: str | None,
     if "variant" in ds.dims or "monitor_coord_px" not in ds:
         return None
     ours = res.monitor_coord_px
-    theirs = ds["monitor_coord_px"].sel(direction=direction).values
-    both = res.valid & (ds["decode_flags"].sel(direction=direction).values == 0)
+    try:
+        theirs = ds["monitor_coord_px"].sel(direction=direction).values
+        flags = ds["decode_flags"].sel(direction=direction).values
+    except Exception:  # noqa: BLE001 - a damaged chunk: the integrity check names it
+        from ..store.integrity import check_arrays, check_metadata
+        from ..store.schema import DATASET_NAME
+
+        folder = run / variant if variant is not None else run
+        store = folder / DATASET_NAME if (folder / DATASET_NAME).is_dir() else folder
+        check_arrays(store, check_metadata(store))  # raises InputError naming the chunk
+        raise
+    both = res.valid & (flags == 0)
     if ours.shape != theirs.shape:
         return None
     s = deviation_stats(ours - theirs, both, res.valid | both).as_dict()
