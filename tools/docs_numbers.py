@@ -456,6 +456,23 @@ def fig3_memory_estimate() -> tuple:
     return (estimate_resources(_fig3_config()).memory_bytes / 1e9,)
 
 
+@functools.cache
+def asphere_roi() -> tuple:
+    """docs/examples.md, docs/system.md: ``examples/asphere_5mp.toml``'s ``camera.roi =
+    "auto"`` window (width x height, its share of the sensor, %) and the estimate with it
+    and for the whole sensor, GB as pmdsim prints them (binary)."""
+    from pmdsim.config import estimate_resources, load_config
+    from pmdsim.run.simulate import resolve_roi
+
+    cfg = load_config(ROOT / "examples" / "asphere_5mp.toml")
+    roi = resolve_roi(cfg)
+    whole = cfg.model_copy(update={"camera": cfg.camera.model_copy(update={"roi": None})})
+    w, h = roi.camera.roi[2:]
+    sw, sh = cfg.camera.resolution
+    return (w, h, 100 * w * h / (sw * sh), estimate_resources(roi).memory_bytes / 2**30,
+            estimate_resources(whole).memory_bytes / 2**30)
+
+
 def _coarse_sphere(aperture_radius_mm, incidence_deg):
     """The coarse camera of tests/test_rim.py (160 x 120 px, about 0.8 mm per pixel) on a
     concave sphere R 800 mm, its exact monitor coordinates, reconstructed with the nominal
@@ -672,6 +689,14 @@ CHECKS = [
     Check("fig3-memory-robustness", "docs/robustness.md",
           r"Fig\. 3: " + NUMBER + r" GB\s+estimated\)", fig3_memory_estimate,
           why="the estimate from the configuration"),
+    Check("asphere-roi-examples", "docs/examples.md",
+          r"renders the " + NUMBER + r" x " + NUMBER + r" px window that sees it \(estimate "
+          + NUMBER + r" GB\s+instead of " + NUMBER + r" GB for the whole sensor\)",
+          lambda: asphere_roi()[:2] + asphere_roi()[3:], why="the roi and the estimate"),
+    Check("asphere-roi-system", "docs/system.md",
+          r"renders a " + NUMBER + r" x " + NUMBER + r" window\s+\(" + NUMBER
+          + r" % of the sensor\): estimated " + NUMBER + r" GB instead of " + NUMBER + r" GB\.",
+          asphere_roi, why="the roi and the estimate"),
     Check("varying-rows", "docs/examples.md",
           r"coordinate deviation RMS / P95 / max " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER
           + r" /\s+" + NUMBER + r" monitor px \(X\) and " + NUMBER + r" ± " + NUMBER + r" / "
