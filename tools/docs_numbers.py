@@ -471,6 +471,7 @@ def _topography_statistics() -> dict:
     return _run_statistics("measured_topography")
 
 
+@functools.cache
 def topography_rows() -> tuple:
     """README.md: the measured-topography example's table, per variant: phase deviation
     from the mirror (X then Y, 50 px): RMS, its numerical error (the RMS of the stated
@@ -838,6 +839,16 @@ CHECKS = [
           r"topography \(alphas " + NUMBER + r" / " + NUMBER + r"\)[\s\S]*?Rayleigh-Rice halo of its "
           r"PSD \(share " + NUMBER + r"\)[\s\S]*?\(g = " + NUMBER + r"\) keeps " + NUMBER
           + r" % of the light", topography_analysis, why="the topography's analysis, closed form"),
+    Check("topography-rows", "README.md",
+          r"after piston ± its error \(the chain's floor, the mirror decoded against itself, is\s+"
+          + NUMBER + r" nm\)" + "".join(
+              r"[\s\S]*?" + label + r" \| " + _PM + r" \(" + NUMBER + r"\) \| " + _PM + r" \("
+              + NUMBER + r"\) \| " + _PM + r" / " + _PM + r" \| " + _PM + r" \|"
+              for label in (r"\(i\) Ward from the machining \(alphas [\d.]+ / [\d.]+\)",
+                            r"\(ii\) slope density of the topography \(alphas [\d.]+ / [\d.]+\)",
+                            r"\(iii\) specular peak \+ Rayleigh-Rice halo of its PSD \(share [\d.]+\)")),
+          lambda: topography_rows()[-1:] + topography_rows()[:-1], rel_tol=0.02, fast=False,
+          why="the example through the chain (160 x 128 camera, about 2 min)"),
     Check("budget-scattering", "README.md",
           r"\| \*\*surface scattering \(ideal system\)\*\* \| " + NUMBER + r" ± " + NUMBER + r" / "
           + NUMBER + r" \| " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER
