@@ -528,6 +528,74 @@ def turned_sphere_kinematic() -> tuple:
             100 * px["low_modulation"] / px["surface"])
 
 
+@functools.cache
+def _dot_tables() -> dict:
+    """``examples/dot_scan.toml`` (28 dots, 1280 x 1024 camera, two variants; minutes):
+    ``dots.csv`` rows per variant (floats), and the turning centre's image (col, row)."""
+    import csv
+    import tempfile
+
+    from pmdsim import Simulation
+    from pmdsim.config import load_config
+    from pmdsim.run import run_simulation
+
+    cfg = load_config(ROOT / "examples" / "dot_scan.toml")
+    cfg = cfg.model_copy(update={"output": cfg.output.model_copy(
+        update={"figures": False, "write_images": False})})
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        run_simulation(cfg, Path(tmp) / "run", diagnostics=False)
+        for name, _ in cfg.expand():
+            with open(Path(tmp) / "run" / name / "dots.csv", newline="") as f:
+                out[name] = [{k: float(v) for k, v in r.items() if k != "variant"}
+                             for r in csv.DictReader(f)]
+    scene = Simulation.from_config(dict(cfg.expand())["kinematic"]).scene
+    return out, tuple(float(x) for x in scene.camera.project(scene.anisotropy.centre))
+
+
+def dot_shapes() -> tuple:
+    """docs/examples.md: the dot scan's second moments. Minimal: median sigma_major and the
+    range of its error, range of the elongation and of its error; kinematic: median,
+    minimum and maximum elongation and the range of its error, the largest angle between
+    the major axis and the radial direction in the image (from the turning centre's image,
+    as figures/dot_shapes.png draws it; exact for a plane) and the range of the angle's
+    error."""
+    import numpy as np
+
+    tables, (c0, r0) = _dot_tables()
+
+    def col(v, k):
+        return np.array([r[k] for r in tables[v]])
+
+    out = [float(np.median(col("minimal", "sigma_major_px")))]
+    for k in ("sigma_major_px_err", "elongation", "elongation_err"):
+        out += [col("minimal", k).min(), col("minimal", k).max()]
+    el = col("kinematic", "elongation")
+    out += [float(np.median(el)), el.min(), el.max()]
+    err = col("kinematic", "elongation_err")
+    out += [err.min(), err.max()]
+    radial = np.degrees(np.arctan2(col("kinematic", "centroid_row") - r0,
+                                   col("kinematic", "centroid_col") - c0))
+    off = (col("kinematic", "angle_deg") - radial + 90) % 180 - 90
+    aerr = col("kinematic", "angle_deg_err")
+    return tuple(float(x) for x in out + [np.abs(off).max(), aerr.min(), aerr.max()])
+
+
+def dot_footprint() -> tuple:
+    """docs/examples.md: the 1 deg cone's disc on the monitor (diameter, monitor px, at the
+    distance from the plate centre to the monitor centre), the share of it a 15 px dot
+    fills (1 / share) and the rays of N = 100 that land on the dot."""
+    import numpy as np
+
+    from pmdsim.config import load_config
+
+    cfg = load_config(ROOT / "examples" / "dot_scan.toml")
+    d = np.linalg.norm(np.subtract(cfg.monitor.centre_mm, cfg.surface.centre_mm))
+    diam = 2 * d * math.tan(math.radians(cfg.sampling.theta_max_deg)) / cfg.monitor.pixel_pitch_mm
+    share = cfg.patterns.dots.size_px ** 2 / (math.pi * diam ** 2 / 4)
+    return (diam, 1 / share, 100 * share)
+
+
 def topography_analysis() -> tuple:
     """README.md: ``pmdsim texture --from examples/measured_topography.x3p --incidence-deg
     25`` (Sq nm, alphas tangential / radial, Rayleigh parameter, specular share) and
@@ -833,6 +901,20 @@ CHECKS = [
           + _PM + r" urad;\s+kinematic " + _PM + r" / " + _PM + r" nm, " + _PM + r" / " + _PM
           + r" urad\. The specular\s+reference reconstructs to " + NUMBER + r" nm RMS",
           turned_sphere_rows, rel_tol=0.02, why="the example through the chain"),
+    Check("dot-shapes", "docs/examples.md",
+          r"The minimal-roughness dot stays round: sigma " + NUMBER + r" px \(the\s+median of the "
+          r"major axes; each ± " + NUMBER + r" to " + NUMBER + r" px\), elongation " + NUMBER
+          + r" to " + NUMBER + r" \(each ± " + NUMBER + r"\s+to " + NUMBER + r"\)\. The kinematic "
+          r"one is stretched to an elongation of " + NUMBER + r" \(median; " + NUMBER + r" to "
+          + NUMBER + r",\s+each ± " + NUMBER + r" to " + NUMBER + r"\), with its major axis within "
+          + NUMBER + r" deg of the radial direction at every\s+position \(each angle ± " + NUMBER
+          + r" to " + NUMBER + r" deg\)", dot_shapes, rel_tol=0.02, fast=False,
+          why="the example's full run (28 dots, 1280 x 1024 camera, about 2 min)"),
+    Check("dot-footprint", "docs/examples.md",
+          r"The 1 deg cone covers a disc of about " + NUMBER + r" monitor px on the\s+monitor, and "
+          r"a 15 px dot fills about 1/" + NUMBER + r" of it, so N = 100 would catch the dot with "
+          r"only\s+about " + NUMBER + r" rays", dot_footprint, rel_tol=0.05,
+          why="closed form from the configuration"),
     Check("topography-analysis", "README.md",
           r"a generated X3P of a turned, Sq\s+" + NUMBER + r" nm finish[\s\S]*?\(i\) Ward from the "
           r"machining \(alphas " + NUMBER + r" / " + NUMBER + r"\)[\s\S]*?\(ii\) slope density of the "
