@@ -98,14 +98,36 @@ def _fig3_config():
     return load_config(ROOT / "examples" / "paper_fig3.toml")
 
 
-def fig3_energy_fraction() -> tuple:
-    """README: the share of the Fig. 3 lobe's energy inside its 1 deg cone (diagnostics on
-    their coarse pixel grid, the full-size camera)."""
+@functools.cache
+def _fig3_diagnostics():
+    """The diagnostics of Fig. 3 as the README's Python example calls them (the coarse
+    pixel grid of the full-size camera)."""
     from pmdsim import Simulation
     from pmdsim.studies.diagnostics import diagnose
 
-    diag = diagnose(Simulation.from_config(_fig3_config()), widths=[400], phase_method="delta")
-    return (diag.summary["energy"]["fraction_median"],)
+    return diagnose(Simulation.from_config(_fig3_config()), widths=[400], phase_method="delta")
+
+
+def fig3_energy_fraction() -> tuple:
+    """README: the share of the Fig. 3 lobe's energy inside its 1 deg cone (diagnostics on
+    their coarse pixel grid, the full-size camera)."""
+    return (_fig3_diagnostics().summary["energy"]["fraction_median"],)
+
+
+def fig3_energy_warning() -> tuple:
+    """README, docs/outputs.md, docs/physics.md: the numbers of Fig. 3's energy warning
+    (``check`` with the example's bounds): median and minimum share of the lobe's energy
+    inside the cone (%), the cone that keeps the bound and the bound (%)."""
+    import numpy as np
+
+    from pmdsim.studies.diagnostic_warnings import check
+
+    diag = _fig3_diagnostics()
+    w = next(w for w in check(diag, bounds=_fig3_config().diagnostics)
+             if w.setting == "sampling.theta_max_deg")
+    fr = diag.energy.fraction
+    return (100 * float(np.nanmedian(fr)), 100 * float(np.nanmin(fr)), w.suggested,
+            100 * _fig3_config().diagnostics.min_energy_fraction)
 
 
 def fig3_modulation() -> tuple:
@@ -795,6 +817,21 @@ CHECKS = [
     Check("fig3-energy", "README.md",
           r"fraction_median\"\]\)\s+# " + NUMBER + r": lobe energy inside 1 deg",
           fig3_energy_fraction, why="quadrature on the diagnostics' grid, full camera"),
+    Check("fig3-energy-warning-readme", "README.md",
+          r"theta_max = 1 deg holds " + NUMBER + r" % of the lobe energy \(median over pixels; min "
+          + NUMBER + r" %\);\s+theta_max >= " + NUMBER + r" deg keeps " + NUMBER + r" %", fig3_energy_warning,
+          why="the diagnostics' energy warning, full camera's grid"),
+    Check("fig3-energy-warning-outputs", "docs/outputs.md",
+          r"theta_max = 1 deg holds " + NUMBER + r" % of the lobe energy \(median over pixels; min "
+          + NUMBER + r" %\);\s+theta_max >= " + NUMBER + r" deg keeps " + NUMBER + r" %", fig3_energy_warning,
+          why="the diagnostics' energy warning, full camera's grid"),
+    Check("fig3-energy-warning-physics", "docs/physics.md",
+          r"theta_max = 1 deg holds " + NUMBER + r" % of the lobe energy \(median over pixels; min "
+          + NUMBER + r" %\);\s+theta_max >= " + NUMBER + r" deg keeps " + NUMBER + r" %", fig3_energy_warning,
+          why="the diagnostics' energy warning, full camera's grid"),
+    Check("fig3-energy-examples", "docs/examples.md",
+          r"The 1 deg cone holds only about " + NUMBER + r" % of this lobe's energy",
+          lambda: (100 * fig3_energy_fraction()[0],), why="the diagnostics, full camera's grid"),
     Check("fig3-modulation", "docs/examples.md",
           r"keep a median modulation\s+of " + NUMBER + r" and the Y fringes " + NUMBER,
           fig3_modulation, abs_tol=0.01, why="320 x 256 camera, same field of view"),
