@@ -385,17 +385,32 @@ def fig3_converge() -> tuple:
 
 
 @functools.cache
-def _fig3_stratified_se() -> dict:
-    """The diagnostics' phase standard error (seeds method: 8 independent lattice
-    rotations, on their pixel grid of the full camera) of the paper's own sample set (100
-    stratified rays, 1 deg) on Fig. 3, rad, per "direction/width": median and P95."""
+def _fig3_stratified_diagnostics():
+    """The diagnostics (seeds method: 8 independent lattice rotations, on their pixel grid
+    of the full camera) of the paper's own sample set (100 stratified rays, 1 deg) on
+    Fig. 3."""
     from pmdsim import Simulation
     from pmdsim.config import with_sampling
     from pmdsim.studies.diagnostics import diagnose
 
     cfg = with_sampling(_fig3_config(), mode="stratified", n_rays=100, target_error_mrad=None)
-    diag = diagnose(Simulation.from_config(cfg), widths=[50, 400], phase_method="seeds")
-    return diag.summary["phase_se_rad"]
+    return diagnose(Simulation.from_config(cfg), widths=[50, 400], phase_method="seeds")
+
+
+def _fig3_stratified_se() -> dict:
+    """The phase standard error of :func:`_fig3_stratified_diagnostics`, rad, per
+    "direction/width": median and P95."""
+    return _fig3_stratified_diagnostics().summary["phase_se_rad"]
+
+
+def fig3_stratified_suggestion() -> tuple:
+    """docs/outputs.md, docs/physics.md: the n_rays the phase-error warning of the paper's
+    sample set suggests (``check`` with the example's bounds)."""
+    from pmdsim.studies.diagnostic_warnings import check
+
+    w = next(w for w in check(_fig3_stratified_diagnostics(), bounds=_fig3_config().diagnostics)
+             if w.setting == "sampling.n_rays")
+    return (w.suggested,)
 
 
 def fig3_stratified_p95() -> tuple:
@@ -878,6 +893,9 @@ CHECKS = [
           ("physics", "docs/physics.md", r"phase standard error " + NUMBER + r" mrad for x fringes of 50 px"),
           ("outputs", "docs/outputs.md", r"warning: phase standard error " + NUMBER + r" mrad for x fringes"),
           ("outputs-text", "docs/outputs.md", r"stratified rays: P95 " + NUMBER + r" mrad for x 50 px"))),
+    *(Check(f"fig3-stratified-suggestion-{k}", doc, r"> 1 mrad: raise sampling\.n_rays to ~ "
+            + NUMBER, fig3_stratified_suggestion, why="the diagnostics' warning for the paper's sample set")
+      for k, doc in (("outputs", "docs/outputs.md"), ("physics", "docs/physics.md"))),
     Check("fit-coverage", "docs/texture.md",
           r"both alphas inside their k = 2 intervals in \*\*" + NUMBER + r" of 20\*\* cases, "
           r"and " + NUMBER + r" of the 20\s+fits accepted", fit_coverage_counts, fast=False,
