@@ -164,6 +164,43 @@ def fig3_rays() -> tuple:
     return (float(fr.sampling["nodes"]), sim.rays_traced / 1e6)
 
 
+def _truncated(x: float, decimals: int) -> float:
+    """``x`` cut (not rounded) to ``decimals``: what a printed value's first digits show."""
+    return math.floor(x * 10**decimals) / 10**decimals
+
+
+def readme_python_api() -> tuple:
+    """README.md, "Python API": what its example prints, cut to the digits the README shows
+    before its "...": the plate's share of the camera and the largest specular u; the
+    median modulation of the X and Y fringes of 50 px (full camera) with the example's
+    sampling (the rule its target picks: nodes per pixel), with the 8 x 32 rule of 256
+    nodes and with the paper's 100 stratified rays; and the P95 of the stated phase error of
+    the X and Y 50 px fringes with the example's sampling (mrad)."""
+    import numpy as np
+
+    from pmdsim import Simulation
+    from pmdsim.config import with_sampling
+
+    sim = Simulation.from_config(_fig3_config())
+    geo = sim.geometry()
+    out = [_truncated(float(geo.surface_mask.mean()), 4),
+           _truncated(float(np.nanmax(geo.specular_u)), 2)]
+    p95 = nodes = None
+    for kw in ({}, {"n_rays": 256, "target_error_mrad": None},
+               {"mode": "stratified", "n_rays": 100, "target_error_mrad": None}):
+        fr = Simulation.from_config(with_sampling(_fig3_config(), **kw) if kw else _fig3_config()
+                                    ).render_fringes(widths=[50, 400], directions=["x", "y"],
+                                                     shifts=4)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mod = np.abs(fr.sums) / fr.f_hit
+        out += [_truncated(float(x), 4) for x in np.nanmedian(mod[:, 0], axis=(-2, -1))]
+        if not kw:
+            pe = fr.phase_error()[:, 0]
+            p95 = [1e3 * float(np.nanpercentile(pe[k], 95)) for k in range(2)]
+            nodes = float(fr.sampling["nodes"])
+    return tuple(out[:4]) + (nodes,) + tuple(out[4:]) + tuple(p95)
+
+
 def fig3_specular_span() -> tuple:
     """docs/fig3-geometry.md: the monitor range (u, v) the principal rays of Fig. 3 reach."""
     import numpy as np
@@ -850,6 +887,14 @@ CHECKS = [
     Check("fig3-modulation", "docs/examples.md",
           r"keep a median modulation\s+of " + NUMBER + r" and the Y fringes " + NUMBER,
           fig3_modulation, abs_tol=0.01, why="320 x 256 camera, same field of view"),
+    Check("readme-python-api", "README.md",
+          r"This prints `" + NUMBER + r"\.\.\.  " + NUMBER + r"\.\.\.` and `\[" + NUMBER
+          + r"\.\.\. " + NUMBER + r"\.\.\.\]`[\s\S]*?target_error_mrad = 0\.1` picks \("
+          + NUMBER + r" nodes per\s+pixel\); the 8 x 32 rule of 256 nodes prints `\[" + NUMBER
+          + r"\.\.\. " + NUMBER + r"\.\.\.\]`, the paper's\s+100 stratified rays `\[" + NUMBER
+          + r"\.\.\. " + NUMBER + r"\.\.\.\]`\)[\s\S]*?\(P95 here " + NUMBER + r" / "
+          + NUMBER + r" mrad for X / Y at 50 px", readme_python_api,
+          why="the README's example as written: full camera, three renders"),
     Check("fig3-specular-span", "docs/fig3-geometry.md",
           r"The specular points span u = " + NUMBER + r" \.\.\. " + NUMBER + r" and v = "
           + NUMBER + r" \.\.\. " + NUMBER, fig3_specular_span, why="geometry, full camera"),
