@@ -327,6 +327,47 @@ def budget_full_system() -> tuple:
                          nh["height_rms_nm"], nh["height_pv_nm"])
 
 
+_BUDGET_SYSTEM = ("monitor_pixels", "display_response", "sensor", "cover_glass", "all_system")
+
+
+def budget_system() -> tuple:
+    """README.md: the realistic example's system rows: the ideal system's slope (urad X / Y)
+    and height (RMS / PV), then per effect of :data:`_BUDGET_SYSTEM` monitor px X / Y, urad
+    X / Y, height RMS / PV."""
+    b = _realistic_budget()
+    out = [b[("ideal", "x")]["rms_urad"], b[("ideal", "y")]["rms_urad"],
+           b[("ideal", "height")]["height_rms_nm"], b[("ideal", "height")]["height_pv_nm"]]
+    for eff in _BUDGET_SYSTEM:
+        x, y, h = b[(eff, "x")], b[(eff, "y")], b[(eff, "height")]
+        out += [x["rms_px"], y["rms_px"], x["rms_urad"], y["rms_urad"], h["height_rms_nm"],
+                h["height_pv_nm"]]
+    return tuple(out)
+
+
+def budget_calibration() -> tuple:
+    """README.md: the realistic example's calibration rows: slope urad RMS X / Y and height
+    RMS / PV per row as the table orders them; the monitor's three in one row (slopes of
+    position, orientation, pitch, then their heights RMS)."""
+    b = _realistic_budget()
+
+    def slope(e):
+        h = b[(e, "height")]
+        return [h["slope_rms_x_urad"], h["slope_rms_y_urad"]]
+
+    def height(e):
+        h = b[(e, "height")]
+        return [h["height_rms_nm"], h["height_pv_nm"]]
+
+    out = []
+    for e in ("camera_position_mm", "camera_orientation_deg", "principal_point_px", "focal_length_rel"):
+        out += slope(e) + height(e)
+    mon = ("monitor_position_mm", "monitor_orientation_deg", "monitor_pitch_rel")
+    out += [v for e in mon for v in slope(e)] + [b[(e, "height")]["height_rms_nm"] for e in mon]
+    for e in ("surface_distance_mm", "calibration_total"):
+        out += slope(e) + height(e)
+    return tuple(out)
+
+
 @functools.cache
 def _roughness_statistics() -> dict:
     """``examples/roughness_comparison.toml`` run through the chain (decoded, compared with
@@ -438,6 +479,21 @@ def _fig3_stratified_se() -> dict:
     """The phase standard error of :func:`_fig3_stratified_diagnostics`, rad, per
     "direction/width": median and P95."""
     return _fig3_stratified_diagnostics().summary["phase_se_rad"]
+
+
+@functools.cache
+def fig3_stratified_delta() -> tuple:
+    """README.md, docs/outputs.md: the delta method's phase standard error of the paper's
+    sample set on Fig. 3 (P95, x 50 px, mrad, on the diagnostics' grid of the full camera)
+    and its ratio to the seeds method's."""
+    from pmdsim import Simulation
+    from pmdsim.config import with_sampling
+    from pmdsim.studies.diagnostics import diagnose
+
+    cfg = with_sampling(_fig3_config(), mode="stratified", n_rays=100, target_error_mrad=None)
+    se = diagnose(Simulation.from_config(cfg), widths=[50], phase_method="delta").summary["phase_se_rad"]
+    delta = 1e3 * se["x/50"]["p95"]
+    return delta, delta / fig3_stratified_p95()[0]
 
 
 def fig3_stratified_suggestion() -> tuple:
@@ -941,6 +997,14 @@ CHECKS = [
     *(Check(f"fig3-stratified-suggestion-{k}", doc, r"> 1 mrad: raise sampling\.n_rays to ~ "
             + NUMBER, fig3_stratified_suggestion, why="the diagnostics' warning for the paper's sample set")
       for k, doc in (("outputs", "docs/outputs.md"), ("physics", "docs/physics.md"))),
+    Check("fig3-stratified-delta-readme", "README.md",
+          r"overstates the error about " + NUMBER + r"x on\s+Fig\. 3 \(" + NUMBER + r" mrad for the "
+          r"paper's 100 stratified rays", lambda: fig3_stratified_delta()[::-1], rel_tol=0.01,
+          why="the diagnostics (delta and seeds) for the paper's sample set"),
+    Check("fig3-stratified-delta-outputs", "docs/outputs.md",
+          r"is an upper bound \(" + NUMBER + r" mrad on Fig\. 3, " + NUMBER + r"x the seeds method's\)",
+          fig3_stratified_delta, rel_tol=0.01,
+          why="the diagnostics (delta and seeds) for the paper's sample set"),
     Check("fit-coverage", "docs/texture.md",
           r"both alphas inside their k = 2 intervals in \*\*" + NUMBER + r" of 20\*\* cases, "
           r"and " + NUMBER + r" of the 20\s+fits accepted", fit_coverage_counts, fast=False,
@@ -1036,6 +1100,31 @@ CHECKS = [
           + NUMBER + r" \| " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER
           + r" ± " + NUMBER + r" / " + NUMBER + r" ± " + NUMBER + r" \|", budget_scattering,
           fast=False, why="the full example's budget (deterministic rule, no sensor)"),
+    Check("budget-system", "README.md",
+          r"\| ideal system \(the reconstruction's floor\) \| < 1e-6 \| " + NUMBER + r" / " + NUMBER
+          + r" \| " + NUMBER + r" / " + NUMBER + r" \|" + "".join(
+              r"\n\| " + label + r" \| " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER + r" / "
+              + NUMBER + r" \| " + NUMBER + r" / " + NUMBER + r" \|"
+              for label in (r"monitor pixel grid", r"display response \(gamma 2\.2, 8 bit\)",
+                            r"sensor noise", r"cover glass 1\.1 mm",
+                            r"pixel footprint, defocus, bow, falloff \| < 0\.001 \| < 0\.03 \| < 0\.1 \|\n"
+                            r"\| \*\*all system effects together\*\*")),
+          budget_system, rel_tol=0.02, fast=False,
+          why="the full example's budget (the system rows: deterministic renders, seeded sensor)"),
+    Check("budget-calibration", "README.md",
+          "".join(r"\| " + label + r" \| " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER + r" / "
+                  + NUMBER + r" \|\n" for label in (
+                      r"camera position 0\.05 mm \(per axis\)", r"camera orientation 0\.005 deg \(per axis\)",
+                      r"principal point 0\.5 px", r"focal length 5e-4 relative"))
+          + r"\| monitor position 0\.05 mm / orientation 0\.005 deg / pitch 1e-4 \| " + NUMBER + r" / "
+          + NUMBER + r", " + NUMBER + r" / " + NUMBER + r", " + NUMBER + r" / " + NUMBER + r" \| "
+          + NUMBER + r", " + NUMBER + r", " + NUMBER + r" \|\n"
+          + "".join(r"\| " + label + r" \| " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER + r" / "
+                    + NUMBER + r" \|" + end for label, end in (
+                        (r"nominal surface distance 0\.05 mm \(height-slope ambiguity\)", r"\n"),
+                        (r"\*\*all calibration errors \(quadrature\)\*\*", ""))),
+          budget_calibration, rel_tol=0.02, fast=False,
+          why="the full example's budget (sensitivity x uncertainty, deterministic)"),
     Check("budget-numerical", "README.md",
           r"\| numerical error of that row \| " + NUMBER + r" / < 1e-8 \| " + NUMBER
           + r" / < 1e-5 \| " + NUMBER + r" / " + NUMBER + r" \|[\s\S]*?\| numerical error of "
