@@ -566,6 +566,20 @@ def _varying_statistics() -> dict:
     return out
 
 
+def varying_cone() -> tuple:
+    """docs/examples.md: the cone (deg) that keeps 95 % of the widest lobe's energy (the
+    energy diagnostic's maximum over its grid) for the varying finish and for the rim's
+    finish everywhere."""
+    from pmdsim import Simulation
+    from pmdsim.config import load_config
+    from pmdsim.studies.diagnostics import diagnose
+
+    cfg = load_config(ROOT / "examples" / "turned_plate_varying.toml")
+    plain = cfg.model_copy(update={"brdf": cfg.brdf.model_copy(update={"variation": None})})
+    return tuple(diagnose(Simulation.from_config(c), widths=[400], phase_method="delta")
+                 .summary["energy"]["theta_needed_deg_max"] for c in (cfg, plain))
+
+
 def varying_rows() -> tuple:
     """docs/examples.md: coordinate deviation (monitor px) RMS with its numerical error,
     P95 and maximum, X then Y, of the varying finish and then of the rim's finish."""
@@ -1030,6 +1044,10 @@ CHECKS = [
           + NUMBER + r" / " + NUMBER + r" and " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER
           + r" / " + NUMBER + r" for the same plate", varying_rows, rel_tol=0.02, fast=False,
           why="the example through the chain and without its variation"),
+    Check("varying-cone", "docs/examples.md",
+          r"95 %\s+of the widest \(central\) lobe needs theta_max " + NUMBER + r" deg, against "
+          + NUMBER + r" deg for the rim's finish", varying_cone, abs_tol=0.05,
+          why="the energy diagnostic of the example and without its variation"),
     Check("turning-ward", "docs/texture.md",
           r"\| Ward, equivalent alphas \(0\.0020 / 0\.0246\)" + _ROW * 4,
           _turning_row("ward_equivalent"), fast=False, why="the full example run"),
