@@ -249,16 +249,47 @@ def _turning_statistics() -> dict:
 def _turning_row(variant: str) -> Callable[[], tuple]:
     def compute() -> tuple:
         st = _turning_statistics()[variant]["directions"]
-        return tuple(st[d][q][s] for q in ("phase_mrad", "coord_px") for d in ("x", "y")
-                     for s in ("rms", "p95"))
-    compute.__doc__ = f"docs/texture.md: the turning example's {variant} row"
+        return tuple(v for q in ("phase_mrad", "coord_px") for d in ("x", "y")
+                     for v in (st[d][q]["rms"], st[d]["numerical_error"][q]["rms"], st[d][q]["p95"]))
+    compute.__doc__ = (f"docs/texture.md: the turning example's {variant} row: RMS, its "
+                       "numerical error (the RMS of the stated per-pixel error) and P95")
     return compute
 
 
-def _turning_readme() -> tuple:
+@functools.cache
+def turning_ward_convergence() -> tuple:
+    """docs/texture.md: the turning example's Ward variant at N = 4096, the Gauss-Hermite
+    rule and rqmc (8 x 512): phase deviation RMS and its numerical error, X then Y, each."""
+    import tempfile
+
+    from pmdsim.config import load_config, with_sampling
+    from pmdsim.run import run_simulation
+
+    cfg = dict(load_config(ROOT / "examples" / "turning_parameters.toml").expand())["ward_equivalent"]
+    cfg = cfg.model_copy(update={"output": cfg.output.model_copy(
+        update={"figures": False, "write_images": False})})
+    out = []
+    for kw in ({"n_rays": 4096}, {"mode": "rqmc", "n_rays": 4096}):
+        with tempfile.TemporaryDirectory() as tmp:
+            st = run_simulation(with_sampling(cfg, **kw), Path(tmp) / "run",
+                                diagnostics=False).statistics["directions"]
+        out += [v for d in ("x", "y") for v in (st[d]["phase_mrad"]["rms"],
+                                                st[d]["numerical_error"]["phase_mrad"]["rms"])]
+    return tuple(out)
+
+
+def _turning_modulations() -> list:
     st = _turning_statistics()
-    return tuple(st[v]["directions"][d]["phase_mrad"]["rms"]
-                 for v in ("ward_equivalent", "kinematic", "diffractive") for d in ("x", "y"))
+    return [st[m]["directions"][d]["modulation"]["ratio_median_by_width"][0]
+            for m in ("ward_equivalent", "kinematic", "diffractive") for d in ("x", "y")]
+
+
+def _turning_readme() -> tuple:
+    """README.md: the phase deviation RMS of each model with its numerical error, X and Y."""
+    st = _turning_statistics()
+    return tuple(v for m in ("ward_equivalent", "kinematic", "diffractive") for d in ("x", "y")
+                 for v in (st[m]["directions"][d]["phase_mrad"]["rms"],
+                           st[m]["directions"][d]["numerical_error"]["phase_mrad"]["rms"]))
 
 
 @functools.cache
@@ -925,7 +956,7 @@ def fig3_rim_floor() -> tuple:
 
 
 # ----------------------------------------------------------------------------- the table
-_ROW = r" \| " + NUMBER + r" / " + NUMBER
+_ROW = r" \| " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER
 _PM = NUMBER + r" ± " + NUMBER
 _PM2 = NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" ± " + NUMBER
 CHECKS = [
@@ -1057,10 +1088,23 @@ CHECKS = [
     Check("turning-diffractive", "docs/texture.md",
           r"\| turned, diffractive \(R, G, B\)" + _ROW * 4,
           _turning_row("diffractive"), fast=False, why="the full example run"),
+    Check("turning-ward-convergence", "docs/texture.md",
+          r"Gauss-Hermite rule of 4096 nodes gives " + _PM + r" / " + _PM + r" mrad \(X / Y\) and "
+          r"rqmc of\s+8 x 512 points, whose replicates state an honest error on a step too, "
+          + _PM + r" /\s+" + _PM + r" mrad", turning_ward_convergence, rel_tol=0.02, fast=False,
+          why="the example's Ward variant at N = 4096, rule and rqmc (about 2 min)"),
+    Check("turning-ward-rqmc-readme", "README.md",
+          r"does not converge for Ward \(" + _PM + r" / " + _PM + r" mrad with 8 x 512 rqmc points\)",
+          lambda: turning_ward_convergence()[4:], rel_tol=0.02, fast=False,
+          why="the example's Ward variant, rqmc 8 x 512"),
+    Check("turning-modulation", "docs/texture.md",
+          r"which the ~290 px wide lobe leaves at modulation " + NUMBER + r"-" + NUMBER + r"\)",
+          lambda: (min(_turning_modulations()), max(_turning_modulations())), fast=False,
+          why="the full example run: median modulation ratio at 500 px, all models and directions"),
     Check("turning-readme", "README.md",
-          r"phase-deviation RMS \(X / Y\) is\s+" + NUMBER + r" / " + NUMBER
-          + r" mrad with the equivalent Ward lobe, " + NUMBER + r" / " + NUMBER
-          + r" mrad with the kinematic density[\s\S]*?and\s+" + NUMBER + r" / " + NUMBER
+          r"phase-deviation RMS \(X / Y\) is\s+" + _PM + r" / " + _PM
+          + r" mrad with the equivalent Ward lobe, " + _PM + r" / " + _PM
+          + r" mrad with the kinematic density[\s\S]*?and\s+" + _PM + r" / " + _PM
           + r" mrad with the diffractive orders", _turning_readme, fast=False,
           why="the full example run"),
     Check("fig3-folder-size", "docs/outputs.md",
