@@ -153,15 +153,55 @@ def _fig3_simulation():
     return Simulation.from_config(_fig3_config())
 
 
-def fig3_rays() -> tuple:
-    """docs/performance.md: the rays a Fig. 3 run traces per surface pixel (the rule its
-    target's pilot picks) and in all, pilot included, in millions, as the kernels count
-    them (``Simulation.rays_traced``, the run's ``rays_traced``)."""
+@functools.cache
+def _fig3_render():
+    """Fig. 3's fringes as its run renders them (full camera, the rule its target's pilot
+    picks): (the fringe result, the rays the kernels traced)."""
     from pmdsim import Simulation
 
     sim = Simulation.from_config(_fig3_config())
     fr = sim.render_fringes(widths=[50.0, 400.0, 3200.0], directions=["x", "y"], shifts=4)
-    return (float(fr.sampling["nodes"]), sim.rays_traced / 1e6)
+    return fr, sim.rays_traced
+
+
+def fig3_rays() -> tuple:
+    """docs/performance.md: the rays a Fig. 3 run traces per surface pixel (the rule its
+    target's pilot picks) and in all, pilot included, in millions, as the kernels count
+    them (``Simulation.rays_traced``, the run's ``rays_traced``)."""
+    fr, rays = _fig3_render()
+    return (float(fr.sampling["nodes"]), rays / 1e6)
+
+
+def fig3_contrast() -> tuple:
+    """docs/fig3-geometry.md: median modulation over the plate of Fig. 3's X and then Y
+    fringes of 50, 400 and 3200 px (full camera, the example's sampling)."""
+    import numpy as np
+
+    fr, _ = _fig3_render()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mod = np.abs(fr.sums) / fr.f_hit
+    return tuple(float(np.nanmedian(mod[d, w])) for d in range(2) for w in range(3))
+
+
+def _groups_of_three(n: int) -> tuple:
+    """``n`` as the docs write a large count, in groups of three digits: 1 309 130 ->
+    (1, 309, 130)."""
+    out = []
+    while True:
+        n, r = divmod(int(n), 1000)
+        out.insert(0, r)
+        if n == 0:
+            return tuple(out)
+
+
+@functools.cache
+def fig3_plate_pixels() -> tuple:
+    """docs/fig3-geometry.md: camera pixels that see the plate, of all, their share (%),
+    those that do not, and where pixel (1, 1)'s vision ray hits the plate (x, y mm)."""
+    geo = _fig3_simulation().geometry()
+    n, total = int(geo.surface_mask.sum()), geo.surface_mask.size
+    return (n, total, 100 * n / total, total - n, float(geo.points[0, 0, 0]),
+            float(geo.points[0, 0, 1]))
 
 
 def _truncated(x: float, decimals: int) -> float:
@@ -1002,6 +1042,19 @@ CHECKS = [
     Check("fig3-rays", "docs/performance.md",
           r"the rays a Fig\. 3 run traces \(" + NUMBER + r" per surface pixel, " + NUMBER
           + r" M\s+in all", fig3_rays, why="the pilot's pick and the render, full camera"),
+    Check("fig3-plate-pixels", "docs/fig3-geometry.md",
+          r"\s" + " ".join([NUMBER] * 3) + r" of the " + " ".join([NUMBER] * 3) + r" pixels \("
+          + NUMBER + r" %\) see the plate\. The " + NUMBER + " " + NUMBER + r" pixels",
+          lambda: (*_groups_of_three(fig3_plate_pixels()[0]), *_groups_of_three(fig3_plate_pixels()[1]),
+                   fig3_plate_pixels()[2], *_groups_of_three(fig3_plate_pixels()[3])),
+          why="geometry, full camera (counts written in groups of three digits)"),
+    Check("fig3-pixel-hit", "docs/fig3-geometry.md",
+          r"its vision ray hits the plate at\s+\(" + NUMBER + r", " + NUMBER + r", 0\) mm",
+          lambda: fig3_plate_pixels()[4:], why="geometry, full camera"),
+    Check("fig3-contrast", "docs/fig3-geometry.md",
+          r"the example's target picks\): X fringes " + NUMBER + r" / " + NUMBER + r" / " + NUMBER
+          + r" and Y fringes " + NUMBER + r" / " + NUMBER + r" / " + NUMBER, fig3_contrast,
+          why="the fig3-rays render (full camera, the example's sampling)"),
     Check("fig3-pixel-bundle", "docs/fig3-geometry.md",
           r"P lands at \(u, v\) = \(" + NUMBER + r", " + NUMBER + r"\); " + NUMBER
           + r" of its " + NUMBER + r" rays hit the\s+monitor, " + NUMBER
