@@ -336,7 +336,7 @@ def _turning_readme() -> tuple:
 
 @functools.cache
 def _realistic_budget() -> dict:
-    """``pmdsim budget examples/realistic_system.toml`` (tens of minutes on two cores): its
+    """``pmdsim budget examples/realistic_system.toml`` (minutes on two cores): its
     rows by (effect, direction) and height rows by effect. ``PMDSIM_BUDGET_JSON`` may name
     the ``budget.json`` of that command's run to check (or ``--update``) from instead; it
     must hold the example's configuration as it is now."""
