@@ -98,14 +98,44 @@ def _fig3_config():
     return load_config(ROOT / "examples" / "paper_fig3.toml")
 
 
-def fig3_energy_fraction() -> tuple:
-    """README: the share of the Fig. 3 lobe's energy inside its 1 deg cone (diagnostics on
-    their coarse pixel grid, the full-size camera)."""
+_FIG3_DIAGNOSTICS: dict = {}
+
+
+def _fig3_diagnostics():
+    """The diagnostics of Fig. 3 as the README's Python example calls them (the coarse
+    pixel grid of the full-size camera); kept per configuration object (a test swaps
+    :func:`_fig3_config`)."""
     from pmdsim import Simulation
     from pmdsim.studies.diagnostics import diagnose
 
-    diag = diagnose(Simulation.from_config(_fig3_config()), widths=[400], phase_method="delta")
-    return (diag.summary["energy"]["fraction_median"],)
+    cfg = _fig3_config()
+    hit = _FIG3_DIAGNOSTICS.get(id(cfg))
+    if hit is None or hit[0] is not cfg:
+        hit = _FIG3_DIAGNOSTICS[id(cfg)] = (cfg, diagnose(Simulation.from_config(cfg), widths=[400],
+                                                          phase_method="delta"))
+    return hit[1]
+
+
+def fig3_energy_fraction() -> tuple:
+    """README: the share of the Fig. 3 lobe's energy inside its 1 deg cone (diagnostics on
+    their coarse pixel grid, the full-size camera)."""
+    return (_fig3_diagnostics().summary["energy"]["fraction_median"],)
+
+
+def fig3_energy_warning() -> tuple:
+    """README, docs/outputs.md, docs/physics.md: the numbers of Fig. 3's energy warning
+    (``check`` with the example's bounds): median and minimum share of the lobe's energy
+    inside the cone (%), the cone that keeps the bound and the bound (%)."""
+    import numpy as np
+
+    from pmdsim.studies.diagnostic_warnings import check
+
+    diag = _fig3_diagnostics()
+    w = next(w for w in check(diag, bounds=_fig3_config().diagnostics)
+             if w.setting == "sampling.theta_max_deg")
+    fr = diag.energy.fraction
+    return (100 * float(np.nanmedian(fr)), 100 * float(np.nanmin(fr)), w.suggested,
+            100 * _fig3_config().diagnostics.min_energy_fraction)
 
 
 def fig3_modulation() -> tuple:
@@ -131,15 +161,100 @@ def _fig3_simulation():
     return Simulation.from_config(_fig3_config())
 
 
-def fig3_rays() -> tuple:
-    """docs/performance.md: the rays a Fig. 3 run traces per surface pixel (the rule its
-    target's pilot picks) and in all, pilot included, in millions, as the kernels count
-    them (``Simulation.rays_traced``, the run's ``rays_traced``)."""
+@functools.cache
+def _fig3_render():
+    """Fig. 3's fringes as its run renders them (full camera, the rule its target's pilot
+    picks): (the fringe result, the rays the kernels traced)."""
     from pmdsim import Simulation
 
     sim = Simulation.from_config(_fig3_config())
     fr = sim.render_fringes(widths=[50.0, 400.0, 3200.0], directions=["x", "y"], shifts=4)
-    return (float(fr.sampling["nodes"]), sim.rays_traced / 1e6)
+    return fr, sim.rays_traced
+
+
+def fig3_rays() -> tuple:
+    """docs/performance.md: the rays a Fig. 3 run traces per surface pixel (the rule its
+    target's pilot picks) and in all, pilot included, in millions, as the kernels count
+    them (``Simulation.rays_traced``, the run's ``rays_traced``)."""
+    fr, rays = _fig3_render()
+    return (float(fr.sampling["nodes"]), rays / 1e6)
+
+
+def fig3_contrast() -> tuple:
+    """docs/fig3-geometry.md: median modulation over the plate of Fig. 3's X and then Y
+    fringes of 50, 400 and 3200 px (full camera, the example's sampling)."""
+    import numpy as np
+
+    fr, _ = _fig3_render()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mod = np.abs(fr.sums) / fr.f_hit
+    return tuple(float(np.nanmedian(mod[d, w])) for d in range(2) for w in range(3))
+
+
+def _groups_of_three(n: int) -> tuple:
+    """``n`` as the docs write a large count, in groups of three digits: 1 309 130 ->
+    (1, 309, 130)."""
+    out = []
+    while True:
+        n, r = divmod(int(n), 1000)
+        out.insert(0, r)
+        if n == 0:
+            return tuple(out)
+
+
+@functools.cache
+def fig3_plate_pixels() -> tuple:
+    """docs/fig3-geometry.md: camera pixels that see the plate, of all, their share (%),
+    those that do not, and where pixel (1, 1)'s vision ray hits the plate (x, y mm)."""
+    geo = _fig3_simulation().geometry()
+    n, total = int(geo.surface_mask.sum()), geo.surface_mask.size
+    return (n, total, 100 * n / total, total - n, float(geo.points[0, 0, 0]),
+            float(geo.points[0, 0, 1]))
+
+
+def _truncated(x: float, decimals: int) -> float:
+    """``x`` cut (not rounded) to ``decimals``: what a printed value's first digits show."""
+    return math.floor(x * 10**decimals) / 10**decimals
+
+
+def readme_python_api() -> tuple:
+    """README.md, "Python API": what its example prints, cut to the digits the README shows
+    before its "...": the plate's share of the camera and the largest specular u, the
+    median modulation of the X and Y fringes of 50 px (full camera, the example's sampling:
+    the rule its target picks, nodes per pixel), and the P95 of their stated phase error
+    (mrad). The render is fig3-rays' (widths 50, 400 and 3200: the same rule and the same
+    50 px sums as the README's [50, 400])."""
+    import numpy as np
+
+    geo = _fig3_simulation().geometry()
+    fr = _fig3_render()[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mod = np.abs(fr.sums[:, 0]) / fr.f_hit
+    pe = fr.phase_error()[:, 0]
+    return (_truncated(float(geo.surface_mask.mean()), 4),
+            _truncated(float(np.nanmax(geo.specular_u)), 2),
+            *(_truncated(float(x), 4) for x in np.nanmedian(mod, axis=(-2, -1))),
+            float(fr.sampling["nodes"]),
+            *(1e3 * float(np.nanpercentile(pe[k], 95)) for k in range(2)))
+
+
+def readme_python_api_rules() -> tuple:
+    """README.md, "Python API": the median modulation of the X and Y fringes of 50 px (full
+    camera, cut to the digits shown) with the 8 x 32 rule of 256 nodes and with the paper's
+    100 stratified rays."""
+    import numpy as np
+
+    from pmdsim import Simulation
+    from pmdsim.config import with_sampling
+
+    out = []
+    for kw in ({"n_rays": 256}, {"mode": "stratified", "n_rays": 100}):
+        fr = Simulation.from_config(with_sampling(_fig3_config(), target_error_mrad=None, **kw)
+                                    ).render_fringes(widths=[50, 400], directions=["x", "y"], shifts=4)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mod = np.abs(fr.sums[:, 0]) / fr.f_hit
+        out += [_truncated(float(x), 4) for x in np.nanmedian(mod, axis=(-2, -1))]
+    return tuple(out)
 
 
 def fig3_specular_span() -> tuple:
@@ -190,21 +305,52 @@ def _turning_statistics() -> dict:
 def _turning_row(variant: str) -> Callable[[], tuple]:
     def compute() -> tuple:
         st = _turning_statistics()[variant]["directions"]
-        return tuple(st[d][q][s] for q in ("phase_mrad", "coord_px") for d in ("x", "y")
-                     for s in ("rms", "p95"))
-    compute.__doc__ = f"docs/texture.md: the turning example's {variant} row"
+        return tuple(v for q in ("phase_mrad", "coord_px") for d in ("x", "y")
+                     for v in (st[d][q]["rms"], st[d]["numerical_error"][q]["rms"], st[d][q]["p95"]))
+    compute.__doc__ = (f"docs/texture.md: the turning example's {variant} row: RMS, its "
+                       "numerical error (the RMS of the stated per-pixel error) and P95")
     return compute
 
 
-def _turning_readme() -> tuple:
+@functools.cache
+def turning_ward_convergence() -> tuple:
+    """docs/texture.md: the turning example's Ward variant at N = 4096, the Gauss-Hermite
+    rule and rqmc (8 x 512): phase deviation RMS and its numerical error, X then Y, each."""
+    import tempfile
+
+    from pmdsim.config import load_config, with_sampling
+    from pmdsim.run import run_simulation
+
+    cfg = dict(load_config(ROOT / "examples" / "turning_parameters.toml").expand())["ward_equivalent"]
+    cfg = cfg.model_copy(update={"output": cfg.output.model_copy(
+        update={"figures": False, "write_images": False})})
+    out = []
+    for kw in ({"n_rays": 4096}, {"mode": "rqmc", "n_rays": 4096}):
+        with tempfile.TemporaryDirectory() as tmp:
+            st = run_simulation(with_sampling(cfg, **kw), Path(tmp) / "run",
+                                diagnostics=False).statistics["directions"]
+        out += [v for d in ("x", "y") for v in (st[d]["phase_mrad"]["rms"],
+                                                st[d]["numerical_error"]["phase_mrad"]["rms"])]
+    return tuple(out)
+
+
+def _turning_modulations() -> list:
     st = _turning_statistics()
-    return tuple(st[v]["directions"][d]["phase_mrad"]["rms"]
-                 for v in ("ward_equivalent", "kinematic", "diffractive") for d in ("x", "y"))
+    return [st[m]["directions"][d]["modulation"]["ratio_median_by_width"][0]
+            for m in ("ward_equivalent", "kinematic", "diffractive") for d in ("x", "y")]
+
+
+def _turning_readme() -> tuple:
+    """README.md: the phase deviation RMS of each model with its numerical error, X and Y."""
+    st = _turning_statistics()
+    return tuple(v for m in ("ward_equivalent", "kinematic", "diffractive") for d in ("x", "y")
+                 for v in (st[m]["directions"][d]["phase_mrad"]["rms"],
+                           st[m]["directions"][d]["numerical_error"]["phase_mrad"]["rms"]))
 
 
 @functools.cache
 def _realistic_budget() -> dict:
-    """``pmdsim budget examples/realistic_system.toml`` (tens of minutes on two cores): its
+    """``pmdsim budget examples/realistic_system.toml`` (minutes on two cores): its
     rows by (effect, direction) and height rows by effect. ``PMDSIM_BUDGET_JSON`` may name
     the ``budget.json`` of that command's run to check (or ``--update``) from instead; it
     must hold the example's configuration as it is now."""
@@ -266,6 +412,87 @@ def budget_full_system() -> tuple:
     nx, ny, nh = (b[("numerical_surface_noise_free", d)] for d in ("x", "y", "height"))
     return tuple(out) + (nx["rms_px"], ny["rms_px"], nx["rms_urad"], ny["rms_urad"],
                          nh["height_rms_nm"], nh["height_pv_nm"])
+
+
+_BUDGET_SYSTEM = ("monitor_pixels", "display_response", "sensor", "cover_glass", "all_system")
+
+
+def budget_system() -> tuple:
+    """README.md: the realistic example's system rows: the ideal system's slope (urad X / Y)
+    and height (RMS / PV), then per effect of :data:`_BUDGET_SYSTEM` monitor px X / Y, urad
+    X / Y, height RMS / PV."""
+    b = _realistic_budget()
+    out = [b[("ideal", "x")]["rms_urad"], b[("ideal", "y")]["rms_urad"],
+           b[("ideal", "height")]["height_rms_nm"], b[("ideal", "height")]["height_pv_nm"]]
+    for eff in _BUDGET_SYSTEM:
+        x, y, h = b[(eff, "x")], b[(eff, "y")], b[(eff, "height")]
+        out += [x["rms_px"], y["rms_px"], x["rms_urad"], y["rms_urad"], h["height_rms_nm"],
+                h["height_pv_nm"]]
+    return tuple(out)
+
+
+def budget_calibration() -> tuple:
+    """README.md: the realistic example's calibration rows: slope urad RMS X / Y and height
+    RMS / PV per row as the table orders them; the monitor's three in one row (slopes of
+    position, orientation, pitch, then their heights RMS)."""
+    b = _realistic_budget()
+
+    def slope(e):
+        h = b[(e, "height")]
+        return [h["slope_rms_x_urad"], h["slope_rms_y_urad"]]
+
+    def height(e):
+        h = b[(e, "height")]
+        return [h["height_rms_nm"], h["height_pv_nm"]]
+
+    out = []
+    for e in ("camera_position_mm", "camera_orientation_deg", "principal_point_px", "focal_length_rel"):
+        out += slope(e) + height(e)
+    mon = ("monitor_position_mm", "monitor_orientation_deg", "monitor_pitch_rel")
+    out += [v for e in mon for v in slope(e)] + [b[(e, "height")]["height_rms_nm"] for e in mon]
+    for e in ("surface_distance_mm", "calibration_total"):
+        out += slope(e) + height(e)
+    return tuple(out)
+
+
+@functools.cache
+def budget_numerical_shares() -> tuple:
+    """README.md, docs/system.md: the largest share (%) a numerical error row has of its
+    surface row (the full system's and the no-sensor row, X and Y) in slope (urad RMS) and
+    in height (RMS and PV); then the same in height for the no-sensor and the ideal
+    system's row alone."""
+    b = _realistic_budget()
+
+    def slope(num, row):
+        return max(b[(num, d)]["rms_urad"] / b[(row, d)]["rms_urad"] for d in ("x", "y"))
+
+    def height(num, row):
+        n, r = b[(num, "height")], b[(row, "height")]
+        return max(n["height_rms_nm"] / r["height_rms_nm"], n["height_pv_nm"] / r["height_pv_nm"])
+
+    pairs = (("numerical_surface", "surface"), ("numerical_surface_noise_free", "surface_noise_free"))
+    return (100 * max(slope(*p) for p in pairs), 100 * max(height(*p) for p in pairs),
+            100 * height(*pairs[1]), 100 * height("numerical_surface_ideal", "surface_ideal"))
+
+
+@functools.cache
+def budget_system_md() -> tuple:
+    """docs/system.md: the budget in words: the full system's scattering row (px, X / Y, each
+    ± its error) with and without the sensor, the ideal system's X bias (px), the mirror's
+    sensor noise (X, px), the no-sensor row (px X / Y, urad X / Y), the full system's height
+    RMS ± error; the height RMS of the grid, the cover glass, the sensor, the scattering
+    through the ideal system (± its error) and the ideal system's floor (nm)."""
+    b = _realistic_budget()
+    f, n = b[("surface", "x")], b[("surface_noise_free", "x")]
+    fy, ny = b[("surface", "y")], b[("surface_noise_free", "y")]
+    fh, ih = b[("surface", "height")], b[("surface_ideal", "height")]
+    return (f["rms_px"], f["rms_px_err"], fy["rms_px"], fy["rms_px_err"], n["rms_px"],
+            n["rms_px_err"], ny["rms_px"], ny["rms_px_err"], b[("surface_ideal", "x")]["rms_px"],
+            b[("sensor", "x")]["rms_px"], n["rms_px"], ny["rms_px"], n["rms_urad"], ny["rms_urad"],
+            fh["height_rms_nm"], fh["height_rms_nm_err"],
+            b[("monitor_pixels", "height")]["height_rms_nm"], b[("cover_glass", "height")]["height_rms_nm"],
+            b[("sensor", "height")]["height_rms_nm"], ih["height_rms_nm"], ih["height_rms_nm_err"],
+            b[("ideal", "height")]["height_rms_nm"])
 
 
 @functools.cache
@@ -363,17 +590,47 @@ def fig3_converge() -> tuple:
 
 
 @functools.cache
-def _fig3_stratified_se() -> dict:
-    """The diagnostics' phase standard error (seeds method: 8 independent lattice
-    rotations, on their pixel grid of the full camera) of the paper's own sample set (100
-    stratified rays, 1 deg) on Fig. 3, rad, per "direction/width": median and P95."""
+def _fig3_stratified_diagnostics():
+    """The diagnostics (seeds method: 8 independent lattice rotations, on their pixel grid
+    of the full camera) of the paper's own sample set (100 stratified rays, 1 deg) on
+    Fig. 3."""
     from pmdsim import Simulation
     from pmdsim.config import with_sampling
     from pmdsim.studies.diagnostics import diagnose
 
     cfg = with_sampling(_fig3_config(), mode="stratified", n_rays=100, target_error_mrad=None)
-    diag = diagnose(Simulation.from_config(cfg), widths=[50, 400], phase_method="seeds")
-    return diag.summary["phase_se_rad"]
+    return diagnose(Simulation.from_config(cfg), widths=[50, 400], phase_method="seeds")
+
+
+def _fig3_stratified_se() -> dict:
+    """The phase standard error of :func:`_fig3_stratified_diagnostics`, rad, per
+    "direction/width": median and P95."""
+    return _fig3_stratified_diagnostics().summary["phase_se_rad"]
+
+
+@functools.cache
+def fig3_stratified_delta() -> tuple:
+    """README.md, docs/outputs.md: the delta method's phase standard error of the paper's
+    sample set on Fig. 3 (P95, x 50 px, mrad, on the diagnostics' grid of the full camera)
+    and its ratio to the seeds method's."""
+    from pmdsim import Simulation
+    from pmdsim.config import with_sampling
+    from pmdsim.studies.diagnostics import diagnose
+
+    cfg = with_sampling(_fig3_config(), mode="stratified", n_rays=100, target_error_mrad=None)
+    se = diagnose(Simulation.from_config(cfg), widths=[50], phase_method="delta").summary["phase_se_rad"]
+    delta = 1e3 * se["x/50"]["p95"]
+    return delta, delta / fig3_stratified_p95()[0]
+
+
+def fig3_stratified_suggestion() -> tuple:
+    """docs/outputs.md, docs/physics.md: the n_rays the phase-error warning of the paper's
+    sample set suggests (``check`` with the example's bounds)."""
+    from pmdsim.studies.diagnostic_warnings import check
+
+    w = next(w for w in check(_fig3_stratified_diagnostics(), bounds=_fig3_config().diagnostics)
+             if w.setting == "sampling.n_rays")
+    return (w.suggested,)
 
 
 def fig3_stratified_p95() -> tuple:
@@ -436,6 +693,20 @@ def _varying_statistics() -> dict:
     return out
 
 
+def varying_cone() -> tuple:
+    """docs/examples.md: the cone (deg) that keeps 95 % of the widest lobe's energy (the
+    energy diagnostic's maximum over its grid) for the varying finish and for the rim's
+    finish everywhere."""
+    from pmdsim import Simulation
+    from pmdsim.config import load_config
+    from pmdsim.studies.diagnostics import diagnose
+
+    cfg = load_config(ROOT / "examples" / "turned_plate_varying.toml")
+    plain = cfg.model_copy(update={"brdf": cfg.brdf.model_copy(update={"variation": None})})
+    return tuple(diagnose(Simulation.from_config(c), widths=[400], phase_method="delta")
+                 .summary["energy"]["theta_needed_deg_max"] for c in (cfg, plain))
+
+
 def varying_rows() -> tuple:
     """docs/examples.md: coordinate deviation (monitor px) RMS with its numerical error,
     P95 and maximum, X then Y, of the varying finish and then of the rim's finish."""
@@ -449,11 +720,189 @@ def varying_rows() -> tuple:
     return tuple(out)
 
 
+def _run_statistics(example: str) -> dict:
+    """``examples/<example>.toml`` through the chain as configured (figures and image files
+    off, no diagnostics): ``statistics.json`` per variant."""
+    import tempfile
+
+    from pmdsim.config import load_config
+    from pmdsim.run import run_simulation
+
+    cfg = load_config(ROOT / "examples" / f"{example}.toml")
+    cfg = cfg.model_copy(update={"output": cfg.output.model_copy(
+        update={"figures": False, "write_images": False})})
+    with tempfile.TemporaryDirectory() as tmp:
+        res = run_simulation(cfg, Path(tmp) / "run", diagnostics=False)
+    return {sub.config.name: sub.statistics for sub in res.variants}
+
+
+@functools.cache
+def _topography_statistics() -> dict:
+    """``examples/measured_topography.toml`` (160 x 128 camera, three variants; minutes)."""
+    return _run_statistics("measured_topography")
+
+
+@functools.cache
+def topography_rows() -> tuple:
+    """README.md: the measured-topography example's table, per variant: phase deviation
+    from the mirror (X then Y, 50 px): RMS, its numerical error (the RMS of the stated
+    per-pixel error), P95; slope deviation RMS with its error, X then Y; height error RMS
+    (piston removed) with its error; then the specular reference's height error RMS."""
+    st = _topography_statistics()
+    out = []
+    for v in ("ward_machining", "slope_density", "halo"):
+        dirs = st[v]["directions"]
+        for d in ("x", "y"):
+            s = dirs[d]
+            out += [s["phase_mrad"]["rms"], s["numerical_error"]["phase_mrad"]["rms"],
+                    s["phase_mrad"]["p95"]]
+        for d in ("x", "y"):
+            s = dirs[d]
+            out += [s["slope_urad"]["rms"], s["numerical_error"]["slope_urad"]["rms"]]
+        h = st[v]["reconstruction"]["height_error_nm"]
+        out += [h["rms"], h["rms_err"]]
+    return tuple(out) + (st["ward_machining"]["reconstruction"]["reference_height_error_nm"]["rms"],)
+
+
+@functools.cache
+def _turned_sphere_statistics() -> dict:
+    """``examples/turned_sphere.toml`` (400 x 400 camera, two variants; about 10 s)."""
+    return _run_statistics("turned_sphere")
+
+
+def turned_sphere_rows() -> tuple:
+    """README.md, docs/examples.md: per variant (optical, kinematic) the height error after
+    piston and tilt removal, RMS and PV (nm), and the slope error RMS about zero, X then Y
+    (urad), each with its numerical error; then the specular reference's height error RMS
+    (nm)."""
+    st = _turned_sphere_statistics()
+    out = []
+    for v in ("optical", "kinematic"):
+        r = st[v]["reconstruction"]
+        h = r["height_error_nm"]
+        out += [h["rms"], h["rms_err"], h["pv"], h["pv_err"]]
+        for d in ("x", "y"):
+            s = r[f"slope_error_{d}_urad"]
+            out += [s["rms_about_zero"], s["rms_about_zero_err"]]
+    return tuple(out) + (st["optical"]["reconstruction"]["reference_height_error_nm"]["rms"],)
+
+
+def turned_sphere_kinematic() -> tuple:
+    """README.md: the kinematic sphere's height error after tilt removal, RMS and PV in um,
+    its X slope error RMS about zero and about its mean (urad), and the share of the
+    surface's pixels whose X fringes lose their contrast (masked, %)."""
+    st = _turned_sphere_statistics()["kinematic"]
+    r = st["reconstruction"]
+    px = st["directions"]["x"]["pixels"]
+    return (r["height_error_nm"]["rms"] / 1e3, r["height_error_nm"]["pv"] / 1e3,
+            r["slope_error_x_urad"]["rms_about_zero"], r["slope_error_x_urad"]["rms"],
+            100 * px["low_modulation"] / px["surface"])
+
+
+@functools.cache
+def _dot_tables() -> dict:
+    """``examples/dot_scan.toml`` (28 dots, 1280 x 1024 camera, two variants; minutes):
+    ``dots.csv`` rows per variant (floats), and the turning centre's image (col, row)."""
+    import csv
+    import tempfile
+
+    from pmdsim import Simulation
+    from pmdsim.config import load_config
+    from pmdsim.run import run_simulation
+
+    cfg = load_config(ROOT / "examples" / "dot_scan.toml")
+    cfg = cfg.model_copy(update={"output": cfg.output.model_copy(
+        update={"figures": False, "write_images": False})})
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        run_simulation(cfg, Path(tmp) / "run", diagnostics=False)
+        for name, _ in cfg.expand():
+            with open(Path(tmp) / "run" / name / "dots.csv", newline="") as f:
+                out[name] = [{k: float(v) for k, v in r.items() if k != "variant"}
+                             for r in csv.DictReader(f)]
+    scene = Simulation.from_config(dict(cfg.expand())["kinematic"]).scene
+    return out, tuple(float(x) for x in scene.camera.project(scene.anisotropy.centre))
+
+
+def dot_shapes() -> tuple:
+    """docs/examples.md: the dot scan's second moments. Minimal: median sigma_major and the
+    range of its error, range of the elongation and of its error; kinematic: median,
+    minimum and maximum elongation and the range of its error, the largest angle between
+    the major axis and the radial direction in the image (from the turning centre's image,
+    as figures/dot_shapes.png draws it; exact for a plane) and the range of the angle's
+    error."""
+    import numpy as np
+
+    tables, (c0, r0) = _dot_tables()
+
+    def col(v, k):
+        return np.array([r[k] for r in tables[v]])
+
+    out = [float(np.median(col("minimal", "sigma_major_px")))]
+    for k in ("sigma_major_px_err", "elongation", "elongation_err"):
+        out += [col("minimal", k).min(), col("minimal", k).max()]
+    el = col("kinematic", "elongation")
+    out += [float(np.median(el)), el.min(), el.max()]
+    err = col("kinematic", "elongation_err")
+    out += [err.min(), err.max()]
+    radial = np.degrees(np.arctan2(col("kinematic", "centroid_row") - r0,
+                                   col("kinematic", "centroid_col") - c0))
+    off = (col("kinematic", "angle_deg") - radial + 90) % 180 - 90
+    aerr = col("kinematic", "angle_deg_err")
+    return tuple(float(x) for x in out + [np.abs(off).max(), aerr.min(), aerr.max()])
+
+
+def dot_footprint() -> tuple:
+    """docs/examples.md: the 1 deg cone's disc on the monitor (diameter, monitor px, at the
+    distance from the plate centre to the monitor centre), the share of it a 15 px dot
+    fills (1 / share) and the rays of N = 100 that land on the dot."""
+    import numpy as np
+
+    from pmdsim.config import load_config
+
+    cfg = load_config(ROOT / "examples" / "dot_scan.toml")
+    d = np.linalg.norm(np.subtract(cfg.monitor.centre_mm, cfg.surface.centre_mm))
+    diam = 2 * d * math.tan(math.radians(cfg.sampling.theta_max_deg)) / cfg.monitor.pixel_pitch_mm
+    share = cfg.patterns.dots.size_px ** 2 / (math.pi * diam ** 2 / 4)
+    return (diam, 1 / share, 100 * share)
+
+
+def topography_analysis() -> tuple:
+    """README.md: ``pmdsim texture --from examples/measured_topography.x3p --incidence-deg
+    25`` (Sq nm, alphas tangential / radial, Rayleigh parameter, specular share) and
+    ``pmdsim texture --feed-um 5 --nose-radius-mm 1 --rq-um 0.0028 --correlation-um 5``
+    (the Ward alphas of the machining)."""
+    from pmdsim.run.texture import run_topography
+
+    a = run_topography(ROOT / "examples" / "measured_topography.x3p", figure=False,
+                       incidence_deg=25.0).analysis
+    p = _texture(feed_um=5, nose_radius_mm=1, rq_um=0.0028, correlation_length_um=5.0)
+    return (a.sq_um * 1e3, p.alpha_tangential, p.alpha_radial, a.alpha_tangential,
+            a.alpha_radial, a.specular_share, a.rayleigh, 100 * a.specular_share)
+
+
 def fig3_memory_estimate() -> tuple:
     """docs/configuration.md, docs/robustness.md: ``estimate_resources`` of Fig. 3, GB."""
     from pmdsim.config import estimate_resources
 
     return (estimate_resources(_fig3_config()).memory_bytes / 1e9,)
+
+
+@functools.cache
+def asphere_roi() -> tuple:
+    """docs/examples.md, docs/system.md: ``examples/asphere_5mp.toml``'s ``camera.roi =
+    "auto"`` window (width x height, its share of the sensor, %) and the estimate with it
+    and for the whole sensor, GB as pmdsim prints them (binary)."""
+    from pmdsim.config import estimate_resources, load_config
+    from pmdsim.run.simulate import resolve_roi
+
+    cfg = load_config(ROOT / "examples" / "asphere_5mp.toml")
+    roi = resolve_roi(cfg)
+    whole = cfg.model_copy(update={"camera": cfg.camera.model_copy(update={"roi": None})})
+    w, h = roi.camera.roi[2:]
+    sw, sh = cfg.camera.resolution
+    return (w, h, 100 * w * h / (sw * sh), estimate_resources(roi).memory_bytes / 2**30,
+            estimate_resources(whole).memory_bytes / 2**30)
 
 
 def _coarse_sphere(aperture_radius_mm, incidence_deg):
@@ -575,6 +1024,24 @@ def _fig3_run() -> dict:
     return out
 
 
+def fig3_nearest() -> tuple:
+    """docs/examples.md: Fig. 3 through the chain with ``monitor.pixel_model = "nearest"``
+    (full camera; no figures, no diagnostics): the X coordinate of the decoded mirror
+    reference against the exact specular points and of the surface against them, RMS
+    (monitor px)."""
+    import tempfile
+
+    from pmdsim.run import run_simulation
+
+    cfg = _fig3_config()
+    cfg = cfg.model_copy(update={
+        "monitor": cfg.monitor.model_copy(update={"pixel_model": "nearest"}),
+        "output": cfg.output.model_copy(update={"figures": False, "write_images": False})})
+    with tempfile.TemporaryDirectory() as tmp:
+        st = run_simulation(cfg, Path(tmp) / "run", diagnostics=False).statistics["directions"]["x"]
+    return (st["reference_vs_exact_px"]["rms"], st["coord_vs_exact_px"]["rms"])
+
+
 def fig3_folder_size() -> tuple:
     """docs/outputs.md: the Fig. 3 run folder, MB: all of it, run.zarr, the TIFFs, the
     figures."""
@@ -603,7 +1070,8 @@ def fig3_rim_floor() -> tuple:
 
 
 # ----------------------------------------------------------------------------- the table
-_ROW = r" \| " + NUMBER + r" / " + NUMBER
+_ROW = r" \| " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER
+_PM = NUMBER + r" ± " + NUMBER
 _PM2 = NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" ± " + NUMBER
 CHECKS = [
     Check("texture-kinematic", "README.md",
@@ -616,15 +1084,54 @@ CHECKS = [
     Check("fig3-energy", "README.md",
           r"fraction_median\"\]\)\s+# " + NUMBER + r": lobe energy inside 1 deg",
           fig3_energy_fraction, why="quadrature on the diagnostics' grid, full camera"),
+    Check("fig3-energy-warning-readme", "README.md",
+          r"theta_max = 1 deg holds " + NUMBER + r" % of the lobe energy \(median over pixels; min "
+          + NUMBER + r" %\);\s+theta_max >= " + NUMBER + r" deg keeps " + NUMBER + r" %", fig3_energy_warning,
+          why="the diagnostics' energy warning, full camera's grid"),
+    Check("fig3-energy-warning-outputs", "docs/outputs.md",
+          r"theta_max = 1 deg holds " + NUMBER + r" % of the lobe energy \(median over pixels; min "
+          + NUMBER + r" %\);\s+theta_max >= " + NUMBER + r" deg keeps " + NUMBER + r" %", fig3_energy_warning,
+          why="the diagnostics' energy warning, full camera's grid"),
+    Check("fig3-energy-warning-physics", "docs/physics.md",
+          r"theta_max = 1 deg holds " + NUMBER + r" % of the lobe energy \(median over pixels; min "
+          + NUMBER + r" %\);\s+theta_max >= " + NUMBER + r" deg keeps " + NUMBER + r" %", fig3_energy_warning,
+          why="the diagnostics' energy warning, full camera's grid"),
+    Check("fig3-energy-examples", "docs/examples.md",
+          r"The 1 deg cone holds only about " + NUMBER + r" % of this lobe's energy",
+          lambda: (100 * fig3_energy_fraction()[0],), why="the diagnostics, full camera's grid"),
     Check("fig3-modulation", "docs/examples.md",
           r"keep a median modulation\s+of " + NUMBER + r" and the Y fringes " + NUMBER,
           fig3_modulation, abs_tol=0.01, why="320 x 256 camera, same field of view"),
+    Check("readme-python-api", "README.md",
+          r"This prints `" + NUMBER + r"\.\.\.  " + NUMBER + r"\.\.\.` and `\[" + NUMBER
+          + r"\.\.\. " + NUMBER + r"\.\.\.\]`[\s\S]*?target_error_mrad = 0\.1` picks \("
+          + NUMBER + r" nodes per\s+pixel\)[\s\S]*?\(P95 here " + NUMBER + r" / "
+          + NUMBER + r" mrad for X / Y at 50 px", readme_python_api,
+          why="the README's example: geometry and fig3-rays' render (full camera)"),
+    Check("readme-python-api-rules", "README.md",
+          r"the 8 x 32 rule of 256 nodes prints `\[" + NUMBER + r"\.\.\. " + NUMBER
+          + r"\.\.\.\]`, the paper's\s+100 stratified rays `\[" + NUMBER + r"\.\.\. " + NUMBER
+          + r"\.\.\.\]`\)", readme_python_api_rules, fast=False,
+          why="the README's example with two other sample sets: two full-camera renders"),
     Check("fig3-specular-span", "docs/fig3-geometry.md",
           r"The specular points span u = " + NUMBER + r" \.\.\. " + NUMBER + r" and v = "
           + NUMBER + r" \.\.\. " + NUMBER, fig3_specular_span, why="geometry, full camera"),
     Check("fig3-rays", "docs/performance.md",
           r"the rays a Fig\. 3 run traces \(" + NUMBER + r" per surface pixel, " + NUMBER
           + r" M\s+in all", fig3_rays, why="the pilot's pick and the render, full camera"),
+    Check("fig3-plate-pixels", "docs/fig3-geometry.md",
+          r"\s" + " ".join([NUMBER] * 3) + r" of the " + " ".join([NUMBER] * 3) + r" pixels \("
+          + NUMBER + r" %\) see the plate\. The " + NUMBER + " " + NUMBER + r" pixels",
+          lambda: (*_groups_of_three(fig3_plate_pixels()[0]), *_groups_of_three(fig3_plate_pixels()[1]),
+                   fig3_plate_pixels()[2], *_groups_of_three(fig3_plate_pixels()[3])),
+          why="geometry, full camera (counts written in groups of three digits)"),
+    Check("fig3-pixel-hit", "docs/fig3-geometry.md",
+          r"its vision ray hits the plate at\s+\(" + NUMBER + r", " + NUMBER + r", 0\) mm",
+          lambda: fig3_plate_pixels()[4:], why="geometry, full camera"),
+    Check("fig3-contrast", "docs/fig3-geometry.md",
+          r"the example's target picks\): X fringes " + NUMBER + r" / " + NUMBER + r" / " + NUMBER
+          + r" and Y fringes " + NUMBER + r" / " + NUMBER + r" / " + NUMBER, fig3_contrast,
+          why="the fig3-rays render (full camera, the example's sampling)"),
     Check("fig3-pixel-bundle", "docs/fig3-geometry.md",
           r"P lands at \(u, v\) = \(" + NUMBER + r", " + NUMBER + r"\); " + NUMBER
           + r" of its " + NUMBER + r" rays hit the\s+monitor, " + NUMBER
@@ -662,6 +1169,17 @@ CHECKS = [
           ("physics", "docs/physics.md", r"phase standard error " + NUMBER + r" mrad for x fringes of 50 px"),
           ("outputs", "docs/outputs.md", r"warning: phase standard error " + NUMBER + r" mrad for x fringes"),
           ("outputs-text", "docs/outputs.md", r"stratified rays: P95 " + NUMBER + r" mrad for x 50 px"))),
+    *(Check(f"fig3-stratified-suggestion-{k}", doc, r"> 1 mrad: raise sampling\.n_rays to ~ "
+            + NUMBER, fig3_stratified_suggestion, why="the diagnostics' warning for the paper's sample set")
+      for k, doc in (("outputs", "docs/outputs.md"), ("physics", "docs/physics.md"))),
+    Check("fig3-stratified-delta-readme", "README.md",
+          r"overstates the error about " + NUMBER + r"x on\s+Fig\. 3 \(" + NUMBER + r" mrad for the "
+          r"paper's 100 stratified rays", lambda: fig3_stratified_delta()[::-1], rel_tol=0.01,
+          why="the diagnostics (delta and seeds) for the paper's sample set"),
+    Check("fig3-stratified-delta-outputs", "docs/outputs.md",
+          r"is an upper bound \(" + NUMBER + r" mrad on Fig\. 3, " + NUMBER + r"x the seeds method's\)",
+          fig3_stratified_delta, rel_tol=0.01,
+          why="the diagnostics (delta and seeds) for the paper's sample set"),
     Check("fit-coverage", "docs/texture.md",
           r"both alphas inside their k = 2 intervals in \*\*" + NUMBER + r" of 20\*\* cases, "
           r"and " + NUMBER + r" of the 20\s+fits accepted", fit_coverage_counts, fast=False,
@@ -672,6 +1190,14 @@ CHECKS = [
     Check("fig3-memory-robustness", "docs/robustness.md",
           r"Fig\. 3: " + NUMBER + r" GB\s+estimated\)", fig3_memory_estimate,
           why="the estimate from the configuration"),
+    Check("asphere-roi-examples", "docs/examples.md",
+          r"renders the " + NUMBER + r" x " + NUMBER + r" px window that sees it \(estimate "
+          + NUMBER + r" GB\s+instead of " + NUMBER + r" GB for the whole sensor\)",
+          lambda: asphere_roi()[:2] + asphere_roi()[3:], why="the roi and the estimate"),
+    Check("asphere-roi-system", "docs/system.md",
+          r"renders a " + NUMBER + r" x " + NUMBER + r" window\s+\(" + NUMBER
+          + r" % of the sensor\): estimated " + NUMBER + r" GB instead of " + NUMBER + r" GB\.",
+          asphere_roi, why="the roi and the estimate"),
     Check("varying-rows", "docs/examples.md",
           r"coordinate deviation RMS / P95 / max " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER
           + r" /\s+" + NUMBER + r" monitor px \(X\) and " + NUMBER + r" ± " + NUMBER + r" / "
@@ -679,6 +1205,10 @@ CHECKS = [
           + NUMBER + r" / " + NUMBER + r" and " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER
           + r" / " + NUMBER + r" for the same plate", varying_rows, rel_tol=0.02, fast=False,
           why="the example through the chain and without its variation"),
+    Check("varying-cone", "docs/examples.md",
+          r"95 %\s+of the widest \(central\) lobe needs theta_max " + NUMBER + r" deg, against "
+          + NUMBER + r" deg for the rim's finish", varying_cone, abs_tol=0.05,
+          why="the energy diagnostic of the example and without its variation"),
     Check("turning-ward", "docs/texture.md",
           r"\| Ward, equivalent alphas \(0\.0020 / 0\.0246\)" + _ROW * 4,
           _turning_row("ward_equivalent"), fast=False, why="the full example run"),
@@ -688,21 +1218,134 @@ CHECKS = [
     Check("turning-diffractive", "docs/texture.md",
           r"\| turned, diffractive \(R, G, B\)" + _ROW * 4,
           _turning_row("diffractive"), fast=False, why="the full example run"),
+    Check("turning-ward-convergence", "docs/texture.md",
+          r"Gauss-Hermite rule of 4096 nodes gives " + _PM + r" / " + _PM + r" mrad \(X / Y\) and "
+          r"rqmc of\s+8 x 512 points, whose replicates state an honest error on a step too, "
+          + _PM + r" /\s+" + _PM + r" mrad", turning_ward_convergence, rel_tol=0.02, fast=False,
+          why="the example's Ward variant at N = 4096, rule and rqmc (about 2 min)"),
+    Check("turning-ward-rqmc-readme", "README.md",
+          r"does not converge for Ward \(" + _PM + r" / " + _PM + r" mrad with 8 x 512 rqmc points\)",
+          lambda: turning_ward_convergence()[4:], rel_tol=0.02, fast=False,
+          why="the example's Ward variant, rqmc 8 x 512"),
+    Check("turning-modulation", "docs/texture.md",
+          r"which the ~290 px wide lobe leaves at modulation " + NUMBER + r"-" + NUMBER + r"\)",
+          lambda: (min(_turning_modulations()), max(_turning_modulations())), fast=False,
+          why="the full example run: median modulation ratio at 500 px, all models and directions"),
     Check("turning-readme", "README.md",
-          r"phase-deviation RMS \(X / Y\) is\s+" + NUMBER + r" / " + NUMBER
-          + r" mrad with the equivalent Ward lobe, " + NUMBER + r" / " + NUMBER
-          + r" mrad with the kinematic density[\s\S]*?and\s+" + NUMBER + r" / " + NUMBER
+          r"phase-deviation RMS \(X / Y\) is\s+" + _PM + r" / " + _PM
+          + r" mrad with the equivalent Ward lobe, " + _PM + r" / " + _PM
+          + r" mrad with the kinematic density[\s\S]*?and\s+" + _PM + r" / " + _PM
           + r" mrad with the diffractive orders", _turning_readme, fast=False,
           why="the full example run"),
+    Check("fig3-nearest", "docs/examples.md",
+          r"its \+-0\.5 px quantisation \(" + NUMBER + r" px RMS\) shows as moire stripes[\s\S]*?"
+          r"the\s+scattering surface itself decodes " + NUMBER + r" px RMS from the exact specular points",
+          fig3_nearest, rel_tol=0.02, fast=False,
+          why="the full Fig. 3 run on a nearest-pixel monitor (minutes)"),
     Check("fig3-folder-size", "docs/outputs.md",
           r"The Fig\. 3 run folder is " + NUMBER + r" MB \(run\.zarr " + NUMBER + r" MB, TIFFs "
           + NUMBER + r" MB, figures " + NUMBER + r" MB\)", fig3_folder_size, rel_tol=0.02,
           fast=False, why="the full Fig. 3 run, figures drawn"),
+    Check("turned-sphere-readme", "README.md",
+          r"\| optical, alpha 0\.0005 / 0\.0005 \| " + _PM + r" \| " + _PM + r" \| " + _PM
+          + r" / " + _PM + r" \|\n\| kinematic, alpha_radial 0\.025, tangential 0\.002 \| " + _PM
+          + r" \| " + _PM + r" \| " + _PM + r" / " + _PM + r" \|\n\| specular reference \(the "
+          r"chain's floor\) \| " + NUMBER + r" \|", turned_sphere_rows, rel_tol=0.02,
+          why="the example through the chain (400 x 400 camera, about 10 s)"),
+    Check("turned-sphere-kinematic", "README.md",
+          r"The kinematic lobe fakes about " + NUMBER + r" um RMS \(" + NUMBER + r" um PV\)[\s\S]*?\("
+          + NUMBER + r" urad RMS about zero, " + NUMBER + r" about\s+their mean[\s\S]*?"
+          + NUMBER + r" % of the\s+surface's pixels", turned_sphere_kinematic, rel_tol=0.02,
+          why="the example through the chain"),
+    Check("turned-sphere-examples", "docs/examples.md",
+          r"each ± its numerical\s+error\): optical " + _PM + r" / " + _PM + r" nm, " + _PM + r" / "
+          + _PM + r" urad;\s+kinematic " + _PM + r" / " + _PM + r" nm, " + _PM + r" / " + _PM
+          + r" urad\. The specular\s+reference reconstructs to " + NUMBER + r" nm RMS",
+          turned_sphere_rows, rel_tol=0.02, why="the example through the chain"),
+    Check("dot-shapes", "docs/examples.md",
+          r"The minimal-roughness dot stays round: sigma " + NUMBER + r" px \(the\s+median of the "
+          r"major axes; each ± " + NUMBER + r" to " + NUMBER + r" px\), elongation " + NUMBER
+          + r" to " + NUMBER + r" \(each ± " + NUMBER + r"\s+to " + NUMBER + r"\)\. The kinematic "
+          r"one is stretched to an elongation of " + NUMBER + r" \(median; " + NUMBER + r" to "
+          + NUMBER + r",\s+each ± " + NUMBER + r" to " + NUMBER + r"\), with its major axis within "
+          + NUMBER + r" deg of the radial direction at every\s+position \(each angle ± " + NUMBER
+          + r" to " + NUMBER + r" deg\)", dot_shapes, rel_tol=0.02, fast=False,
+          why="the example's full run (28 dots, 1280 x 1024 camera, about 2 min)"),
+    Check("dot-footprint", "docs/examples.md",
+          r"The 1 deg cone covers a disc of about " + NUMBER + r" monitor px on the\s+monitor, and "
+          r"a 15 px dot fills about 1/" + NUMBER + r" of it, so N = 100 would catch the dot with "
+          r"only\s+about " + NUMBER + r" rays", dot_footprint, rel_tol=0.05,
+          why="closed form from the configuration"),
+    Check("topography-analysis", "README.md",
+          r"a generated X3P of a turned, Sq\s+" + NUMBER + r" nm finish[\s\S]*?\(i\) Ward from the "
+          r"machining \(alphas " + NUMBER + r" / " + NUMBER + r"\)[\s\S]*?\(ii\) slope density of the "
+          r"topography \(alphas " + NUMBER + r" / " + NUMBER + r"\)[\s\S]*?Rayleigh-Rice halo of its "
+          r"PSD \(share " + NUMBER + r"\)[\s\S]*?\(g = " + NUMBER + r"\) keeps " + NUMBER
+          + r" % of the light", topography_analysis, why="the topography's analysis, closed form"),
+    Check("topography-rows", "README.md",
+          r"after piston ± its error \(the chain's floor, the mirror decoded against itself, is\s+"
+          + NUMBER + r" nm\)" + "".join(
+              r"[\s\S]*?" + label + r" \| " + _PM + r" \(" + NUMBER + r"\) \| " + _PM + r" \("
+              + NUMBER + r"\) \| " + _PM + r" / " + _PM + r" \| " + _PM + r" \|"
+              for label in (r"\(i\) Ward from the machining \(alphas [\d.]+ / [\d.]+\)",
+                            r"\(ii\) slope density of the topography \(alphas [\d.]+ / [\d.]+\)",
+                            r"\(iii\) specular peak \+ Rayleigh-Rice halo of its PSD \(share [\d.]+\)")),
+          lambda: topography_rows()[-1:] + topography_rows()[:-1], rel_tol=0.02, fast=False,
+          why="the example through the chain (160 x 128 camera, about 2 min)"),
+    Check("fig3-folder-size-readme", "README.md",
+          r"The Fig\. 3 run folder is " + NUMBER + r" MB \(float32", lambda: fig3_folder_size()[:1],
+          rel_tol=0.02, fast=False, why="the full Fig. 3 run, figures drawn"),
     Check("budget-scattering", "README.md",
           r"\| \*\*surface scattering \(ideal system\)\*\* \| " + NUMBER + r" ± " + NUMBER + r" / "
           + NUMBER + r" \| " + NUMBER + r" ± " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER
           + r" ± " + NUMBER + r" / " + NUMBER + r" ± " + NUMBER + r" \|", budget_scattering,
           fast=False, why="the full example's budget (deterministic rule, no sensor)"),
+    Check("budget-system", "README.md",
+          r"\| ideal system \(the reconstruction's floor\) \| < 1e-6 \| " + NUMBER + r" / " + NUMBER
+          + r" \| " + NUMBER + r" / " + NUMBER + r" \|" + "".join(
+              r"\n\| " + label + r" \| " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER + r" / "
+              + NUMBER + r" \| " + NUMBER + r" / " + NUMBER + r" \|"
+              for label in (r"monitor pixel grid", r"display response \(gamma 2\.2, 8 bit\)",
+                            r"sensor noise", r"cover glass 1\.1 mm",
+                            r"pixel footprint, defocus, bow, falloff \| < 0\.001 \| < 0\.03 \| < 0\.1 \|\n"
+                            r"\| \*\*all system effects together\*\*")),
+          budget_system, rel_tol=0.02, fast=False,
+          why="the full example's budget (the system rows: deterministic renders, seeded sensor)"),
+    Check("budget-calibration", "README.md",
+          "".join(r"\| " + label + r" \| " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER + r" / "
+                  + NUMBER + r" \|\n" for label in (
+                      r"camera position 0\.05 mm \(per axis\)", r"camera orientation 0\.005 deg \(per axis\)",
+                      r"principal point 0\.5 px", r"focal length 5e-4 relative"))
+          + r"\| monitor position 0\.05 mm / orientation 0\.005 deg / pitch 1e-4 \| " + NUMBER + r" / "
+          + NUMBER + r", " + NUMBER + r" / " + NUMBER + r", " + NUMBER + r" / " + NUMBER + r" \| "
+          + NUMBER + r", " + NUMBER + r", " + NUMBER + r" \|\n"
+          + "".join(r"\| " + label + r" \| " + NUMBER + r" / " + NUMBER + r" \| " + NUMBER + r" / "
+                    + NUMBER + r" \|" + end for label, end in (
+                        (r"nominal surface distance 0\.05 mm \(height-slope ambiguity\)", r"\n"),
+                        (r"\*\*all calibration errors \(quadrature\)\*\*", ""))),
+          budget_calibration, rel_tol=0.02, fast=False,
+          why="the full example's budget (sensitivity x uncertainty, deterministic)"),
+    Check("budget-numerical-shares-readme", "README.md",
+          r"Every numerical error row is now at\s+most " + NUMBER + r" % of its row in slope and "
+          + NUMBER + r" % in height", lambda: budget_numerical_shares()[:2], abs_tol=0.1, fast=False,
+          why="the full example's budget"),
+    Check("budget-system-md", "docs/system.md",
+          r"The table above \(N = 100\): X " + NUMBER + r" ± " + NUMBER + r" px RMS, Y " + NUMBER
+          + r" ±\s+" + NUMBER + r" px; without the sensor X " + NUMBER + r" ± " + NUMBER + r", Y "
+          + NUMBER + r" ± " + NUMBER + r" px\. Its mean is the\s+ideal system's scattering bias \("
+          + NUMBER + r" px\)[\s\S]*?the mirror's noise \(" + NUMBER + r" px\) in X, and its own\s+"
+          r"part, the no-sensor row, is " + NUMBER + r" / " + NUMBER + r" px, " + NUMBER + r" / "
+          + NUMBER + r" urad\. The numerical error rows\s+are at most " + NUMBER + r" % of their rows "
+          r"in slope and " + NUMBER + r" % in height \(the full system's height\s+RMS, " + NUMBER
+          + r" ± " + NUMBER + r" nm; no sensor: " + NUMBER + r" %, ideal system: " + NUMBER
+          + r" %\)[\s\S]*?the grid's staircase is " + NUMBER + r" nm RMS of\s+height error over "
+          r"the 21 x 17 mm seen, the cover glass's angle-dependent bias " + NUMBER + r" nm, the\s+"
+          r"sensor " + NUMBER + r" nm; the scattering's uniform X bias is a tilt, " + NUMBER + r" ± "
+          + NUMBER + r" nm RMS with piston only\s+removed \(a drawing that allows tilt removes it\)\. "
+          r"The reconstruction's own floor \(ideal\s+system\) is " + NUMBER + r" nm",
+          lambda: (budget_system_md()[:14] + budget_numerical_shares()[:2] + budget_system_md()[14:16]
+                   + budget_numerical_shares()[2:] + budget_system_md()[16:]),
+          rel_tol=0.05, fast=False, why="the full example's budget"),
     Check("budget-numerical", "README.md",
           r"\| numerical error of that row \| " + NUMBER + r" / < 1e-8 \| " + NUMBER
           + r" / < 1e-5 \| " + NUMBER + r" / " + NUMBER + r" \|[\s\S]*?\| numerical error of "
