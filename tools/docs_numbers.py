@@ -286,6 +286,99 @@ def fig3_pixel_bundle() -> tuple:
             u.size, int(u.size - hit.sum()), float(u[hit].min()), float(u[hit].max()), float(v[hit].min()), float(v[hit].max()))
 
 
+def _plate_reflections(camera_mm) -> tuple:
+    """Fig. 3's plate (601 x 401 sample points) seen from ``camera_mm``: the share of its
+    area whose reflection of the camera direction misses the monitor (pmdsim's own monitor
+    intersection) and the extent (u, v; mm) of all reflections on the monitor plane."""
+    import numpy as np
+
+    mon = _fig3_simulation().scene.monitor
+    x, y = np.meshgrid(np.linspace(-150.0, 150.0, 601), np.linspace(-100.0, 100.0, 401))
+    p = np.stack([x, y, np.zeros_like(x)], axis=-1)
+    d = p - np.asarray(camera_mm, float)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    r = d * np.array([1.0, 1.0, -1.0])  # the plate's normal is +z
+    _, _, hit = mon.intersect(p, r)
+    t = ((mon.centre - p) @ mon.normal) / (r @ mon.normal)
+    uv = mon.world_to_pixel(p + t[..., None] * r)
+    return 1.0 - float(hit.mean()), float(np.ptp(uv[..., 0])) * mon.pitch, float(np.ptp(uv[..., 1])) * mon.pitch
+
+
+def _camera_at_600mm() -> list:
+    s, c = math.sin(math.radians(25.0)), math.cos(math.radians(25.0))
+    return [-600.0 * s, 0.0, 600.0 * c]
+
+
+def fig3_hypothetical_plate() -> tuple:
+    """docs/fig3-geometry.md: the first guess (camera 600 mm from the plate, 25 deg): the
+    plate's share (%) that reflects a point outside the monitor, the extent of its
+    reflections (mm) and that over the plate's 300 x 200 mm; then the extent from Fig. 3's
+    camera at 2000 mm."""
+    miss, su, sv = _plate_reflections(_camera_at_600mm())
+    _, fu, fv = _plate_reflections(_fig3_config().camera.position_mm)
+    return (100 * miss, su, sv, su / 300.0, sv / 200.0, fu, fv)
+
+
+def fig3_hypothetical_pixels() -> tuple:
+    """docs/fig3-geometry.md: the first guess's share (%) of plate pixels whose principal
+    reflection misses the monitor (Fig. 3's camera moved to 600 mm, f = 10 mm: the whole
+    plate in view; f = 12 mm gives 41.76 %)."""
+    cfg = _fig3_config()
+    cfg = cfg.model_copy(update={"camera": cfg.camera.model_copy(
+        update={"position_mm": _camera_at_600mm(), "focal_length_mm": 10.0})})
+    from pmdsim import Simulation
+
+    geo = Simulation.from_config(cfg).geometry()
+    sm = geo.surface_mask
+    return (100 * (1.0 - float((geo.monitor_mask & sm).sum()) / float(sm.sum())),)
+
+
+@functools.cache
+def _fig3_stratified_100():
+    from pmdsim import Simulation
+    from pmdsim.config import with_sampling
+
+    return Simulation.from_config(with_sampling(_fig3_config(), mode="stratified", n_rays=100,
+                                                target_error_mrad=None))
+
+
+def fig3_cone_spans() -> tuple:
+    """docs/fig3-geometry.md: the paper's 100 stratified rays of the centre pixel (512, 640)
+    and of pixel (0, 0): the distance from the hit point to P on the monitor (mm) and the
+    span of the rays about P (monitor px): centre +-u, v min / max; pixel (0, 0) u min / max."""
+    import numpy as np
+
+    sim = _fig3_stratified_100()
+    geo = sim.geometry()
+    mon = sim.scene.monitor
+    out = []
+    for px in ((512, 640), (0, 0)):
+        u, v, _, _, _ = sim.transport([px[0]], [px[1]], directions=False)
+        du = np.asarray(u, float).ravel() - geo.specular_u[px]
+        dv = np.asarray(v, float).ravel() - geo.specular_v[px]
+        dist = float(np.linalg.norm(mon.pixel_to_world(geo.specular_u[px], geo.specular_v[px])
+                                    - geo.points[px]))
+        if px == (512, 640):
+            out += [dist, max(-np.nanmin(du), np.nanmax(du)), np.nanmin(dv), np.nanmax(dv)]
+        else:
+            out += [dist, np.nanmin(du), np.nanmax(du)]
+    return tuple(float(x) for x in out)
+
+
+def fig3_edge_weight() -> tuple:
+    """docs/fig3-geometry.md: in camera rows 0-13 and 1011-1023 (the paper's 100 stratified
+    rays) the largest share of a pixel's weight whose rays leave the monitor, and the
+    smallest f_hit / f_total."""
+    import numpy as np
+
+    rows, cols = np.meshgrid(np.r_[0:14, 1011:1024], np.arange(1280), indexing="ij")
+    _, _, f, _, _, ft = _fig3_stratified_100().transport(rows.ravel(), cols.ravel(),
+                                                         directions=False, totals=True)
+    ft = np.asarray(ft, float)
+    ratio = np.asarray(f, float).sum(-1)[ft > 0] / ft[ft > 0]
+    return (1.0 - float(ratio.min()), float(ratio.min()))
+
+
 @functools.cache
 def _turning_statistics() -> dict:
     """The full ``examples/turning_parameters.toml`` run (minutes): statistics per variant."""
@@ -1143,6 +1236,25 @@ CHECKS = [
           + r" leave it[\s\S]*?The bundle spans u = " + NUMBER + r" \.\.\. "
           + NUMBER + r", v = " + NUMBER + r" \.\.\. " + NUMBER, fig3_pixel_bundle,
           why="the paper's pixel (1, 1), its 100 rays"),
+    Check("fig3-hypothetical-plate", "docs/fig3-geometry.md",
+          r"\*\*" + NUMBER + r" % of the plate area\*\* \(601 x 401 sample points\)[\s\S]*?spread over \*\*"
+          + NUMBER + r" mm x " + NUMBER + r" mm\*\* of the monitor plane,\s+" + NUMBER + r" x and "
+          + NUMBER + r" x the plate's[\s\S]*?At 2000 mm the reflections of the\s+whole plate spread over "
+          + NUMBER + r" mm x " + NUMBER + r" mm", fig3_hypothetical_plate,
+          why="601 x 401 plate points reflected at the monitor (camera at 600 and 2000 mm)"),
+    Check("fig3-hypothetical-pixels", "docs/fig3-geometry.md",
+          r"it is \*\*" + NUMBER + r" % of the plate pixels\*\*", fig3_hypothetical_pixels,
+          why="geometry, full camera at 600 mm, f = 10 mm"),
+    Check("fig3-cone-spans", "docs/fig3-geometry.md",
+          r"hits the plate at the origin, " + NUMBER + r" mm from\s+the monitor, and its 100 rays span \+-"
+          + NUMBER + r" px in u and " + NUMBER + r" \.\.\. \+" + NUMBER + r" px in v[\s\S]*?\(0, 0\) is "
+          + NUMBER + r" mm from the monitor and its cone spans " + NUMBER + r" \.\.\. \+" + NUMBER
+          + r" px in u", fig3_cone_spans,
+          why="two pixels' 100 stratified rays (~2 s once fig3-pixel-bundle compiled the transport)"),
+    Check("fig3-edge-weight", "docs/fig3-geometry.md",
+          r"at most " + NUMBER + r" of a pixel's total\s+weight is lost \(f_hit / f_total >= "
+          + NUMBER + r"\)", fig3_edge_weight,
+          why="34 560 edge pixels' 100 stratified rays (~2 s)"),
     Check("roughness-rows", "docs/examples.md",
           r"median modulation ratio to the mirror is " + NUMBER + r" \(X\) and " + NUMBER
           + r" \(Y\), and the phase\s+deviation from the mirror is " + NUMBER + r" ± " + NUMBER
