@@ -365,6 +365,30 @@ def fig3_cone_spans() -> tuple:
     return tuple(float(x) for x in out)
 
 
+def realistic_lobe_widths() -> tuple:
+    """README.md: the realistic system's lobe on its nearest-pixel monitor (the budget's
+    radiometric estimator), monitor px: the lower bounds of its standard deviation along u
+    and v that decide the box rule (``pmdsim.render.control_variate.lobe_widths``)."""
+    from pmdsim import Simulation
+    from pmdsim.config import load_config, physical_estimator
+    from pmdsim.render.control_variate import lobe_widths
+
+    cfg = physical_estimator(load_config(ROOT / "examples" / "realistic_system.toml"))
+    w = lobe_widths(Simulation.from_config(cfg))
+    return (w["x"], w["y"])
+
+
+def fig3_field_of_view() -> tuple:
+    """docs/fig3-geometry.md: the Fig. 3 camera's field of view (mm) at 2000 mm: the
+    sensor (pixels x pitch) over the focal length, times the distance."""
+    from pmdsim.config import load_config
+
+    cam = load_config(ROOT / "examples" / "paper_fig3.toml").camera
+    w, h = cam.resolution
+    scale = cam.pixel_pitch_mm / cam.focal_length_mm * 2000.0
+    return (w * scale, h * scale)
+
+
 def fig3_edge_weight() -> tuple:
     """docs/fig3-geometry.md: in camera rows 0-13 and 1011-1023 (the paper's 100 stratified
     rays) the largest share of a pixel's weight whose rays leave the monitor, and the
@@ -1251,6 +1275,15 @@ CHECKS = [
           + NUMBER + r" mm from the monitor and its cone spans " + NUMBER + r" \.\.\. \+" + NUMBER
           + r" px in u", fig3_cone_spans,
           why="two pixels' 100 stratified rays (~2 s once fig3-pixel-bundle compiled the transport)"),
+    Check("realistic-lobe-width-table", "README.md",
+          r"the lobe being at least " + NUMBER + r" x " + NUMBER + r" monitor px wide",
+          realistic_lobe_widths, rel_tol=0.02, why="a 12 x 12 grid of the realistic camera"),
+    Check("realistic-lobe-width-prose", "README.md",
+          r"A lobe this wide \(" + NUMBER + r" x " + NUMBER + r" monitor px, std\.\)",
+          realistic_lobe_widths, rel_tol=0.02, why="a 12 x 12 grid of the realistic camera"),
+    Check("fig3-field-of-view", "docs/fig3-geometry.md",
+          r"the field of view at 2000 mm is " + NUMBER + r" mm x " + NUMBER + r" mm",
+          fig3_field_of_view, why="pinhole arithmetic of the example's camera"),
     Check("fig3-edge-weight", "docs/fig3-geometry.md",
           r"at most " + NUMBER + r" of a pixel's total\s+weight is lost \(f_hit / f_total >= "
           + NUMBER + r"\)", fig3_edge_weight,
