@@ -1121,7 +1121,8 @@ def _fig3_run() -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "run"
         run_simulation(_fig3_config(), folder, diagnostics=False)
-        st = json.loads((folder / "statistics.json").read_text())["reconstruction"]
+        full = json.loads((folder / "statistics.json").read_text())
+        st = full["reconstruction"]
         ds = load_run(folder)
         maps = {k: ds[k].values for k in ("slope_error_x_urad", "slope_error_y_urad")}
         files = [f for f in folder.rglob("*") if f.is_file()]
@@ -1132,13 +1133,23 @@ def _fig3_run() -> dict:
         sizes = (mb(lambda r: True), mb(lambda r: r.parts[0] == "run.zarr"),
                  mb(lambda r: r.suffix in (".tif", ".tiff")),
                  mb(lambda r: r.parts[0] == "figures"))
-    out = {"stats": st, "folder_mb": sizes}
+    out = {"stats": st, "folder_mb": sizes, "directions": full["directions"]}
     for k, a in maps.items():
         f = a[np.isfinite(a)]
         d = np.abs(f - f.mean())
         out[k] = (float(np.sqrt(np.mean(f * f))), float(np.percentile(d, 95)),
                   float(np.percentile(d, 99.9)), float(np.ptp(f)))
     return out
+
+
+def fig3_phase_deviation() -> tuple:
+    """docs/physics.md: the Fig. 3 run's phase deviation from the mirror (mrad), each with
+    its stated numerical error: X RMS, X P95, Y RMS."""
+    d = _fig3_run()["directions"]
+
+    def pair(di, k):
+        return (d[di]["phase_mrad"][k], d[di]["numerical_error"]["phase_mrad"][k])
+    return pair("x", "rms") + pair("x", "p95") + pair("y", "rms")
 
 
 def fig3_nearest() -> tuple:
@@ -1387,6 +1398,10 @@ CHECKS = [
           + r" mrad with the kinematic density[\s\S]*?and\s+" + _PM + r" / " + _PM
           + r" mrad with the diffractive orders", _turning_readme, fast=False,
           why="the full example run"),
+    Check("fig3-phase-deviation", "docs/physics.md",
+          r"deviates from the\s+mirror by " + _PM + r" mrad RMS \(X, 50 px; P95 " + _PM
+          + r"\) and " + _PM + r" mrad \(Y\)", fig3_phase_deviation, rel_tol=0.01, fast=False,
+          why="the full Fig. 3 run"),
     Check("fig3-nearest", "docs/examples.md",
           r"its \+-0\.5 px quantisation \(" + NUMBER + r" px RMS\) shows as moire stripes[\s\S]*?"
           r"the\s+scattering surface itself decodes\s+" + NUMBER + r" ± " + NUMBER
