@@ -136,11 +136,18 @@ def test_a_ctrl_c_swallowed_by_a_compiled_callback_still_stops_the_command(capsy
         raise KeyboardInterrupt
 
     thunk = ctypes.CFUNCTYPE(None)(callback)
-    with pytest.raises(typer.Exit) as stop:
-        with _guard():
-            thunk()  # the interrupt ends inside ctypes
-            for _ in range(500):  # the command's work goes on, until it is delivered again
-                time.sleep(0.01)
+    # a command's process has Python's SIGINT handler inside its guard (cli.interrupt gives it
+    # back there); a test worker may hold another one, left by an earlier test or by the
+    # worker itself (under SIG_IGN an interrupt_main does nothing): the command's state here
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(typer.Exit) as stop:
+            with _guard():
+                thunk()  # the interrupt ends inside ctypes
+                for _ in range(500):  # the command's work goes on, until it is delivered again
+                    time.sleep(0.01)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert stop.value.exit_code == 130
     err = capsys.readouterr().err
     assert "interrupted" in err and "Traceback" not in err and "ignored" not in err, err
