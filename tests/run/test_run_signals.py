@@ -52,7 +52,7 @@ def _start(cfg: Path, out: Path, *extra: str) -> subprocess.Popen:
     shell (POSIX gives such jobs SIGINT ignored, and an ignored signal stays ignored across
     ``exec``, so the run would rightly ignore the test's SIGINT). A handled signal is reset
     to its default by ``exec``, so a handler is set for the moment of the start."""
-    env = dict(os.environ, PYTHONPATH=SRC)
+    env = dict(os.environ, PYTHONPATH=SRC, PYTHONFAULTHANDLER="1")
     ignored = (signal.getsignal(signal.SIGINT) == signal.SIG_IGN
                and threading.current_thread() is threading.main_thread())
     if ignored:
@@ -155,8 +155,21 @@ def test_a_second_run_on_the_same_target_fails_at_once(tmp_path):
         assert sorted(p.name for p in tmp_path.glob("out.tmp-*")) == [tmp.name]
     finally:
         first.send_signal(signal.SIGINT)
-        first.communicate(timeout=120)
+        _end(first)
     assert _left(tmp_path, cfg) == []
+
+
+def _end(proc: subprocess.Popen, timeout: float = 120.0) -> None:
+    """Wait for ``proc`` after its SIGINT; one that does not end in ``timeout`` is a hang:
+    SIGABRT makes its faulthandler (PYTHONFAULTHANDLER, set by :func:`_start`) print every
+    thread's stack, which the failure shows."""
+    try:
+        proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGABRT)
+        _, err = proc.communicate(timeout=60)
+        raise AssertionError(f"the run did not end {timeout:.0f} s after SIGINT; its "
+                             f"threads:\n{err[-6000:]}") from None
 
 
 EMPTY = {
