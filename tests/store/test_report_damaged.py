@@ -28,25 +28,14 @@ def run_folder(tmp_path_factory):
 def reconstructed_run(tmp_path_factory):
     """A run with a reconstruction (height_error_nm): Fig. 3's geometry at 48 x 40 camera
     px (tests/run/test_pipeline.py's tiny scene)."""
-    import math
+    from test_pipeline import tiny_config_dict
 
     from pmdsim.config import parse_config
     from pmdsim.run import run_simulation
 
-    s, c = math.sin(math.radians(25)), math.cos(math.radians(25))
     out = tmp_path_factory.mktemp("reconstructed") / "run"
-    run_simulation(parse_config({
-        "name": "tiny",
-        "camera": {"resolution": [48, 40], "focal_length_px": 390.625,
-                   "position_mm": [-2000 * s, 0.0, 2000 * c], "look_at_mm": [0, 0, 0]},
-        "monitor": {"resolution": [160, 90], "pixel_pitch_mm": 3.0,
-                    "centre_mm": [600 * s, 0.0, 600 * c], "look_at_mm": [0, 0, 0]},
-        "surface": {"type": "flat", "size_mm": [300.0, 200.0]},
-        "anisotropy": {"frame": "fixed", "x_direction": [1, 0, 0]},
-        "brdf": {"model": "ward", "alpha_x": 0.025, "alpha_y": 0.002, "rho_s": 0.4},
-        "sampling": {"n_rays": 10, "theta_max_deg": 1.0, "mode": "stratified"},
-        "patterns": {"fringes": {"widths_px": [10, 40, 160], "shifts": 4}},
-        "compute": {"tile_rows": 16}}), out, figures=False, diagnostics=False)
+    run_simulation(parse_config(tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})),
+                   out, figures=False, diagnostics=False)
     return out
 
 
