@@ -23,7 +23,7 @@ fixed rule. The pilot measures that error where it is cheap and carries it to ev
   rules converge only erratically (a rule and the one 4 x finer can agree to 1/30 of
   their error): such pixels are measured against rules 4 x and 16 x finer
   (:data:`CUT_MEASURED` < off share <= :data:`MAX_OFF`), or add the bound
-  :func:`edge_bound` of what misplacing the weight beyond the edge can do (a share below
+  :func:`image_floors` of what misplacing the weight beyond the edge can do (a share below
   :data:`CUT_MEASURED`, or above :data:`MAX_OFF`, where the chain masks them);
 - **floors** that do not shrink with the order, added: the images' float32 storage
   (``2^-24 sum_k |I_k| / |Z|`` per pixel: every image rounded to nearest, a bound) and the
@@ -65,7 +65,7 @@ SAFETY = 2.0
 #: a pixel) is measured at the pixel against rules 4 x and 16 x
 #: finer (a rule and the one 4 x finer can agree to 1/30 of their error across the step;
 #: the one 16 x finer did not); below it, and above :data:`MAX_OFF`, the analytic
-#: :func:`edge_bound` is added.
+#: :func:`image_floors` is added.
 CUT_MEASURED = 1e-6
 #: Rules below this many nodes state no error (pi: the phase is known to within pi).
 MIN_NODES = 16
@@ -118,7 +118,7 @@ class Layout:
         display the fringe sum itself), the images' float32 floor (:func:`image_floor`) and the
         fringe's modulation ``B / A`` as the decoder sees it (``2 |Z| / K`` over the images'
         mean) and the phase change per unit share of the weight misplaced
-        (:func:`edge_bound`)."""
+        (:func:`image_floors`)."""
         f_hit = out[:, kb.OUT_FHIT] * norm
         nb = len(self.cols)
         z = np.empty((nb, out.shape[0]), np.complex128)
@@ -170,25 +170,19 @@ def image_floor(images: np.ndarray, deltas) -> np.ndarray:
 F32_SIGMAS = 3.0
 
 
-def edge_bound(images: np.ndarray, deltas, f_total, off, lmax: float) -> np.ndarray:
-    """(nd, nw, H, W) rad: a bound of the phase error a step in the integrand at the
-    monitor's edge can add where a share ``off`` of the lobe's weight ``f_total`` falls
-    beyond it: the rule can misplace at most twice that weight (its own share and the true
-    one), each image then moves by at most that weight times the display's largest
-    luminance ``lmax``, and the decoded ``Z = sum_k I_k exp(-i delta_k)`` by K times it."""
-    return image_floors(images, deltas, _edge_weight(f_total, off), lmax)[1]
-
-
 def _edge_weight(f_total, off) -> np.ndarray:
-    """The weight an edge can misplace: twice the share ``off`` (NaN: all of it) of
-    ``|f_total|``."""
+    """The weight a step in the integrand at the monitor's edge can misplace where a share
+    ``off`` (NaN: all of it) of the lobe's weight ``f_total`` falls beyond it: twice that
+    share of ``|f_total|`` (the rule's own share and the true one)."""
     return 2.0 * np.nan_to_num(np.asarray(off, np.float64), nan=1.0).clip(0.0, 1.0) * np.abs(f_total)
 
 
 def image_floors(images: np.ndarray, deltas, weight, lmax: float):
-    """``(floor, edge)`` (nd, nw, H, W) of images (nd, nw, K, H, W) in one pass:
-    :func:`image_floor` and the edge term of :func:`edge_bound` for the misplaced
-    ``weight`` (H, W) (None: no edge term, zeros)."""
+    """``(floor, edge)`` (nd, nw, H, W) rad of images (nd, nw, K, H, W) in one pass:
+    :func:`image_floor`, and a bound of the phase error that misplacing ``weight`` (H, W)
+    of the lobe at the monitor's edge can add (:func:`_edge_weight`; None: zeros): each
+    image moves by at most that weight times the display's largest luminance ``lmax``, the
+    decoded ``Z = sum_k I_k exp(-i delta_k)`` by K times it."""
     nd, nw, k = images.shape[:3]
     floor = np.empty((nd, nw) + images.shape[3:])
     edge = np.empty_like(floor)
@@ -291,7 +285,7 @@ def normalise(out: np.ndarray, estimator: str, n_rays: int) -> np.ndarray:
 class Probe:
     """One rule's phasors at the pilot pixels: ``z`` (B, P) complex, ``floor`` (B, P) its
     float32 floor, ``mod`` (B, P) the fringe's modulation, ``edge`` (B, P) the phase
-    change per unit of the lobe's weight share misplaced (:func:`edge_bound`), ``off`` (P,) the share of each lobe's weight off the monitor and
+    change per unit of the lobe's weight share misplaced (:func:`image_floors`), ``off`` (P,) the share of each lobe's weight off the monitor and
     ``nodes`` per pixel."""
 
     z: np.ndarray
@@ -398,7 +392,7 @@ class Pilot:
         ``sums_ok`` (H, W): pixels with a valid render; ``images`` (nd, nw, K, H, W) the
         rendered images (their float32 floor); ``off`` (H, W) the share of each lobe's
         weight off the monitor in the render and ``f_total`` (H, W) its weight
-        (:func:`edge_bound`)."""
+        (:func:`image_floors`)."""
         h, w = self.shape
         s = self.stride
         env, trusted = self.envelope(n_rays)
