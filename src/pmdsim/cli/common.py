@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import sys
 import os
+import sys
 
 import typer
 import typer.rich_utils
