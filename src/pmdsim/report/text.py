@@ -295,5 +295,9 @@ def description(cfg) -> str:
                      f"{', '.join(varied)})" if varied is not None
                      else f" (varying: map {os.path.basename(var.file)})")
     s = cfg.sampling
-    return (text + f"; {s.estimator} estimator, N = {s.n_rays}, theta_max {s.theta_max_deg:g} "
+    # with a target the pilot picks the order (n_rays is only where it starts): the rule
+    # rendered is in the statistics (sampling.nodes) and the dataset (rays_per_pixel)
+    n = (f"the rule for a target of {s.target_error_mrad:g} mrad"
+         if s.mode == "rule" and s.target_error_mrad is not None else f"N = {s.n_rays}")
+    return (text + f"; {s.estimator} estimator, {n}, theta_max {s.theta_max_deg:g} "
             f"deg, {s.mode}; monitor pixel model {cfg.monitor.pixel_model}")
