@@ -73,3 +73,27 @@ def test_nanmedian_same_bits_as_numpy():
         else:
             assert nanmedian(m) == float(np.nanmedian(m)), n
     assert math.isnan(nanmedian(np.full(5, np.nan)))
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 20, 21, 400])
+@pytest.mark.parametrize("ties", [True, False])
+def test_one_value_change_bounds_every_set_one_value_larger_or_smaller(n, ties):
+    """The percentile of the set with any one value removed, or any value within the set's
+    range added (at and between the values; ties included), stays within one_value_change
+    of the set's own percentile, and one of them reaches it: brute force over every such
+    set."""
+    from pmdsim.quantiles import one_value_change
+
+    rng = np.random.default_rng(n)
+    a = rng.gamma(2.0, 1.0, n)
+    if ties:
+        a = np.round(a, 1)
+    for q in (50, 95):
+        p = np.percentile(a, q)
+        bound = one_value_change(a, q)
+        changed = [np.percentile(np.delete(a, i), q) for i in range(n)] if n > 1 else []
+        s = np.sort(a)
+        extra = np.concatenate([s, (s[1:] + s[:-1]) / 2])
+        changed += [np.percentile(np.append(a, y), q) for y in extra]
+        worst = max(abs(c - p) for c in changed)
+        assert worst == pytest.approx(bound, rel=1e-9, abs=1e-12), (q, worst, bound)

@@ -63,6 +63,42 @@ def percentile(a, q: float, *, overwrite: bool = False) -> float:
     return float(a_lo + diff * gamma)
 
 
+def one_value_change(a, q: float) -> float:
+    """The largest change of ``percentile(a, q)`` when one value leaves the finite set ``a``
+    (finite values, not empty) or one within its range enters it: the resolution of a
+    percentile of a finite set, which no numerical error of the values themselves contains
+    (a pixel that enters or leaves the valid set moves it by up to this). The percentile
+    grows with every value, so the extremes are the sets without the smallest or the
+    largest value and with one more smallest or largest: their percentiles, from the four
+    order statistics around the percentile's (one partition; tests/test_quantiles.py checks
+    it against every set one value larger or smaller)."""
+    s = np.asarray(a, np.float64).ravel()
+    n = s.size
+    if n == 0:
+        raise ValueError("one_value_change of an empty sample")
+    qf = q / 100.0
+    lo = int(np.floor((n - 1) * qf))
+    kth = sorted({min(max(k, 0), n - 1) for k in range(lo - 2, lo + 4)})
+    part = np.partition(s, kth)
+
+    def order(k):  # the k-th smallest value (k within the window around lo)
+        return float(part[min(max(k, 0), n - 1)])
+
+    def pct(get, m):  # NumPy's linear percentile of m sorted values get(0..m-1)
+        v = (m - 1) * qf
+        k = int(np.floor(v))
+        x0, x1 = get(k), get(min(k + 1, m - 1))
+        return x0 + (x1 - x0) * (v - k)
+
+    p = pct(order, n)
+    new = [pct(lambda k: order(max(k - 1, 0)), n + 1),   # one more smallest value
+           pct(lambda k: order(min(k, n - 1)), n + 1)]   # one more largest value
+    if n > 1:
+        new += [pct(lambda k: order(k + 1), n - 1),      # without the smallest
+                pct(order, n - 1)]                       # without the largest
+    return float(max(abs(x - p) for x in new))
+
+
 def median(a, *, overwrite: bool = False) -> float:
     """``np.median(a)`` (over all values) as a float, the same bits. ``overwrite``: ``a``
     may be reordered (no copy). NaN where ``a`` holds a NaN; ``a`` must not be empty."""

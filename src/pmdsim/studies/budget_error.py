@@ -23,7 +23,10 @@ the rendering integral, whose per-pixel error the budget carries to every statis
 - **RMS and P95 of a row** (:func:`stat_error`): a statistic ``S`` of ``|d|`` that grows
   with every ``|d_i|`` (RMS, percentiles) lies between ``S(max(|d| - e, 0))`` and
   ``S(|d| + e)`` whatever the errors' signs; the row states the larger distance of ``S(|d|)``
-  to those bounds. For the RMS this is at most the RMS of ``e`` (Minkowski);
+  to those bounds. For the RMS this is at most the RMS of ``e`` (Minkowski). A P95 adds
+  the resolution of a percentile of a finite set (:func:`pmdsim.quantiles.one_value_change`:
+  what one pixel entering or leaving the valid set moves it by), which no pixel's error
+  contains;
 - **height rows** (:func:`height_error_bounds`): the decoding is reconstructed again with
   every coordinate moved by ``+e`` and by ``-e`` (x and y together); the larger change of
   each node's slope errors and height error (after removal) is that node's error
@@ -60,7 +63,9 @@ def stat_error(dev: np.ndarray, err: np.ndarray, valid: np.ndarray, stat: str) -
     """The numerical error of ``stat`` (``"rms"`` or ``"p95"``) of ``|dev|`` over ``valid``
     when every ``dev_i`` is known to within ``err_i`` (>= 0; NaN counts as 0 and is not
     expected where ``dev`` is finite): ``max(S(|d| + e) - S(|d|), S(|d|) - S(max(|d| - e,
-    0)))``, exact bounds for a statistic that grows with every ``|d_i|``."""
+    0)))``, exact bounds for a statistic that grows with every ``|d_i|``; for ``"p95"``
+    plus :func:`~pmdsim.quantiles.one_value_change` of ``|dev|`` (the percentile of a
+    finite set moves by up to that when one pixel enters or leaves it)."""
     f = STATS[stat]
     m = np.asarray(valid, bool) & np.isfinite(dev)
     d = np.abs(np.asarray(dev, np.float64)[m])
@@ -68,7 +73,12 @@ def stat_error(dev: np.ndarray, err: np.ndarray, valid: np.ndarray, stat: str) -
     if not d.size:
         return float("nan")
     s = f(d)
-    return float(max(f(d + e) - s, s - f(np.maximum(d - e, 0.0))))
+    out = max(f(d + e) - s, s - f(np.maximum(d - e, 0.0)))
+    if stat == "p95":
+        from ..quantiles import one_value_change
+
+        out += one_value_change(d, 95)
+    return float(out)
 
 
 def error_stats(err: np.ndarray, valid: np.ndarray) -> dict:
