@@ -109,12 +109,12 @@ def test_writing_runs_behind_the_chain_and_the_manifest_comes_last(tmp_path, mon
     from pmdsim.run import simulate as simulate_mod
 
     seen = {}
-    diagnose, manifest = member_mod.diagnose_run, simulate_mod.write_run_manifest
+    manifest = simulate_mod.write_run_manifest
 
-    def diagnose_run(cfg, sim, geometry, **kwargs):
+    def diagnose(m):  # the diagnose step (the diagnostics' thread started after the render)
         store = seen["folder"] / "run.zarr"
         seen["at_diagnose"] = sorted(p.name for p in store.iterdir()) if store.is_dir() else []
-        return diagnose(cfg, sim, geometry, **kwargs)
+        return member_mod.diagnose(m)
 
     def write_run_manifest(folder, cfg, result, timings):
         seen["threads"] = sorted(t.name for t in threading.enumerate()
@@ -126,7 +126,9 @@ def test_writing_runs_behind_the_chain_and_the_manifest_comes_last(tmp_path, mon
         seen["images"] = all(p.is_file() and p.stat().st_size > 0 for p in result.image_paths)
         return manifest(folder, cfg, result, timings)
 
-    monkeypatch.setattr(member_mod, "diagnose_run", diagnose_run)
+    monkeypatch.setattr(member_mod, "STEPS", tuple(
+        (diagnose if step is member_mod.diagnose else step, timing)
+        for step, timing in member_mod.STEPS))
     monkeypatch.setattr(simulate_mod, "write_run_manifest", write_run_manifest)
     original = member_mod.run_member
 

@@ -29,6 +29,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 from scipy import ndimage
 
@@ -123,7 +125,11 @@ class Reconstruction:
     prior's sag on the grid; ``history`` max |change of z| (mm) per iteration;
     ``node_status`` (H, W) int8: how each node was served or why it is not reported
     (:mod:`pmdsim.measure.interpolate`: ``NODE_SPLINE``, ``NODE_RIM_FIT``, the keys of
-    ``EXCLUSION_REASONS``; ``NODE_OUTSIDE_APERTURE`` off the nominal aperture)."""
+    ``EXCLUSION_REASONS``; ``NODE_OUTSIDE_APERTURE`` off the nominal aperture);
+    ``tolerance_mm`` how far the height may be from the iteration's fixed point (its stop,
+    ``tol_mm``; the last change where it did not converge) and ``slope_tolerance`` (rad)
+    the largest change of a node's slopes that moving it by ``tolerance_mm`` along the
+    local z gives (the solver's floor of the stated errors)."""
 
     x_mm: np.ndarray
     y_mm: np.ndarray
@@ -136,6 +142,8 @@ class Reconstruction:
     history: tuple
     converged: bool
     node_status: np.ndarray | None = None
+    tolerance_mm: float = 0.0
+    slope_tolerance: float = 0.0
 
     @property
     def spacing(self):
@@ -320,8 +328,16 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     height = np.where(node_ok, z, np.nan)
     node_status = np.full(mask.shape, NODE_OUTSIDE_APERTURE, np.int8)
     node_status[mask] = status
+    tolerance = tol_mm if converged else (history[-1] if history else math.inf)
+    slope_tol = 0.0
+    if sx is not None and ok_m.any():  # the slopes' change for the height's tolerance
+        pts = s[ok_m]
+        m3 = np.asarray(monitor.pixel_to_world(mu, mv), np.float64)
+        moved = [slopes_in_frame(bisector_normals(p, cam_pos, m3), rot)
+                 for p in (pts, pts + tolerance * rot[:, 2])]
+        slope_tol = float(np.nanmax(np.abs(np.subtract(moved[1], moved[0]))))
     return Reconstruction(xs, ys, node_ok, height, sx, sy, np.where(mask, nominal, np.nan), it,
-                          tuple(history), converged, node_status)
+                          tuple(history), converged, node_status, tolerance, slope_tol)
 
 
 def planar_monitor(monitor):

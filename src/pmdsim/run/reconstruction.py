@@ -67,7 +67,7 @@ def from_chain(cfg, scene, measured, reference_rec=None):
     if ex is not None and ey is not None:  # the render's numerical error, carried through
         moved = moved_errors(cfg, scene, rec, u, v, ex, ey, valid)
         if moved is not None and moved.height_nm.shape == err.height_nm.shape:
-            add_numerical_error(stats, err, moved)
+            add_numerical_error(stats, err, moved, rec)
             moves = {a: np.nan_to_num(getattr(moved, a) - getattr(err, a), nan=0.0)
                      for a, _, _ in AREAL_MAPS}
     avars, stats["areal"] = areal_of(rec, err, moves, reference_rec)
@@ -78,6 +78,8 @@ def from_chain(cfg, scene, measured, reference_rec=None):
 #: name, unit); ``statistics.json`` names them ``<name>_<unit>`` as the RMS/PV/P95.
 AREAL_MAPS = (("height_nm", "height_error", "nm"), ("slope_x_urad", "slope_error_x", "urad"),
               ("slope_y_urad", "slope_error_y", "urad"))
+#: The SurfaceErrors attribute of each areal map's name.
+_ATTR_OF = {name: a for a, name, _ in AREAL_MAPS}
 #: Coordinates of the PSD variables: 2-D spatial frequencies and the radial bins (1/mm).
 PSD_COORDS = ("psd_fx", "psd_fy", "psd_f")
 
@@ -86,8 +88,8 @@ def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
     """(dataset variables, statistics) of the areal parameters and PSDs of the surface
     errors (:mod:`pmdsim.measure.areal`): per map its Sq ... Sdq, band RMS and radial PSD
     (with their numerical errors from ``moves``, ``{attribute: (H, W)}``: each node's signed
-    change when the decoded coordinates move by their numerical error; its magnitude is the
-    node's error, the map of changes the PSDs' error spectrum), its 2-D and radial
+    change when the decoded coordinates move by their numerical error; its magnitude plus
+    the solver's floor (:func:`solver_floor`) is the node's error), its 2-D and radial
     PSD as variables; the reference's height error too (the chain's floor; exact, no
     error). The bands are those of the height error's measured region, for every map."""
     from ..measure import areal
@@ -108,8 +110,9 @@ def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
         # envelope (blocks of 8 x 8 pixels), not a smooth signed field, and the signed map's
         # spectrum missed the repeated reconstruction's by 5x at high frequencies
         # (tests/test_reconstruct.py)
-        st, p = areal.describe(z, dx, dy, unit, error=None if dz is None else np.abs(dz),
-                               bands=bands)
+        floor = 0.0 if dz is None else solver_floor(rec, _ATTR_OF[name])
+        st, p = areal.describe(z, dx, dy, unit,
+                               error=None if dz is None else np.abs(dz) + floor, bands=bands)
         stats[f"{name}_{unit}"] = st
         if p is None:
             continue
@@ -155,19 +158,35 @@ _ERROR_STATS = {"height_error_nm": "height_nm", "slope_error_x_urad": "slope_x_u
                 "slope_error_y_urad": "slope_y_urad"}
 
 
-def add_numerical_error(stats: dict, err, moved) -> None:
+def solver_floor(rec, attr: str) -> float:
+    """The reconstruction solver's part of a node's error (the stop of the height-normal
+    iteration, :attr:`~pmdsim.measure.reconstruct.Reconstruction.tolerance_mm`): twice the
+    tolerance for the height after removal (the node's own, and the removed piston's
+    change, the mean of changes at most that large; the low-order forms removed otherwise
+    are fitted to the same smooth field), the slopes' change for it in urad. Both
+    reconstructions that :func:`moved_errors` compares stop within it, which their
+    difference does not show."""
+    if attr == "height_nm":
+        return 2.0 * rec.tolerance_mm * 1e6
+    return rec.slope_tolerance * 1e6
+
+
+def add_numerical_error(stats: dict, err, moved, rec=None) -> None:
     """Add ``<stat>_err`` to the RMS / PV / P95 of each surface error in ``stats``: the
     reconstruction with every decoded coordinate moved by its numerical error (x and y
     together; the reconstruction is linear in small coordinate changes: :func:`moved_errors`), each
     node's change is its error, carried to the statistics as the budget's height rows are
     (:func:`pmdsim.studies.budget_error.stat_error`: exact intervals for RMS and P95; the
-    PV by the widest range the nodes' errors allow)."""
+    PV by the widest range the nodes' errors allow), plus the solver's floor
+    (:func:`solver_floor`)."""
     from ..studies.budget_error import stat_error
 
     for key, attr in _ERROR_STATS.items():
         st = stats.get(key)
         a = np.asarray(getattr(err, attr), np.float64)
         e = np.abs(np.asarray(getattr(moved, attr), np.float64) - a)
+        if rec is not None:
+            e = e + solver_floor(rec, attr)
         m = np.isfinite(a)
         if not st or not m.any():
             continue
@@ -245,6 +264,9 @@ def statistics(cfg, rec, err, reference_rec=None) -> dict:
         "anchor": cfg.reconstruct.anchor,
         "iterations": rec.iterations,
         "converged": rec.converged,
+        # the iteration's stop, in every stated height and slope error (solver_floor)
+        "solver_tolerance_nm": rec.tolerance_mm * 1e6,
+        "solver_slope_tolerance_urad": rec.slope_tolerance * 1e6,
         "grid_points": int(rec.mask.sum()),
         "aperture_fraction": float(rec.mask.sum() / max(np.isfinite(rec.nominal_mm).sum(), 1)),
         **excluded_nodes(rec),
