@@ -140,9 +140,10 @@ def test_a_failed_fork_draws_in_the_run_process(decoded_run, tmp_path, monkeypat
 
 def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch):
     """The overview needs only the chain: its drawing starts before the surface is
-    reconstructed and diagnosed, the reconstruction's figure right after the
-    reconstruction (the diagnostics run meanwhile); the run's statistics still hold the
-    reconstruction, and a run without decoding draws its figures too."""
+    reconstructed, the reconstruction's figure right after the reconstruction; the
+    diagnostics start right after the render (a thread beside the chain), before any
+    figure; the run's statistics still hold the reconstruction and the diagnostics, and a
+    run without decoding draws its figures too."""
     import json
 
     from pmdsim.run import figures as figures_mod
@@ -170,8 +171,9 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
     d["output"] = {"figures": True, "write_images": False}
     res = pipeline.run_simulation(parse_config(d), tmp_path / "run")
     drawn = [e for e in events if e[0] == "figures" and e[1]]
-    assert events.index(("figures", ("overview",))) < events.index(("reconstruction",)) \
-        < events.index(("figures", ("surface_errors", "surface_psd"))) < events.index(("diagnostics",))
+    assert events.index(("diagnostics",)) < events.index(("figures", ("setup",))) \
+        < events.index(("figures", ("overview",))) < events.index(("reconstruction",)) \
+        < events.index(("figures", ("surface_errors", "surface_psd")))
     assert [e[1] for e in drawn] == [("setup",), ("overview",), ("surface_errors", "surface_psd")]
     stats = json.loads((res.outdir / "statistics.json").read_text())
     assert "reconstruction" in stats and "diagnostics" in stats
