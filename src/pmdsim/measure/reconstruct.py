@@ -126,8 +126,8 @@ class Reconstruction:
     ``node_status`` (H, W) int8: how each node was served or why it is not reported
     (:mod:`pmdsim.measure.interpolate`: ``NODE_SPLINE``, ``NODE_RIM_FIT``, the keys of
     ``EXCLUSION_REASONS``; ``NODE_OUTSIDE_APERTURE`` off the nominal aperture);
-    ``tolerance_mm`` how far the height may be from the iteration's fixed point (its stop,
-    ``tol_mm``; the last change where it did not converge) and ``slope_tolerance`` (rad)
+    ``tolerance_mm`` how far the height may be from the iteration's fixed point
+    (:func:`_remaining`) and ``slope_tolerance`` (rad)
     the largest change of a node's slopes that moving it by ``tolerance_mm`` along the
     local z gives (the solver's floor of the stated errors)."""
 
@@ -328,7 +328,7 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     height = np.where(node_ok, z, np.nan)
     node_status = np.full(mask.shape, NODE_OUTSIDE_APERTURE, np.int8)
     node_status[mask] = status
-    tolerance = tol_mm if converged else (history[-1] if history else math.inf)
+    tolerance = _remaining(history)
     slope_tol = 0.0
     if sx is not None and ok_m.any():  # the slopes' change for the height's tolerance
         pts = s[ok_m]
@@ -352,6 +352,22 @@ def planar_monitor(monitor):
     f = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
     return (f(monitor.centre), f(monitor.e_u), f(monitor.e_v), float(monitor.pitch),
             (monitor.width - 1) / 2.0, (monitor.height - 1) / 2.0)
+
+
+def _remaining(history) -> float:
+    """How far the height-normal iteration's last height may be from its fixed point (mm):
+    the geometric tail ``last q / (1 - q)`` of the changes still to come where the last two
+    contract (``q`` their ratio; the estimate :func:`_settled` stops on), else the last
+    change itself, plus the iterative solver's part (it refines each correction to
+    :data:`SOLVE_RTOL` of its size). 0 without an iteration."""
+    if not history:
+        return 0.0
+    last = float(history[-1])
+    tail = last
+    if len(history) >= 2 and history[-2] > 0 and last / history[-2] < 1.0:
+        q = last / history[-2]
+        tail = last * q / (1.0 - q)
+    return tail + last * SOLVE_RTOL
 
 
 def _settled(history, tol_mm):

@@ -159,8 +159,9 @@ _ERROR_STATS = {"height_error_nm": "height_nm", "slope_error_x_urad": "slope_x_u
 
 
 def solver_floor(rec, attr: str) -> float:
-    """The reconstruction solver's part of a node's error (the stop of the height-normal
-    iteration, :attr:`~pmdsim.measure.reconstruct.Reconstruction.tolerance_mm`): twice the
+    """The reconstruction solver's part of a node's error (how far the height-normal
+    iteration stopped from its fixed point,
+    :attr:`~pmdsim.measure.reconstruct.Reconstruction.tolerance_mm`): twice the
     tolerance for the height after removal (the node's own, and the removed piston's
     change, the mean of changes at most that large; the low-order forms removed otherwise
     are fitted to the same smooth field), the slopes' change for it in urad. Both
