@@ -78,8 +78,6 @@ def from_chain(cfg, scene, measured, reference_rec=None):
 #: name, unit); ``statistics.json`` names them ``<name>_<unit>`` as the RMS/PV/P95.
 AREAL_MAPS = (("height_nm", "height_error", "nm"), ("slope_x_urad", "slope_error_x", "urad"),
               ("slope_y_urad", "slope_error_y", "urad"))
-#: The SurfaceErrors attribute of each areal map's name.
-_ATTR_OF = {name: a for a, name, _ in AREAL_MAPS}
 #: Coordinates of the PSD variables: 2-D spatial frequencies and the radial bins (1/mm).
 PSD_COORDS = ("psd_fx", "psd_fy", "psd_f")
 
@@ -101,7 +99,9 @@ def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
     if not valid.any():
         return out, stats
     bands = areal.default_bands(valid, dx, dy)
-    maps = [(getattr(err, a), name, unit, None if moves is None else moves[a])
+    # each node's error: the magnitude of its change plus the solver's floor
+    maps = [(getattr(err, a), name, unit,
+             None if moves is None else np.abs(moves[a]) + solver_floor(rec, a))
             for a, name, unit in AREAL_MAPS]
     if reference_rec is not None and reference_rec[1].height_nm.shape == err.height_nm.shape:
         maps.append((reference_rec[1].height_nm, "reference_height_error", "nm", None))
@@ -110,9 +110,7 @@ def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
         # envelope (blocks of 8 x 8 pixels), not a smooth signed field, and the signed map's
         # spectrum missed the repeated reconstruction's by 5x at high frequencies
         # (tests/test_reconstruct.py)
-        floor = 0.0 if dz is None else solver_floor(rec, _ATTR_OF[name])
-        st, p = areal.describe(z, dx, dy, unit,
-                               error=None if dz is None else np.abs(dz) + floor, bands=bands)
+        st, p = areal.describe(z, dx, dy, unit, error=dz, bands=bands)
         stats[f"{name}_{unit}"] = st
         if p is None:
             continue
@@ -172,7 +170,7 @@ def solver_floor(rec, attr: str) -> float:
     return rec.slope_tolerance * 1e6
 
 
-def add_numerical_error(stats: dict, err, moved, rec=None) -> None:
+def add_numerical_error(stats: dict, err, moved, rec) -> None:
     """Add ``<stat>_err`` to the RMS / PV / P95 of each surface error in ``stats``: the
     reconstruction with every decoded coordinate moved by its numerical error (x and y
     together; the reconstruction is linear in small coordinate changes: :func:`moved_errors`), each
@@ -185,9 +183,7 @@ def add_numerical_error(stats: dict, err, moved, rec=None) -> None:
     for key, attr in _ERROR_STATS.items():
         st = stats.get(key)
         a = np.asarray(getattr(err, attr), np.float64)
-        e = np.abs(np.asarray(getattr(moved, attr), np.float64) - a)
-        if rec is not None:
-            e = e + solver_floor(rec, attr)
+        e = np.abs(np.asarray(getattr(moved, attr), np.float64) - a) + solver_floor(rec, attr)
         m = np.isfinite(a)
         if not st or not m.any():
             continue
