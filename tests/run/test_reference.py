@@ -24,7 +24,7 @@ def setup():
 
 def _reference(setup, threaded, monkeypatch):
     cfg, sim, geometry = setup
-    monkeypatch.setattr(ref, "_threadsafe_numba", lambda: threaded)
+    monkeypatch.setattr(ref, "numba_takes_two_threads", lambda: threaded)
     n_tiles = -(-sim.shape[0] // sim.tile_rows)
     return ref.specular_reference(cfg, sim, geometry, _Steps(None, 10 * n_tiles), n_tiles)
 
@@ -82,7 +82,7 @@ def test_the_run_forks_its_figures_only_after_the_reference_thread(tmp_path, mon
                                  for t in threading.enumerate()))
         return start(names, *args, **kwargs)
 
-    monkeypatch.setattr(ref, "_threadsafe_numba", lambda: True)
+    monkeypatch.setattr(ref, "numba_takes_two_threads", lambda: True)
     monkeypatch.setattr(recon, "reference_reconstruction", slow)
     monkeypatch.setattr(figures_mod, "start_drawings", start_drawings)
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})
@@ -110,7 +110,7 @@ def test_a_failed_run_leaves_no_reference_thread_behind(tmp_path, monkeypatch):
     def fails(*args, **kwargs):
         raise RuntimeError("the member failed")
 
-    monkeypatch.setattr(ref, "_threadsafe_numba", lambda: True)
+    monkeypatch.setattr(ref, "numba_takes_two_threads", lambda: True)
     monkeypatch.setattr(recon, "reference_reconstruction", slow)
     monkeypatch.setattr("pmdsim.run.simulate.run_member", fails)
     d = tiny_config_dict(fringes={"widths_px": [10, 40, 160], "shifts": 4})

@@ -14,6 +14,7 @@ from ..measure import chain
 from ..studies.specular_reference import decode_specular_reference
 from ..render import Geometry, Simulation
 from .result import _Steps
+from .threads import numba_takes_two_threads
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,18 +65,6 @@ def chain_mode(cfg: RunConfig, decode: bool | None) -> tuple[bool, list[str]]:
 
 
 
-def _threadsafe_numba() -> bool:
-    """True when Numba's threading layer (chosen at the first parallel kernel, which the
-    decoding has run by now) accepts parallel kernels launched from several threads (omp,
-    tbb; not workqueue)."""
-    import numba
-
-    try:
-        return numba.threading_layer() in ("omp", "tbb")
-    except ValueError:  # no parallel kernel has run: not known
-        return False
-
-
 def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, steps: _Steps,
                n_tiles: int) -> Reference:
     """Render and decode the fringes of the ideal specular reference (mirror BRDF, one ray
@@ -107,7 +96,7 @@ def specular_reference(cfg: RunConfig, sim: Simulation, geometry: Geometry, step
     # the surface (it is read only when the surface is reconstructed): about 0.5 s less
     # wall on the Fig. 3 run. Its compiled kernels are parallel too: only with a Numba
     # threading layer that takes launches from two threads at once
-    if recon.wanted(cfg, decoded) and _threadsafe_numba():
+    if recon.wanted(cfg, decoded) and numba_takes_two_threads():
         pool = ThreadPoolExecutor(1, thread_name_prefix="pmdsim-reference-reconstruction")
         rec = pool.submit(recon.reference_reconstruction, cfg, sim.scene, decoded)
         pool.shutdown(wait=False)  # its one thread ends with the job

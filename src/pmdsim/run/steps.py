@@ -45,6 +45,7 @@ from .diagnostics import RunDiagnostics, diagnose_run
 from .figures import FigureSchedule
 from .preload import dataset_imported, import_in_background
 from .result import RunResult, _Steps, draw_safely
+from .threads import numba_takes_two_threads
 from ..store.writer import DatasetWriter
 from ..patterns import Dot
 from .reference import Reference
@@ -312,9 +313,7 @@ def start_diagnose(m: Member) -> None:
     Fig. 3). Their compiled kernels may be parallel: in a thread only with a Numba
     threading layer that takes launches from two threads (else :func:`diagnose` runs
     them)."""
-    from .reference import _threadsafe_numba
-
-    if not m.diagnostics or m.helpers is None or not _threadsafe_numba():
+    if not m.diagnostics or m.helpers is None or not numba_takes_two_threads():
         return
     m.diagnosing = m.helpers.submit(diagnose_run, m.cfg, m.sim, m.geometry,
                                     exclude=m.off_monitor)

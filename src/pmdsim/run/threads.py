@@ -1,4 +1,5 @@
-"""One BLAS thread while pmdsim works.
+"""The run's threads: one BLAS thread while pmdsim works, and whether Numba takes
+parallel kernels from several threads at once (:func:`numba_takes_two_threads`).
 
 NumPy and SciPy each bring an OpenBLAS that starts one thread per core, and its threads
 busy-wait for the next call after each one. pmdsim's parallel work is its compiled kernels
@@ -70,4 +71,17 @@ def blas_pool_at_start() -> None:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", str(limit))
 
 
-__all__ = ["single_blas", "blas_limit", "blas_pool_at_start"]
+def numba_takes_two_threads() -> bool:
+    """True when Numba's threading layer (chosen at the first parallel kernel) accepts
+    parallel kernels launched from several threads at once (omp, tbb; not workqueue): the
+    run's helper threads (the reference's reconstruction, the diagnostics) need it; False
+    while no parallel kernel has run (not known yet)."""
+    import numba
+
+    try:
+        return numba.threading_layer() in ("omp", "tbb")
+    except ValueError:  # no parallel kernel has run: not known
+        return False
+
+
+__all__ = ["single_blas", "blas_limit", "blas_pool_at_start", "numba_takes_two_threads"]
