@@ -204,10 +204,9 @@ def _compare_with_run(res: dec.DecodeResult, run: Path, variant: str | None,
         flags = ds["decode_flags"].sel(direction=direction).values
     except Exception:  # noqa: BLE001 - a damaged chunk: the integrity check names it
         from ..store.integrity import check_arrays, check_metadata
-        from ..store.schema import DATASET_NAME
+        from ..store.schema import dataset_path
 
-        folder = run / variant if variant is not None else run
-        store = folder / DATASET_NAME if (folder / DATASET_NAME).is_dir() else folder
+        store = dataset_path(run, variant)
         check_arrays(store, check_metadata(store))  # raises InputError naming the chunk
         raise
     both = res.valid & (flags == 0)

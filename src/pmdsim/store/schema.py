@@ -126,6 +126,15 @@ def build_dataset(cfg: RunConfig, geometry: Geometry, fringes: FringeResult | No
     return ds
 
 
+def dataset_path(path: str | Path, variant: str | None = None) -> Path:
+    """Where :func:`load_run` looks: ``path`` (a run folder or its ``run.zarr``), its
+    ``variant`` subfolder if given, and its ``run.zarr`` where that exists."""
+    path = Path(path)
+    if variant is not None:
+        path = path / variant
+    return path / DATASET_NAME if (path / DATASET_NAME).is_dir() else path
+
+
 def load_run(path: str | Path, variant: str | None = None, *, dask: bool = True):
     """Open the dataset of a run (lazily, Dask-backed; with ``dask=False`` each variable
     is read with NumPy once, on first use, and kept: what a figure needs).
@@ -138,11 +147,7 @@ def load_run(path: str | Path, variant: str | None = None, *, dask: bool = True)
     ``RunConfig.model_validate_json(ds.attrs["config_json"])`` gives the configuration that
     reproduces the dataset (:func:`run_config`).
     """
-    path = Path(path)
-    if variant is not None:
-        path = path / variant
-    if (path / DATASET_NAME).is_dir():
-        path = path / DATASET_NAME
+    path = dataset_path(path, variant)
     if path.name == DATASET_NAME or (path / "zarr.json").is_file():
         if not path.is_dir():
             raise FileNotFoundError(f"no pmdsim run dataset at {path}")
