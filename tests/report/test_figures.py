@@ -386,3 +386,34 @@ def test_numerical_warnings_name_every_printed_deviation_over_10_percent():
     assert "coord_vs_exact_px p95 0.002 ± 0.0005" in w and "coord_px rms" not in w
     (w,) = numerical_warnings(stats(2e-3))  # now over 10 % of both coordinates
     assert "coord_px rms 0.01 ± 0.002" in w and "phase_mrad" not in w
+
+
+def test_setup_figure_draws_the_rule_a_target_picked(tmp_path, monkeypatch):
+    """With a target the pilot picks the rule after the figure schedule was made: the
+    set-up figure (its bundle of rays) is drawn with the rule rendered, in the run and when
+    re-drawn from the run folder, not with n_rays, the pilot's start."""
+    import json
+
+    from pmdsim.run import figures as figures_mod
+
+    given = {}
+    start = figures_mod.start_drawings
+
+    def start_drawings(names, folder, run_name, description, ds, sim, *args, **kwargs):
+        for n in names:
+            given[n] = sim
+        return start(names, folder, run_name, description, ds, sim, *args, **kwargs)
+
+    monkeypatch.setattr(figures_mod, "start_drawings", start_drawings)
+    from test_quadrature import fig3  # the Fig. 3 example on a 40 x 32 camera
+
+    d = fig3(n_rays=16, target_error_mrad=0.1)
+    d["output"] = {"figures": True, "write_images": False}
+    res = pipeline.run_simulation(parse_config(d), tmp_path / "run")
+    picked = json.loads((res.outdir / "statistics.json").read_text())["sampling"]["n_rays"]
+    assert picked > 16
+    assert given["setup"].scene.sampling.n_rays == picked
+    ds = schema.load_run(res.outdir)
+    again = figures_mod._simulation(ds)
+    assert again.scene.sampling.n_rays == picked
+    assert again.scene.rays_per_pixel == ds.attrs["rays_per_pixel"]

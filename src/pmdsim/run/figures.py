@@ -23,6 +23,7 @@ about 1.5 s), by default one per core for 4 figures or more (``--workers``).
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import sys
 import threading
@@ -79,10 +80,16 @@ def figure_names(ds, which="summary") -> list[str]:
 
 
 def _simulation(ds):
-    from ..config import RunConfig
+    """The simulation a run's dataset was rendered with: its configuration, at the rule a
+    target's pilot picked (``statistics_json``'s ``sampling.n_rays``) where it had one."""
+    from ..config import RunConfig, with_sampling
     from ..render import Simulation
 
-    return Simulation.from_config(RunConfig.model_validate_json(ds.attrs["config_json"]))
+    cfg = RunConfig.model_validate_json(ds.attrs["config_json"])
+    smp = json.loads(ds.attrs.get("statistics_json") or "{}").get("sampling") or {}
+    if cfg.sampling.target_error_mrad is not None and smp.get("n_rays"):
+        cfg = with_sampling(cfg, n_rays=int(smp["n_rays"]), target_error_mrad=None)
+    return Simulation.from_config(cfg)
 
 
 def draw_one(ds, name: str, folder: Path, run_name: str, description: str = "",
@@ -403,9 +410,12 @@ class FigureSchedule:
         self.started: list[str] = []
         self.drawings: list[Drawing] = []
 
-    def offer(self, ds) -> list[str]:
+    def offer(self, ds, sim=None) -> list[str]:
         """Start the planned figures that ``ds`` can give and that have not started;
-        returns their names."""
+        returns their names. ``sim``: the run's simulation now (a target's pick replaces
+        the one the schedule was made with: the set-up figure draws the rule rendered)."""
+        if sim is not None:
+            self.sim = sim
         names = [n for n in self.planned
                  if n not in self.started and _has(ds, FIGURES[n][1])]
         if not names:

@@ -419,7 +419,7 @@ def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder
             if m.ds is not offered and step is not write:  # something new to draw or write
                 offered = m.ds
                 if m.figures is not None:  # first: a fork waits for a part being written
-                    m.figures.offer(m.ds)
+                    m.figures.offer(m.ds, m.sim)
                 m.writer.offer(m.ds)
     return result(m), m.ds
 
