@@ -91,8 +91,10 @@ def atomic_run_dir(outdir: str | Path, overwrite: bool = False, marker: str = MA
         tmp = final.with_name(f"{final.name}.tmp-{os.getpid()}")
         if tmp.exists():
             shutil.rmtree(tmp)  # leftover of a crashed run of this very process id
-        tmp.mkdir()
         try:
+            # inside the try: a SIGINT that Python raises as mkdir returns (the folder made,
+            # the next statement not reached) removes it too
+            tmp.mkdir()
             yield tmp
             check_output_dir(final, overwrite, marker)  # it may have appeared meanwhile
             old = None
