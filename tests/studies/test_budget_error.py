@@ -184,3 +184,49 @@ def test_coupled_shot_noise_is_the_poisson_quantile_and_moves_with_the_signal():
     b = s.capture(img * (1 + 1e-5), coupled=True).dn / s.gain
     assert np.abs(b - a).max() <= 1.0 + 1e-6 + 2 / s.gain  # one electron (and its DN rounding)
     assert np.mean(b - a) == pytest.approx(np.mean(img * 1e-5 * 8000.0), abs=0.05)
+
+
+def test_height_rows_state_the_solvers_floors():
+    """A height row compares two reconstructions that each stop within their own tolerance
+    of their fixed point, which their difference does not show: every node's error is the
+    moved decodings' change plus both floors (twice the height tolerance each, the slope
+    tolerance each); a row against the exact truth (nothing moved) states its floors, not
+    0: a constant node error e widens the PV by exactly 2 e."""
+    from types import SimpleNamespace
+
+    from pmdsim.measure.reconstruct import Reconstruction
+    from pmdsim.studies.budget_error import height_error_bounds, node_errors, solver_floors
+
+    z = np.zeros((3, 4))
+
+    def rec(tol_mm, slope_tol):
+        return Reconstruction(np.arange(4.0), np.arange(3.0), z == 0, z, z, z, z, 3, (), True,
+                              None, tol_mm, slope_tol)
+
+    floors = solver_floors(rec(3e-7, 2e-9), rec(5e-7, 7e-9))
+    assert floors["height_nm"] == pytest.approx(2 * (3e-7 + 5e-7) * 1e6, rel=1e-12)
+    assert floors["slope_x_urad"] == floors["slope_y_urad"] == pytest.approx(9e-3, rel=1e-12)
+    with pytest.raises(ValueError, match="quantity"):
+        rec(1e-7, 1e-9).solver_floor("height_mm")
+    rng = np.random.default_rng(3)
+    h = rng.normal(5.0, 2.0, (3, 4))
+    h[0, 1] = np.nan
+    err = SimpleNamespace(height_nm=h, slope_x_urad=rng.normal(0.4, 1.0, (3, 4)),
+                          slope_y_urad=rng.normal(-0.2, 0.5, (3, 4)))
+    moved = SimpleNamespace(height_nm=h + 0.25, slope_x_urad=err.slope_x_urad - 0.01,
+                            slope_y_urad=err.slope_y_urad)
+    e = node_errors(err, [moved], floors)
+    ok = np.isfinite(h)
+    assert np.allclose(e["height_nm"][ok], 0.25 + floors["height_nm"], rtol=1e-12)
+    assert np.isnan(e["height_nm"][0, 1])
+    assert np.allclose(e["slope_x_urad"], 0.01 + 9e-3, rtol=1e-9)
+    assert np.allclose(e["slope_y_urad"], 9e-3, rtol=1e-12)
+    exact = height_error_bounds(err, [], floors)
+    assert exact["height_pv_nm_err"] == pytest.approx(2 * floors["height_nm"], rel=1e-9)
+    d = np.where(ok, h - np.nanmean(h), np.nan)
+    assert exact["height_rms_nm_err"] == pytest.approx(
+        stat_error(d, np.where(ok, floors["height_nm"], np.nan), ok, "rms"), rel=1e-12)
+    assert 0 < exact["slope_rms_y_urad_err"] <= 9e-3 * (1 + 1e-9)
+    assert exact["solver_floor_nm"] == floors["height_nm"]
+    # without floors nothing is added (the change alone)
+    assert np.allclose(node_errors(err, [moved])["height_nm"][ok], 0.25, rtol=1e-12)

@@ -147,6 +147,22 @@ class Reconstruction:
     def spacing(self):
         return (float(self.x_mm[1] - self.x_mm[0]), float(self.y_mm[1] - self.y_mm[0]))
 
+    def solver_floor(self, quantity: str) -> float:
+        """The solver's part of a node's error in ``quantity`` (``"height_nm"``,
+        ``"slope_x_urad"`` or ``"slope_y_urad"``, the maps of a surface error): how far the
+        height-normal iteration stopped from its fixed point (:attr:`tolerance_mm`), twice
+        it for the height after removal (the node's own, and the removed piston's change,
+        the mean of changes at most that large; the low-order forms removed otherwise are
+        fitted to the same smooth field), the slopes' change for it (:attr:`slope_tolerance`)
+        in urad. Two reconstructions that are compared node by node (a run's repetition
+        with moved coordinates, a budget row's surface and mirror) each stop within their
+        own, which their difference does not show: it is added to every stated error."""
+        if quantity == "height_nm":
+            return 2.0 * self.tolerance_mm * 1e6
+        if quantity in ("slope_x_urad", "slope_y_urad"):
+            return self.slope_tolerance * 1e6
+        raise ValueError(f"solver_floor: unknown quantity {quantity!r}")
+
     @property
     def excluded(self) -> dict:
         """``{reason: count}`` of the aperture's nodes that are not reported

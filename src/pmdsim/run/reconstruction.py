@@ -87,7 +87,7 @@ def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
     errors (:mod:`pmdsim.measure.areal`): per map its Sq ... Sdq, band RMS and radial PSD
     (with their numerical errors from ``moves``, ``{attribute: (H, W)}``: each node's signed
     change when the decoded coordinates move by their numerical error; its magnitude plus
-    the solver's floor (:func:`solver_floor`) is the node's error), its 2-D and radial
+    the solver's floor (``Reconstruction.solver_floor``) is the node's error), its 2-D and radial
     PSD as variables; the reference's height error too (the chain's floor; exact, no
     error). The bands are those of the height error's measured region, for every map."""
     from ..measure import areal
@@ -101,7 +101,7 @@ def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
     bands = areal.default_bands(valid, dx, dy)
     # each node's error: the magnitude of its change plus the solver's floor
     maps = [(getattr(err, a), name, unit,
-             None if moves is None else np.abs(moves[a]) + solver_floor(rec, a))
+             None if moves is None else np.abs(moves[a]) + rec.solver_floor(a))
             for a, name, unit in AREAL_MAPS]
     if reference_rec is not None and reference_rec[1].height_nm.shape == err.height_nm.shape:
         maps.append((reference_rec[1].height_nm, "reference_height_error", "nm", None))
@@ -156,20 +156,6 @@ _ERROR_STATS = {"height_error_nm": "height_nm", "slope_error_x_urad": "slope_x_u
                 "slope_error_y_urad": "slope_y_urad"}
 
 
-def solver_floor(rec, attr: str) -> float:
-    """The reconstruction solver's part of a node's error (how far the height-normal
-    iteration stopped from its fixed point,
-    :attr:`~pmdsim.measure.reconstruct.Reconstruction.tolerance_mm`): twice the
-    tolerance for the height after removal (the node's own, and the removed piston's
-    change, the mean of changes at most that large; the low-order forms removed otherwise
-    are fitted to the same smooth field), the slopes' change for it in urad. Both
-    reconstructions that :func:`moved_errors` compares stop within it, which their
-    difference does not show."""
-    if attr == "height_nm":
-        return 2.0 * rec.tolerance_mm * 1e6
-    return rec.slope_tolerance * 1e6
-
-
 def add_numerical_error(stats: dict, err, moved, rec) -> None:
     """Add ``<stat>_err`` to the RMS / PV / P95 of each surface error in ``stats``: the
     reconstruction with every decoded coordinate moved by its numerical error (x and y
@@ -177,13 +163,13 @@ def add_numerical_error(stats: dict, err, moved, rec) -> None:
     node's change is its error, carried to the statistics as the budget's height rows are
     (:func:`pmdsim.studies.budget_error.stat_error`: exact intervals for RMS and P95; the
     PV by the widest range the nodes' errors allow), plus the solver's floor
-    (:func:`solver_floor`)."""
+    (:meth:`~pmdsim.measure.reconstruct.Reconstruction.solver_floor`)."""
     from ..studies.budget_error import stat_error
 
     for key, attr in _ERROR_STATS.items():
         st = stats.get(key)
         a = np.asarray(getattr(err, attr), np.float64)
-        e = np.abs(np.asarray(getattr(moved, attr), np.float64) - a) + solver_floor(rec, attr)
+        e = np.abs(np.asarray(getattr(moved, attr), np.float64) - a) + rec.solver_floor(attr)
         m = np.isfinite(a)
         if not st or not m.any():
             continue
@@ -261,7 +247,7 @@ def statistics(cfg, rec, err, reference_rec=None) -> dict:
         "anchor": cfg.reconstruct.anchor,
         "iterations": rec.iterations,
         "converged": rec.converged,
-        # the iteration's stop, in every stated height and slope error (solver_floor)
+        # the iteration's stop, in every stated height and slope error (rec.solver_floor)
         "solver_tolerance_nm": rec.tolerance_mm * 1e6,
         "solver_slope_tolerance_urad": rec.slope_tolerance * 1e6,
         "grid_points": int(rec.mask.sum()),

@@ -52,8 +52,9 @@ from ..render import Simulation
 from ..scene import Scene
 from ..scene.sensor import Sensor, capture_dn
 from .budget_areal import areal_of
-from .budget_error import (HEIGHT_STATS, ROW_STATS, at_order, difference_error, error_stats, estimator_label,
-                           height_error_bounds, node_errors, second_estimate, stat_error,
+from .budget_error import (ROW_STATS, at_order, difference_error, error_stats, estimator_label,
+                           height_error_bounds, node_errors, second_estimate, solver_floors,
+                           stat_error,
                            unknown_share)
 from .height_rows import (Decoded, HeightError, SurfaceMaps, form_spec, height_error, height_row,
                           reconstruct_decoded, true_maps, wants_heights, zernike_disc)
@@ -338,8 +339,10 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
             rec, sec = rec_of(name, dec)
             herr = height_error(SurfaceMaps.of(rec), truth_of(rec), spec, disc)
             r = height_row(name, label, "system", herr, dec.seconds + sec, "reconstruction minus the true surface")
-            r["areal"] = areal_of(herr, rec.spacing, exact=True)  # the mirror's render: exact
-            hrows.append({**r, **{f"{k}_err": 0.0 for k in HEIGHT_STATS}})
+            # the mirror's render is exact: the reconstruction solver's floor alone
+            floors = solver_floors(rec)
+            r["areal"] = areal_of(herr, rec.spacing, floors=floors)
+            hrows.append({**r, **height_error_bounds(herr, [], floors)})
         return dec
 
     ideal_dec = system("ideal", "ideal system (reference)", ideal)
@@ -372,9 +375,10 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
                                 dec.valid, 0.0)
                 rm = reconstruct_decoded(cfg, scene, moved)
                 shifted.append(height_error(SurfaceMaps.of(rm), base, spec, disc))
-            row["areal"] = areal_of(herr, rec.spacing, shifted)  # areal parameters and PSDs
-            hrows.append({**row, **height_error_bounds(herr, shifted)})
-            ne = node_errors(herr, shifted)
+            floors = solver_floors(rec, recs[ref_name])  # the surface's and the mirror's
+            row["areal"] = areal_of(herr, rec.spacing, shifted, floors)  # areal parameters, PSDs
+            hrows.append({**row, **height_error_bounds(herr, shifted, floors)})
+            ne = node_errors(herr, shifted, floors)
             numerical_h[name] = HeightError(ne["slope_x_urad"], ne["slope_y_urad"], ne["height_nm"],
                                             herr.form)
 
@@ -469,8 +473,7 @@ def budget(cfg: RunConfig, progress: Callable[[str], None] | None = None,
         from .calibration import calibration_rows
 
         say("calibration rows")
-        # the ideal mirror's decoding: no quadrature, no numerical error
-        hrows += [{**{f"{k}_err": 0.0 for k in HEIGHT_STATS}, **r}
-                  for r in calibration_rows(cfg, scene, ideal_dec, recs["ideal"], spec, disc)]
+        # the ideal mirror's decoding (no quadrature): the solvers' floors alone
+        hrows += calibration_rows(cfg, scene, ideal_dec, recs["ideal"], spec, disc)
         settings["calibration"] = cfg.budget.calibration.model_dump()
     return Budget(rows, hrows, settings)

@@ -13,14 +13,15 @@ MAPS = (("height_nm", "height_error_nm", "nm"), ("slope_x_urad", "slope_error_x_
         ("slope_y_urad", "slope_error_y_urad", "urad"))
 
 
-def areal_of(err, spacing_mm, shifted=None, exact: bool = False) -> dict:
+def areal_of(err, spacing_mm, shifted=None, floors: dict | None = None) -> dict:
     """``{statistics key: areal summary}`` (:func:`pmdsim.measure.areal.summary`) of the
     maps of a :class:`~pmdsim.studies.height_rows.HeightError` on a grid of ``spacing_mm`` (dx,
     dy). ``shifted``: the row's HeightErrors with the decoded coordinates moved by +-their
     numerical error: the nodes' errors (:func:`pmdsim.studies.budget_error.node_errors`)
-    and, for the PSDs, the signed changes themselves; ``exact``: the row has no numerical
-    error (a mirror's render: every error 0). The bands are those of the height error's
-    measured region."""
+    and, for the PSDs, the signed changes themselves; ``floors``: the reconstruction
+    solvers' floors (:func:`pmdsim.studies.budget_error.solver_floors`), in every node's
+    error (alone where nothing is ``shifted``: a mirror's exact render). The bands are
+    those of the height error's measured region."""
     from .budget_error import node_errors
 
     dx, dy = (float(s) for s in spacing_mm)
@@ -28,7 +29,7 @@ def areal_of(err, spacing_mm, shifted=None, exact: bool = False) -> dict:
     if not valid.any():
         return {}
     bands = areal.default_bands(valid, dx, dy)
-    ne = node_errors(err, shifted) if shifted else None
+    ne = node_errors(err, shifted or [], floors) if shifted or floors is not None else None
     out = {}
     for attr, key, unit in MAPS:
         z = np.asarray(getattr(err, attr), np.float64)
@@ -36,9 +37,7 @@ def areal_of(err, spacing_mm, shifted=None, exact: bool = False) -> dict:
         if ne is not None:
             e = np.nan_to_num(np.asarray(ne[attr], np.float64), nan=0.0)
             maps = [np.nan_to_num(np.asarray(getattr(h, attr), np.float64) - z, nan=0.0)
-                    for h in shifted]
-        elif exact:
-            e = np.zeros_like(z)
+                    for h in shifted or ()] or None
         out[key] = areal.summary(z, dx, dy, unit, error=e, bands=bands, error_maps=maps)
     return out
 

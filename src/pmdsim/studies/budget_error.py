@@ -31,8 +31,11 @@ the rendering integral, whose per-pixel error the budget carries to every statis
   every coordinate moved by ``+e`` and by ``-e`` (x and y together); the larger change of
   each node's slope errors and height error (after removal) is that node's error
   (:func:`node_errors`: the reconstruction is linear in small coordinate errors, and the
-  quadrature's errors vary smoothly across pixels), carried to RMS/P95 by the same interval
-  bound and to the PV by the widest range it allows;
+  quadrature's errors vary smoothly across pixels), plus the floors of the reconstruction
+  solvers whose results the row compares (:func:`solver_floors`: each stops within its own
+  tolerance, which no difference shows; the system rows, against the exact truth, state
+  their reconstruction's), carried to RMS/P95 by the same interval bound and to the PV by
+  the widest range it allows;
 - the **numerical error rows** of the budget state the error maps themselves (RMS and P95
   of ``e`` in every unit; heights: RMS, PV and P95 of the nodes' errors).
 """
@@ -111,25 +114,46 @@ HEIGHT_STATS = ("slope_rms_x_urad", "slope_rms_y_urad", "slope_p95_x_urad", "slo
                 "height_rms_nm", "height_pv_nm", "height_p95_nm")
 
 
-def node_errors(err, shifted) -> dict:
+def node_errors(err, shifted, floors: dict | None = None) -> dict:
     """Per reconstruction node, the numerical error of the slope errors (urad) and of the
     height error after removal (nm): the larger change between ``err`` and the
-    :class:`~pmdsim.studies.height_rows.HeightError` of each decoding moved by ``+-e``."""
+    :class:`~pmdsim.studies.height_rows.HeightError` of each decoding moved by ``+-e``
+    (none: 0 where the map is defined, a mirror's exact render), plus ``floors[key]``
+    (the reconstruction solvers' floors, :func:`solver_floors`; None: none)."""
     out = {}
     for key in ("slope_x_urad", "slope_y_urad", "height_nm"):
         base = getattr(err, key)
         ch = [np.abs(getattr(h, key) - base) for h in shifted]
-        out[key] = np.fmax.reduce(ch) if ch else np.full_like(base, np.nan)
+        if ch:
+            e = np.fmax.reduce(ch)
+        elif floors is not None:
+            e = np.where(np.isfinite(base), 0.0, np.nan)
+        else:
+            e = np.full_like(base, np.nan)
+        out[key] = e + floors[key] if floors is not None else e
     return out
 
 
-def height_error_bounds(err, shifted) -> dict:
+def solver_floors(*recs) -> dict:
+    """``{map: floor}`` of a height row: the sum over the reconstructions ``recs`` it is
+    the difference of (the surface's and the mirror's; one where the truth is exact) of
+    each one's solver floor
+    (:meth:`~pmdsim.measure.reconstruct.Reconstruction.solver_floor`)."""
+    return {key: float(sum(r.solver_floor(key) for r in recs))
+            for key in ("slope_x_urad", "slope_y_urad", "height_nm")}
+
+
+def height_error_bounds(err, shifted, floors: dict | None = None) -> dict:
     """{statistic + "_err"} of :data:`HEIGHT_STATS`: the per-node errors of
-    :func:`node_errors` carried to each statistic by :func:`stat_error` (RMS and P95 about
-    zero for the slopes, about the mean for the height, as the row's statistics are), the
-    PV's by the widest range the per-node errors allow."""
-    e = node_errors(err, shifted)
-    out = {}
+    :func:`node_errors` (with the solvers' ``floors``) carried to each statistic by
+    :func:`stat_error` (RMS and P95 about zero for the slopes, about the mean for the
+    height, as the row's statistics are), the PV's by the widest range the per-node
+    errors allow; with ``floors`` also the floors themselves (``solver_floor_nm``, the
+    larger slope floor ``solver_floor_urad``)."""
+    e = node_errors(err, shifted, floors)
+    out = {} if floors is None else {
+        "solver_floor_nm": floors["height_nm"],
+        "solver_floor_urad": max(floors["slope_x_urad"], floors["slope_y_urad"])}
     for k in ("x", "y"):
         a, ea = getattr(err, f"slope_{k}_urad"), e[f"slope_{k}_urad"]
         m = np.isfinite(a)

@@ -101,7 +101,15 @@ _QUAD = ("slope_rms_x_urad", "slope_rms_y_urad", "slope_p95_x_urad", "slope_p95_
 
 
 def _quadrature(rows):
-    return {k: float(math.sqrt(sum(r[k] ** 2 for r in rows if math.isfinite(r[k])))) for k in _QUAD}
+    """The quadrature sum of each statistic of ``rows`` and its error: the norm
+    ``sqrt(sum r_k^2)`` moves by at most ``sqrt(sum e_k^2)`` when every ``r_k`` moves by up
+    to ``e_k`` (Minkowski)."""
+    out = {}
+    for k in _QUAD:
+        ok = [r for r in rows if math.isfinite(r[k])]
+        out[k] = float(math.sqrt(sum(r[k] ** 2 for r in ok)))
+        out[f"{k}_err"] = float(math.sqrt(sum(r.get(f"{k}_err", 0.0) ** 2 for r in ok)))
+    return out
 
 
 def calibration_rows(cfg, scene, decoded, rec0, spec, disc) -> list[dict]:
@@ -110,6 +118,7 @@ def calibration_rows(cfg, scene, decoded, rec0, spec, disc) -> list[dict]:
     mirror's decoding through the ideal system and its reconstruction."""
     from .height_rows import SurfaceMaps, height_error, height_row, prior_of, reconstruct_decoded
     from .budget_areal import areal_of
+    from .budget_error import height_error_bounds, solver_floors
 
     unc = cfg.budget.calibration
     base = SurfaceMaps.of(rec0)
@@ -124,7 +133,10 @@ def calibration_rows(cfg, scene, decoded, rec0, spec, disc) -> list[dict]:
             rec = reconstruct_decoded(cfg, scene, decoded, camera=cam, monitor=mon, prior=prior)
             err = height_error(SurfaceMaps.of(rec), base, spec, disc, shift_mm=shift)
             r = height_row(field_name, name, "calibration", err)
-            r["areal"] = areal_of(err, rec.spacing)  # of the component's maps (no numerical error)
+            # the mirror's render is exact: the two reconstructions' solver floors alone
+            floors = solver_floors(rec, rec0)
+            r.update(height_error_bounds(err, [], floors))
+            r["areal"] = areal_of(err, rec.spacing, floors=floors)
             for k in ("zernike_noll_nm", "zernike_fringe_nm"):
                 r.pop(k)
             comps.append(r)
