@@ -49,7 +49,7 @@ from .fringe_finish import FringeFinish, TileErrors, fringe_errors
 from .convergence_grid import convergence_stride, keep_grid
 from .tile_tasks import fuses, local_scheduler, render_rule_fused
 from .geometry_rows import reduce_subrays, scene_geometry_rows, vision_geometry_rows
-from ..trace import bundle_geometry, cone_basis, trace_pixels
+from ..trace import bundle_geometry, trace_pixels
 
 ProgressFn = Callable[[int, int], None]
 
@@ -836,18 +836,20 @@ class Simulation:
             return (ou, ov, of, None, hits.point[0].copy()) + extra
         dirs = np.empty((len(rows), n, 3))
         origin = np.empty((len(rows), 3))
-        cone = cone_basis(hits)
         for p in range(len(rows)):
             origin[p] = hits.point[0, p]
+            frame = (hits.x_axis[0, p], hits.y_axis[0, p], hits.normal[0, p])
             if lobe:
-                frame = (hits.x_axis[0, p], hits.y_axis[0, p], hits.normal[0, p])
                 i_loc = np.array([hits.to_camera[0, p] @ b for b in frame])
                 off = rot[p] if rot.shape[0] else (0.0, 0.0)
                 model = scene.brdf if px is None else with_params(scene.brdf, *px[p])
                 loc = model.sample(np.mod(u1 + off[0], 1.0), np.mod(u2 + off[1], 1.0), i_loc)
                 e1, e2, e3 = frame
             else:
-                e1, e2, e3 = (b[0, p] for b in cone)
+                # the cone basis the kernel traced: the geometry rows' (turned about P where
+                # the rule's azimuths follow the lobe, ``samp.orient``), in world axes
+                e1, e2, e3 = (geo[p, kb.G_X + k] * frame[0] + geo[p, kb.G_Y + k] * frame[1]
+                              + geo[p, kb.G_Z + k] * frame[2] for k in (1, 2, 3))
                 if scene.brdf.is_delta:
                     loc = local
                 else:
