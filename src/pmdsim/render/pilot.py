@@ -422,7 +422,13 @@ class Pilot:
         env, trusted = self.envelope(n_rays)
         bi = np.minimum(np.arange(h) // s, self.rows.size - 1)
         bj = np.minimum(np.arange(w) // s, self.cols.size - 1)
-        stated = env[:, bi][:, :, bj]
+        # every block's value over its s x s pixels, in one copy (the grid has ceil(h / s)
+        # rows: bi and bj index its blocks)
+        nb, gh, gw = env.shape
+        blocks = np.broadcast_to(env[:, :, None, :, None],
+                                 (nb, gh, s, gw, s)).reshape(nb, gh * s, gw * s)[:, :h, :w]
+        # (a step of 1 reshapes without a copy: a read-only view of env)
+        stated = blocks if blocks.flags.writeable and blocks.flags.c_contiguous else blocks.copy()
         off = np.nan_to_num(np.asarray(off, np.float64), nan=1.0)
         cut = sums_ok & (off > CUT_MEASURED) & (off <= MAX_OFF)
         local = sums_ok & ~(trusted[bi][:, bj]) | cut
@@ -441,10 +447,12 @@ class Pilot:
         bounded = np.where((off <= CUT_MEASURED) | (off > MAX_OFF), off, 0.0)
         floor, edge = image_floors(images, deltas, _edge_weight(f_total, bounded),
                                    self.layout.lmax)
-        stated = stated + floor + ROUNDOFF_PHASE + edge
+        stated += floor  # in place, in the order of stated + floor + ROUNDOFF_PHASE + edge
+        stated += ROUNDOFF_PHASE
+        stated += edge
         if self.probe(n_rays).nodes < MIN_NODES:
-            stated = np.where(np.isfinite(stated), math.pi, stated)
-        stated = np.minimum(stated, math.pi)
+            stated[np.isfinite(stated)] = math.pi
+        np.minimum(stated, math.pi, out=stated)
         stated[:, :, ~sums_ok] = np.nan
         return stated, int(rr.size)
 
