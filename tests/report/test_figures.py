@@ -16,6 +16,7 @@ from pmdsim.cli import app
 from pmdsim.config import parse_config
 from pmdsim.report.scene import MAX_IMAGE_PX, imshow
 from test_pipeline import tiny_config_dict
+from conftest import base_dict
 from pmdsim.report.chain_maps import plot_deviation, plot_histograms
 from pmdsim.report.overview import plot_overview, plot_variant_deviation
 
@@ -417,3 +418,32 @@ def test_setup_figure_draws_the_rule_a_target_picked(tmp_path, monkeypatch):
     again = figures_mod._simulation(ds)
     assert again.scene.sampling.n_rays == picked
     assert again.scene.rays_per_pixel == ds.attrs["rays_per_pixel"]
+
+
+@pytest.mark.parametrize("mode", ["rule", "stratified"])
+def test_setup_footprint_marks_p_at_the_specular_point(tmp_path, monkeypatch, mode):
+    """The set-up figure's "+" marks P, the pixel's specular direction, where it meets the
+    monitor: the render's geometry (``specular_u``, ``specular_v``) at that pixel. A Gauss
+    rule's nodes do not include P (ray 0 is its first node, several monitor px away on
+    Fig. 3); only the paper's stratified set starts with it."""
+    import numpy as np
+
+    from pmdsim.render import Simulation
+    from pmdsim.report import scene as plot
+
+    figs = []
+    monkeypatch.setattr(plot, "_save", lambda fig, path, dpi=None: figs.append(fig) or path)
+    d = base_dict()
+    d["sampling"] = {"mode": mode, "n_rays": 96, "theta_max_deg": 2.0}
+    sim = Simulation.from_config(parse_config(d))
+    pixel = (15, 20)
+    plot.plot_setup(sim, tmp_path / "setup.png", pixel=pixel)
+    geo = sim.geometry()
+    marks = [c for ax in figs[0].axes for c in ax.collections
+             if str(c.get_label()).startswith("P ")]
+    assert len(marks) == 1
+    np.testing.assert_allclose(marks[0].get_offsets()[0],
+                               [geo.specular_u[pixel], geo.specular_v[pixel]], atol=1e-9)
+    u, v, _, _, _ = sim.transport([pixel[0]], [pixel[1]], directions=False)
+    first = np.hypot(u[0, 0] - geo.specular_u[pixel], v[0, 0] - geo.specular_v[pixel])
+    assert (first > 0.05) if mode == "rule" else (first < 1e-9)  # ray 0 is P only there

@@ -25,7 +25,7 @@ from matplotlib.patches import Rectangle
 from matplotlib.ticker import MaxNLocator
 
 from ..quantiles import nanmedian
-from ..trace import trace_primary
+from ..trace import specular_monitor_coords, trace_pixels, trace_primary
 
 DPI = 130
 RED = "#d62728"
@@ -296,7 +296,12 @@ def plot_setup(sim, path: str | Path, pixel: tuple[int, int] | None = None,
         if (~hit).any():
             ax2.scatter(cu[~hit], cv[~hit], marker="x", color="0.4", s=22,
                         label="misses the monitor")
-        ax2.scatter([u[0]], [v[0]], marker="+", color="k", s=120, label="P (ray 0)")
+        # P, the specular direction, where it meets the monitor (a Gauss rule's or the
+        # radiometric estimator's rays do not include it: ray 0 is P only in the paper's sets)
+        pu, pv, p_hit = specular_monitor_coords(scene, trace_pixels(scene, [pixel[0]], [pixel[1]]))
+        if p_hit[0, 0]:
+            ax2.scatter([pu[0, 0]], [pv[0, 0]], marker="+", color="k", s=120,
+                        label="P (specular direction)")
         ax2.add_patch(Rectangle((-0.5, -0.5), mon.width, mon.height, fill=False,
                                 edgecolor="#08519c", linewidth=1.5, label="monitor edge"))
         fu, fv = cu[np.isfinite(cu)], cv[np.isfinite(cv)]
