@@ -114,6 +114,10 @@ HEIGHT_STATS = ("slope_rms_x_urad", "slope_rms_y_urad", "slope_p95_x_urad", "slo
                 "height_rms_nm", "height_pv_nm", "height_p95_nm")
 
 
+#: The maps of a height row that carry per-node errors (HeightError attributes).
+NODE_MAPS = ("slope_x_urad", "slope_y_urad", "height_nm")
+
+
 def node_errors(err, shifted, floors: dict | None = None) -> dict:
     """Per reconstruction node, the numerical error of the slope errors (urad) and of the
     height error after removal (nm): the larger change between ``err`` and the
@@ -121,7 +125,7 @@ def node_errors(err, shifted, floors: dict | None = None) -> dict:
     (none: 0 where the map is defined, a mirror's exact render), plus ``floors[key]``
     (the reconstruction solvers' floors, :func:`solver_floors`; None: none)."""
     out = {}
-    for key in ("slope_x_urad", "slope_y_urad", "height_nm"):
+    for key in NODE_MAPS:
         base = getattr(err, key)
         ch = [np.abs(getattr(h, key) - base) for h in shifted]
         if ch:
@@ -140,7 +144,7 @@ def solver_floors(*recs) -> dict:
     each one's solver floor
     (:meth:`~pmdsim.measure.reconstruct.Reconstruction.solver_floor`)."""
     return {key: float(sum(r.solver_floor(key) for r in recs))
-            for key in ("slope_x_urad", "slope_y_urad", "height_nm")}
+            for key in NODE_MAPS}
 
 
 def height_error_bounds(err, shifted, floors: dict | None = None) -> dict:
