@@ -415,7 +415,8 @@ def _run_statistics(n, tmp):
 def _stated_pairs(a, b):
     """(name, value, the finer run's value, stated error) of every statistic of
     statistics.json that states a numerical error (the deviations' RMS, P95 and max per
-    direction and quantity; the reconstruction's)."""
+    direction and quantity; the reconstruction's RMS, PV and P95, and its areal parameters
+    Sq ... Sdq and band RMS of every surface error map)."""
     for dn, da in a["directions"].items():
         for q, e in da["numerical_error"].items():
             for k, err in e.items():
@@ -424,6 +425,17 @@ def _stated_pairs(a, b):
         if isinstance(va, dict):
             for k in [k for k in va if k + "_err" in va]:
                 yield f"rec.{key}.{k}", va[k], b["reconstruction"][key][k], va[k + "_err"]
+    # the areal parameters (Sq ... Sdq) and band RMS of each surface error map
+    for key, va in ((a.get("reconstruction") or {}).get("areal") or {}).items():
+        if not isinstance(va, dict) or "sq" not in va:
+            continue
+        vb = b["reconstruction"]["areal"][key]
+        for k in [k for k in va if k + "_err" in va]:
+            yield f"areal.{key}.{k}", va[k], vb[k], va[k + "_err"]
+        psd = va.get("psd") or {}
+        for band, err in (psd.get("band_rms_err") or {}).items():
+            yield (f"areal.{key}.band_rms.{band}", psd["band_rms"][band],
+                   vb["psd"]["band_rms"][band], err)
 
 
 @pytest.fixture(scope="module")
