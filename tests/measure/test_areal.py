@@ -319,3 +319,41 @@ def test_psd_matches_surface_topography_on_real_files(path):
         c_iso = np.ma.filled(c_iso, np.nan) * scale
         np.testing.assert_allclose(c_iso[keep], p.psd_iso[keep], rtol=1e-6)
         assert keep.sum() > 0.5 * keep.size
+
+
+def test_a_floor_beside_the_error_maps_covers_any_signs_of_it():
+    """``floor`` (node errors of any signs, e.g. a solver's tolerance) beside the signed
+    error maps: a map moved by a fraction of a map plus any signs of the floor (alternating
+    from node to node: its power at the highest frequencies, which the smooth maps lack)
+    changes Ssk, Sku (first order: 10 % room), Sdq, every PSD value and band RMS by no more
+    than the stated errors; without the floor the alternating part is not covered."""
+    ny, nx, dx, dy = 36, 50, 0.4, 0.55  # dx != dy
+    x, y = _grid(nx, ny, dx, dy)
+    rng = np.random.default_rng(5)
+    z = np.sin(x / 2.5 + 0.4) * np.cos(y / 3) + 0.3 * x / x.max() \
+        + 0.03 * rng.standard_normal((ny, nx))
+    z = np.where((x - 10) ** 2 / 90 + (y - 9) ** 2 / 60 < 1, z, np.nan)  # an ellipse
+    up = 0.02 * np.cos(x / 7 + 0.3) * (1 + y / 25)
+    floor = np.full_like(z, 0.015)
+    checker = np.where((np.indices(z.shape).sum(axis=0) % 2) == 0, 1.0, -1.0)
+    kw = {"error_maps": [up, -up], "floor": floor}
+    ap = areal.areal_parameters(z, dx, dy, **kw)
+    p = areal.power_spectrum(z, dx, dy, **kw)
+    moves = [c * up + s * floor for c in (1.0, -0.6) for s in (checker, -checker, rng.choice(
+        [-1.0, 1.0], z.shape))]
+    for m in moves:
+        a2 = areal.areal_parameters(z + m, dx, dy)
+        for k in ("ssk", "sku", "sdq"):
+            room = 1.1 if k != "sdq" else 1.0 + 1e-12
+            assert abs(a2[k] - ap[k]) <= room * ap[f"{k}_err"], k
+        p2 = areal.power_spectrum(z + m, dx, dy, bands=p.bands)
+        assert np.all(np.abs(p2.psd_radial - p.psd_radial) <= p.psd_radial_err * (1 + 1e-9) + 1e-15)
+        for b in p.bands:
+            assert abs(p2.band_rms[b] - p.band_rms[b]) <= p.band_rms_err[b] * (1 + 1e-9)
+    # the checkerboard's power sits in the high band: the maps alone do not cover it (a
+    # smooth map, whose own high band is small)
+    smooth = np.where(np.isfinite(z), np.sin(x / 2.5 + 0.4) * np.cos(y / 3), np.nan)
+    p0 = areal.power_spectrum(smooth, dx, dy, bands=p.bands)
+    bare = areal.power_spectrum(smooth, dx, dy, error_maps=[up, -up], bands=p.bands)
+    p2 = areal.power_spectrum(smooth + up + floor * checker, dx, dy, bands=p.bands)
+    assert abs(p2.band_rms["high"] - p0.band_rms["high"]) > bare.band_rms_err["high"]

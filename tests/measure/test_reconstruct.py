@@ -445,11 +445,12 @@ def test_run_states_the_reconstructions_numerical_error(tmp_path):
             z = np.sqrt(np.mean(a * a))
             assert abs(z - st["rms_about_zero"]) <= 1.05 * st["rms_about_zero_err"] + 1e-9 * z
     assert "± " in (out / "kinematic" / "summary.txt").read_text().split("height error")[1]
-    # the areal parameters and PSDs of the same maps, with errors that cover the same move
-    from pmdsim.measure import areal
-
+    # the areal parameters: Sq is the RMS with its error; Sq, Sa, Sz from the same node
+    # errors cover the same move. Ssk, Sku, Sdq and the PSDs take their errors from the
+    # error's own signed pattern (pmdsim.render.pilot.Pilot.signed_field), which the
+    # envelope's move is not: tests/render/test_pilot.py checks them against a rule 4 x
+    # finer (on Fig. 3); here they are stated, > 0
     ar = stats["areal"]
-    dx, dy = (float(np.diff(ds[c].values[:2])[0]) for c in ("surface_x", "surface_y"))
     for key, attr, var in (("height_error_nm", "height_nm", "height_error"),
                            ("slope_error_x_urad", "slope_x_urad", "slope_error_x"),
                            ("slope_error_y_urad", "slope_y_urad", "slope_error_y")):
@@ -457,16 +458,13 @@ def test_run_states_the_reconstructions_numerical_error(tmp_path):
         assert st["sq"] == pytest.approx(stats[key]["rms"], rel=1e-9)
         assert st["sq_err"] == pytest.approx(stats[key]["rms_err"], rel=1e-9)
         assert st["n"] == stats[key]["n"]
-        bands = {b: (lo, np.inf if hi is None else hi)
-                 for b, (lo, hi) in st["psd"]["bands_per_mm"].items()}
-        p2 = areal.power_spectrum(getattr(moved, attr), dx, dy, bands=bands)
-        p0 = areal.power_spectrum(getattr(base, attr), dx, dy, bands=bands)  # the baseline
-        psd, err = p0.psd_radial, ds[f"{var}_psd_err"].values
-        np.testing.assert_allclose(ds[f"{var}_psd"].values, psd, rtol=1e-3, atol=1e-6 * psd.max())
-        assert np.all(np.abs(p2.psd_radial - psd) <= 1.05 * err + 1e-9 * psd.max())
-        for b in st["psd"]["band_rms"]:
-            v = p0.band_rms[b]
-            assert abs(p2.band_rms[b] - v) <= 1.05 * st["psd"]["band_rms_err"][b] + 1e-9 * v
+        a, b0 = (getattr(r, attr) for r in (moved, base))
+        a, b0 = a[np.isfinite(a)], b0[np.isfinite(b0)]
+        for k, f in (("sa", lambda x: np.mean(np.abs(x - x.mean()))), ("sz", np.ptp)):
+            assert abs(f(a) - f(b0)) <= 1.05 * st[k + "_err"] + 1e-9 * abs(st[k]), (key, k)
+        assert all(st[k + "_err"] > 0 for k in ("ssk", "sku", "sdq"))
+        assert all(e > 0 for e in st["psd"]["band_rms_err"].values())
+        assert np.all(ds[f"{var}_psd_err"].values > 0)
         assert ds[f"{var}_psd_2d"].dims == ("psd_fy", "psd_fx")
         assert ds[f"{var}_psd"].attrs["units"].endswith("^2 mm")
     assert "reference_height_error_psd" in ds and "sq" in ar["reference_height_error_nm"]

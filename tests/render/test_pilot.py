@@ -454,6 +454,29 @@ def test_every_statistic_within_its_error_of_a_4x_finer_run(fig3_statistics, n):
     assert not bad, bad
 
 
+def _pattern_pairs(a, b):
+    """(name, value, finer value, stated error) of the statistics whose errors come from
+    the error's signed pattern: Sdq and the band RMS of each surface error map."""
+    for name, x, y, e in _stated_pairs(a, b):
+        if name.startswith("areal.") and (name.endswith(".sdq") or ".band_rms." in name):
+            yield name, x, y, e
+
+
+@pytest.mark.parametrize("n", [16, 64])
+def test_pattern_errors_are_tight(fig3_statistics, n):
+    """Sdq and the band RMS take their errors from the rule's signed error pattern (the
+    pilot's grid, :meth:`Pilot.signed_field`): within 50 x their true change where the
+    rule's error dominates it (N = 16, 64 on the small Fig. 3 camera; 2 to 30 x measured).
+    Any signs of the node errors (an error alternating from node to node, the statement
+    before) stated 10^3 to 10^5 x for Sdq and the high band; the change of every
+    coordinate by its envelope (the same sign everywhere) missed the slope y's by 6 x."""
+    pairs = list(_pattern_pairs(fig3_statistics[n], fig3_statistics[4 * n]))
+    assert len(pairs) == 12
+    loose = [(name, e / abs(x - y)) for name, x, y, e in pairs
+             if abs(x - y) > 0 and e > 50 * abs(x - y)]
+    assert not loose, loose
+
+
 @pytest.fixture(scope="module")
 def targets():
     from test_budget_error import _reduced

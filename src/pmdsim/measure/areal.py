@@ -23,9 +23,10 @@ by the interval of a statistic that grows with every ``|d_i|`` (``d`` about the 
 mean; :func:`pmdsim.studies.budget_error.stat_error`, the rule of the run's RMS and P95
 errors), ``sz`` by the widest and narrowest range the nodes' errors allow, ``sdq`` by the
 same interval on the differences (each difference known to ``(e_i + e_j) / step`` for any
-signs, or, with the signed error maps below, to the largest change of that difference),
-``ssk`` and ``sku`` to first order, ``sum_i |dS/dz_i| e_i`` (the largest change any signs
-of the node errors give).
+signs, or, with the signed error maps below, to the largest change of that difference plus
+the ``floor``'s ``f_i + f_j``), ``ssk`` and ``sku`` to first order, ``sum_i |dS/dz_i| e_i``
+(the largest change any signs of the node errors give; with error maps ``e_i`` is the
+maps' largest change at the node plus the floor).
 
 Power spectral density (:func:`power_spectrum`):
 
@@ -57,12 +58,13 @@ Numerical errors of the PSD. Each amplitude (the square root of the power at a f
 in a bin or in a band) moves by at most the amplitude ``a`` of the error map's windowed
 spectrum there (triangle inequality), so the PSD's error is ``(sqrt(P) + a)^2 - P`` in its
 normalisation and the band RMS's is ``a / sqrt(N sum w^2)`` (N grid nodes). With
-``error_maps`` (signed maps of how the map moves when its inputs move by their numerical
-error, both signs: the run's and the budget's reconstructions repeated with the decoded
-coordinates moved by +-e) ``a`` is the larger of their spectra: the bound for any error
-whose spectrum is no larger, whatever its phase (the quadrature's errors vary smoothly
-across pixels, the rule the node errors follow). With node errors ``e`` alone (magnitudes,
-no signs) it is the bound for any signs: with ``e'`` = ``e`` plus the largest shift of the
+``error_maps`` (signed maps of how the map moves by its numerical error: the run's
+reconstruction repeated with the decoded coordinates moved by the rule's signed error
+pattern, and its opposite; the budget's with them moved by +-e) ``a`` is the larger of
+their spectra: the bound for any error whose spectrum is no larger, whatever its phase (the
+quadrature's errors vary smoothly across pixels); a ``floor`` (node errors of any signs,
+e.g. a solver's tolerance) adds the amplitudes any signs of it give. With node errors ``e``
+alone (magnitudes, no signs) it is the bound for any signs: with ``e'`` = ``e`` plus the largest shift of the
 weighted mean, ``a^2 = min(n T^2, N sum (w e')^2)`` for n frequencies, ``T = sum w e'``;
 never more than the window-weighted RMS of ``e'`` for a band, but a flat floor across the
 spectrum (an error that alternated sign from node to node would put its power at the
@@ -161,19 +163,24 @@ def _sdq(gx, gy):
     return float(np.sqrt(sum(parts))) if parts else float("nan")
 
 
-def areal_parameters(z, dx: float, dy: float, mask=None, error=None, error_maps=None) -> dict:
+def areal_parameters(z, dx: float, dy: float, mask=None, error=None, error_maps=None,
+                     floor=None) -> dict:
     """ISO 25178-2 Sq, Sa, Sz, Ssk, Sku and Sdq of ``z`` over its valid nodes (module
     docstring), with ``n`` (valid nodes); with ``error`` each also as ``<name>_err``
     (``error_maps``, the signed changes of the map, see :func:`power_spectrum`: the node
-    errors are their largest magnitude unless ``error`` is given, and each difference of
-    Sdq is known to the largest change of that difference). NaN (and ``n`` 0) for a map
-    without a valid node; Sdq NaN without a pair of neighbouring valid nodes, Ssk/Sku NaN
-    for a constant map."""
+    errors are their largest magnitude unless ``error`` is given; Ssk and Sku change by the
+    largest first-order change a map gives, each difference of Sdq by the largest change
+    of that difference; ``floor``, node errors of any signs added to the maps' changes).
+    NaN (and ``n`` 0) for a map without a valid node; Sdq NaN without a pair of
+    neighbouring valid nodes, Ssk/Sku NaN for a constant map."""
     z, v = _valid(z, mask)
     maps = _error_maps(error_maps, v)
     if error is None and maps:
         error = np.fmax.reduce([np.abs(m) for m in maps])
+        if floor is not None:
+            error = error + np.abs(np.asarray(floor, np.float64))
     e = _node_error(error, v)
+    fl = _node_error(floor, v) if maps and floor is not None else None
     n = int(np.count_nonzero(v))
     nan = float("nan")
     out = {k: nan for k in AREAL}
@@ -211,12 +218,20 @@ def areal_parameters(z, dx: float, dy: float, mask=None, error=None, error_maps=
         dm4 = 4 * (d3 - m3) / n
         g_sk = dm3 / m2**1.5 - 1.5 * m3 / m2**2.5 * dm2
         g_ku = dm4 / m2**2 - 2 * m4 / m2**3 * dm2
-        out["ssk_err"] = float(np.sum(np.abs(g_sk) * ev))
-        out["sku_err"] = float(np.sum(np.abs(g_ku) * ev))
+        if maps:  # any signs of the maps' largest change at each node, and the floor's
+            mv = np.fmax.reduce([np.abs(m[v]) for m in maps]) + (0.0 if fl is None else fl[v])
+            out["ssk_err"] = float(np.sum(np.abs(g_sk) * mv))
+            out["sku_err"] = float(np.sum(np.abs(g_ku) * mv))
+        else:
+            out["ssk_err"] = float(np.sum(np.abs(g_sk) * ev))
+            out["sku_err"] = float(np.sum(np.abs(g_ku) * ev))
     if gx.size or gy.size:
-        if maps:  # the change of each difference
+        if maps:  # the change of each difference (and the floor's, any signs)
             ex = np.fmax.reduce([np.abs(np.diff(m, axis=1))[okx] for m in maps]) / dx
             ey = np.fmax.reduce([np.abs(np.diff(m, axis=0))[oky] for m in maps]) / dy
+            if fl is not None:
+                ex = ex + (fl[:, 1:] + fl[:, :-1])[okx] / dx
+                ey = ey + (fl[1:, :] + fl[:-1, :])[oky] / dy
         else:  # any signs: the sum of both nodes' errors
             ex = (e[:, 1:] + e[:, :-1])[okx] / dx
             ey = (e[1:, :] + e[:-1, :])[oky] / dy
@@ -317,16 +332,19 @@ class PowerSpectrum:
 
 
 def power_spectrum(z, dx: float, dy: float, mask=None, error=None, window_kind: str = "tukey",
-                   bands: dict | None = None, error_maps=None) -> PowerSpectrum:
+                   bands: dict | None = None, error_maps=None, floor=None) -> PowerSpectrum:
     """2-D and radial PSD and band-limited RMS of ``z`` (module docstring); ``bands``
     ``{name: (f_lo, f_hi)}`` (1/mm, default :func:`default_bands`); ``error``: the node
     errors, carried to every PSD value and band RMS for any signs; ``error_maps``: signed
     maps (each (H, W)) of how the map moves by its numerical error (e.g. reconstructed with
-    the decoded coordinates moved by +e and by -e): their spectra instead (the larger)."""
+    the decoded coordinates moved by +e and by -e): their spectra instead (the larger),
+    with ``floor`` (node errors of any signs, e.g. a solver's tolerance) added to their
+    amplitudes."""
     z, v = _valid(z, mask)
     if not v.any():
         raise ValueError("power spectrum: the map has no valid node")
     e = _node_error(error, v)
+    fl = _node_error(floor, v) if error_maps is not None and floor is not None else None
     h, w_ = z.shape
     wgt = _window_of(v, dx, dy, window_kind)
     sw, sw2 = float(wgt.sum()), float(np.sum(wgt * wgt))
@@ -362,6 +380,14 @@ def power_spectrum(z, dx: float, dy: float, mask=None, error=None, window_kind: 
            "counts": counts, "psd_iso": iso, "psd_radial": radial, "bands": bands,
            "band_rms": band_rms, "window": window_kind, "mean_square": ms,
            "n_valid": int(np.count_nonzero(v))}
+    def any_signs(e):  # the amplitudes any signs of node errors e can give (docstring)
+        shift = float(np.sum(wgt * e) / sw)  # the weighted mean moves by at most this
+        ep = np.where(v, e + shift, 0.0) * wgt
+        t2 = float(ep.sum()) ** 2
+        pars = n_all * float(np.sum(ep * ep))
+        return (np.full_like(s, t2), np.minimum(counts * t2, pars),
+                {name: min(np.count_nonzero(sel) * t2, pars) for name, sel in band_sel.items()})
+
     if error_maps is not None:  # the spectra of the error maps themselves (the larger)
         a2 = np.zeros_like(s)
         for dz in _error_maps(error_maps, v):
@@ -369,14 +395,13 @@ def power_spectrum(z, dx: float, dy: float, mask=None, error=None, window_kind: 
             a2 = np.maximum(a2, fd.real**2 + fd.imag**2)
         a2_bin = np.bincount(k[inbin], weights=a2[inbin], minlength=n_bins + 1)[1:]
         a2_band = {name: float(np.sum(a2[sel])) for name, sel in band_sel.items()}
+        if fl is not None:  # amplitudes add (the triangle inequality, per bin and band)
+            f2, f2_bin, f2_band = any_signs(fl)
+            a2 = (np.sqrt(a2) + np.sqrt(f2)) ** 2
+            a2_bin = (np.sqrt(a2_bin) + np.sqrt(f2_bin)) ** 2
+            a2_band = {b: (math.sqrt(a2_band[b]) + math.sqrt(f2_band[b])) ** 2 for b in a2_band}
     elif e is not None:  # any signs of the node errors (module docstring)
-        shift = float(np.sum(wgt * e) / sw)  # the weighted mean moves by at most this
-        ep = np.where(v, e + shift, 0.0) * wgt
-        t2 = float(ep.sum()) ** 2
-        pars = n_all * float(np.sum(ep * ep))
-        a2 = np.full_like(s, t2)
-        a2_bin = np.minimum(counts * t2, pars)
-        a2_band = {name: min(np.count_nonzero(sel) * t2, pars) for name, sel in band_sel.items()}
+        a2, a2_bin, a2_band = any_signs(e)
     if error_maps is not None or e is not None:
         def grow(p, a_sq):
             return (np.sqrt(p) + np.sqrt(a_sq)) ** 2 - p
@@ -396,25 +421,27 @@ def _num(x):
 
 
 def describe(z, dx: float, dy: float, unit: str, mask=None, error=None,
-             window_kind: str = "tukey", bands: dict | None = None, error_maps=None):
+             window_kind: str = "tukey", bands: dict | None = None, error_maps=None,
+             floor=None):
     """(JSON-ready areal parameters, band RMS and 1-D radial PSD of a map, with their
-    numerical errors where ``error`` is given; its :class:`PowerSpectrum`). A map without a
-    valid node: ``({"n": 0, ...}, None)``."""
+    numerical errors where ``error`` (or ``error_maps``, with ``floor``) is given; its
+    :class:`PowerSpectrum`). A map without a valid node: ``({"n": 0, ...}, None)``."""
     z, v = _valid(z, mask)
-    ap = areal_parameters(z, dx, dy, v, error, error_maps)
+    ap = areal_parameters(z, dx, dy, v, error, error_maps, floor)
     out = {"unit": unit, "sdq_unit": f"{unit}/mm",
            **{k: (_num(x) if isinstance(x, float) else x) for k, x in ap.items()}}
     if not v.any():
         return out, None
-    p = power_spectrum(z, dx, dy, v, error, window_kind, bands, error_maps)
+    p = power_spectrum(z, dx, dy, v, error, window_kind, bands, error_maps, floor)
     out["psd"] = psd_summary(p, unit)
     return out, p
 
 
 def summary(z, dx: float, dy: float, unit: str, mask=None, error=None,
-            window_kind: str = "tukey", bands: dict | None = None, error_maps=None) -> dict:
+            window_kind: str = "tukey", bands: dict | None = None, error_maps=None,
+            floor=None) -> dict:
     """The JSON part of :func:`describe`."""
-    return describe(z, dx, dy, unit, mask, error, window_kind, bands, error_maps)[0]
+    return describe(z, dx, dy, unit, mask, error, window_kind, bands, error_maps, floor)[0]
 
 
 def psd_summary(p: PowerSpectrum, unit: str) -> dict:
@@ -451,9 +478,11 @@ DEFINITIONS = {
                 "longer than the measured extent / 3; high: shorter than 4 grid steps; mid: "
                 "between); their squares add up to the window-weighted mean square",
     "_err": "numerical error: the run's node errors carried to each number (Sq, Sa: exact "
-            "interval; Sz: widest and narrowest range; Sdq: interval on the differences; "
-            "Ssk, Sku: first order; PSD and band RMS: a bound for any signs of the node "
-            "errors, pmdsim.measure.areal)",
+            "interval; Sz: widest and narrowest range); Ssk, Sku, Sdq, PSD and band RMS from "
+            "the change of the map for the rule's signed error pattern (x 2) and the "
+            "solver's floor (Sdq: interval on the differences; Ssk, Sku: first order, any "
+            "signs of each node's change; PSD, band RMS: the spectrum of the change), "
+            "pmdsim.measure.areal, pmdsim.run.reconstruction",
 }
 
 

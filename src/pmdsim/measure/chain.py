@@ -180,6 +180,11 @@ class DirectionChain:
     #: numerical error maps {quantity: (H, W)} (:mod:`pmdsim.measure.numerical`); None when
     #: the render stated none
     numerical: dict | None = None
+    #: (H, W) monitor px: the estimated signed numerical error of the decoded coordinate
+    #: (the render's error pattern, :attr:`pmdsim.render.FringeResult.signed_phase_error`,
+    #: carried as the deviation is: ``delta phi w / (2 pi)``; 0 where not valid); not a
+    #: bound. None when the render gave none
+    signed_coord_px: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -206,7 +211,8 @@ class ChainResult:
 
 def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, pitch_mm: float,
             decode_cfg, shifts: int, slope_geometry: SlopeGeometry | None = None,
-            off_monitor: np.ndarray | None = None, phase_error: dict | None = None) -> ChainResult:
+            off_monitor: np.ndarray | None = None, phase_error: dict | None = None,
+            signed_phase_error: dict | None = None) -> ChainResult:
     """Deviation of every decoded direction from the decoded reference.
 
     Parameters
@@ -228,6 +234,10 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
         The render's numerical phase error of the finest width
         (:func:`pmdsim.measure.numerical.finest_phase_error`): propagated to every quantity
         (``DirectionChain.numerical``, ``numerical_error`` of the statistics).
+    signed_phase_error : dict of direction -> (H, W) rad, optional
+        The render's estimate of that error's signed pattern
+        (:attr:`pmdsim.render.FringeResult.signed_phase_error`):
+        ``DirectionChain.signed_coord_px``.
     """
     from . import numerical
     per = {}
@@ -251,9 +261,13 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
                                                     pitch_mm),
                 dev.coord_px, slope_at_coord=slope)
             num = {k: np.where(dev.valid, v, np.nan) for k, v in num.items()}
+        signed = None
+        if signed_phase_error is not None and signed_phase_error.get(d) is not None:
+            signed = np.where(dev.valid, np.asarray(signed_phase_error[d], np.float64)
+                              * float(min(res.widths_px)) / (2 * math.pi), 0.0)
         per[d] = DirectionChain(
             d, res, ref, dev, slope, analysis.deviation_stats(slope, dev.valid, considered),
-            geometry.specular_u if d == "x" else geometry.specular_v, num)
+            geometry.specular_u if d == "x" else geometry.specular_v, num, signed)
     first = next(iter(decoded.values()))
     return ChainResult(per, distance_mm, first.widths_px, int(shifts), first.method, pitch_mm,
                        decode_cfg.min_modulation_ratio, geometry.surface_mask,

@@ -61,6 +61,11 @@ FINE_FACTOR = 4
 #: Safety factor on the envelope of the measured error (validated by
 #: tests/render/test_pilot.py: >= 95 % of pixels bounded, median stated / true <= 5).
 SAFETY = 2.0
+#: Safety factor on the error's signed pattern (:meth:`Pilot.signed_field`) where a
+#: statistic takes its error from it (the areal parameters' Ssk, Sku, Sdq and the PSDs of
+#: a run's surface errors): validated by tests/render/test_pilot.py (every statistic within
+#: its error of a 4 x finer run, N = 16 ... 4096).
+PATTERN_SAFETY = 2.0
 #: Where the monitor's edge cuts a lobe, a share of its weight above this off the monitor
 #: (and at most :data:`~pmdsim.render.results.MAX_OFF`, beyond which the chain masks
 #: a pixel) is measured at the pixel against rules 4 x and 16 x
@@ -336,6 +341,8 @@ class Pilot:
     cols: np.ndarray = field(default=None)
     probes: dict = field(default_factory=dict)
     geometry: dict = field(default_factory=dict)
+    #: the last :meth:`statement`'s own-pilot pixels: (rows, cols, rule probe, finer probe)
+    _local: tuple | None = None
 
     def __post_init__(self):
         h, w = self.shape
@@ -434,14 +441,15 @@ class Pilot:
         local = sums_ok & ~(trusted[bi][:, bj]) | cut
         rr, cc = np.nonzero(local)
         if rr.size:
-            a = self.probe(n_rays, rr, cc)
-            e = self._difference(a, self.probe(FINE_FACTOR * n_rays, rr, cc))
+            a, b = self.probe(n_rays, rr, cc), self.probe(FINE_FACTOR * n_rays, rr, cc)
+            e = self._difference(a, b)
             k = np.nonzero(cut[rr, cc])[0]
             if k.size:  # across the step: the rule 16 x finer too
                 far = self._difference(self.probe(n_rays, rr[k], cc[k]),
                                        self.probe(FINE_FACTOR**2 * n_rays, rr[k], cc[k]))
                 e[:, k] = np.maximum(e[:, k], far)
             stated[:, rr, cc] = SAFETY * e
+        self._local = (rr, cc, a, b) if rr.size else None
         nd, nw = images.shape[:2]
         stated = stated.reshape(nd, nw, h, w)
         bounded = np.where((off <= CUT_MEASURED) | (off > MAX_OFF), off, 0.0)
@@ -456,6 +464,46 @@ class Pilot:
         stated[:, :, ~sums_ok] = np.nan
         return stated, int(rr.size)
 
+    def signed_field(self, n_rays: int, fringes) -> np.ndarray:
+        """(len(fringes), H, W) rad: the rule's signed phase error ``arg(Z_rule / Z_fine)``
+        (rule minus the rule :data:`FINE_FACTOR` x finer) of the fringes ``fringes``
+        (indices into the B fringes), an estimate of the error's pattern, not a bound: the
+        grid pixels' measured values interpolated bilinearly to every pixel (held constant
+        beyond the outermost grid pixels; a grid pixel without a valid value takes its
+        nearest valid neighbour's), and the pixels that took their own pilot in the last
+        :meth:`statement` their own. The rule's error varies smoothly across the camera
+        (the premise of the envelope): its areal statistics take their errors from this
+        pattern (:mod:`pmdsim.run.reconstruction`), where the envelope's magnitudes with
+        any signs between neighbouring nodes would state a gradient and high-frequency
+        content the error does not have. 0 where nothing is known."""
+        from scipy.ndimage import distance_transform_edt
+
+        h, w = self.shape
+        fringes = list(fringes)
+        a, b = self.probe(n_rays), self.probe(FINE_FACTOR * n_rays)
+        gh, gw = self.rows.size, self.cols.size
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.angle(a.z[fringes] * np.conj(b.z[fringes])).reshape(len(fringes), gh, gw)
+        ok = np.isfinite(g) & (np.abs(a.z[fringes]) > 0).reshape(g.shape) \
+            & (np.abs(b.z[fringes]) > 0).reshape(g.shape)
+        out = np.zeros((len(fringes), h, w))
+        wr, wc = _linear_weights(self.rows, h), _linear_weights(self.cols, w)
+        for k in range(len(fringes)):
+            if not ok[k].any():
+                continue
+            gk = g[k]
+            if not ok[k].all():  # the nearest valid grid pixel's value
+                idx = distance_transform_edt(~ok[k], return_distances=False,
+                                             return_indices=True)
+                gk = gk[tuple(idx)]
+            out[k] = wr @ gk @ wc.T
+        if self._local is not None:
+            rr, cc, pa, pb = self._local
+            with np.errstate(divide="ignore", invalid="ignore"):
+                e = np.angle(pa.z[fringes] * np.conj(pb.z[fringes]))
+            out[:, rr, cc] = np.where(np.isfinite(e), e, 0.0)
+        return out
+
     @staticmethod
     def _difference(a: Probe, b: Probe) -> np.ndarray:
         """(B, P) ``|arg(Z_a / Z_b)|``, pi where either is not valid."""
@@ -467,6 +515,21 @@ class Pilot:
         """Rays the pilot traced so far (grid probes), per camera sub-ray."""
         n_px = self.rows.size * self.cols.size
         return sum(p.nodes for p in self.probes.values()) * n_px
+
+
+def _linear_weights(nodes: np.ndarray, n: int) -> np.ndarray:
+    """(n, len(nodes)) weights of linear interpolation from the increasing ``nodes`` to
+    0 .. n - 1 (constant beyond the first and last node)."""
+    x = np.clip(np.arange(n, dtype=np.float64), nodes[0], nodes[-1])
+    wts = np.zeros((n, nodes.size))
+    if nodes.size == 1:
+        wts[:, 0] = 1.0
+        return wts
+    j = np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, nodes.size - 2)
+    t = (x - nodes[j]) / (nodes[j + 1] - nodes[j])
+    wts[np.arange(n), j] = 1.0 - t
+    wts[np.arange(n), j + 1] = t
+    return wts
 
 
 def worst_p95(stated: np.ndarray, mod: np.ndarray, min_modulation: float = 0.05) -> float | None:

@@ -245,6 +245,11 @@ class FringeResult:
         The phase error (rad) where the render states it directly: a non-linear display on
         a nearest-pixel monitor (:mod:`pmdsim.render.control_variate`: the error of the shifted
         images' fringe sum ``sum_k I_k exp(-i delta_k)``), else None.
+    signed_phase_error : (n_directions, H, W) float32 or None
+        The pilot's estimate of the finest width's signed phase error (rad; the rule minus
+        a rule 4 x finer, :meth:`pmdsim.render.pilot.Pilot.signed_field`): the error's
+        pattern across the camera, not a bound (the bound is the statement,
+        :meth:`phase_error`); None without a pilot.
     """
 
     directions: tuple[str, ...]
@@ -258,6 +263,7 @@ class FringeResult:
     sampling: dict | None = None
     convergence: np.ndarray | None = None
     stated_phase_error: np.ndarray | None = None
+    signed_phase_error: np.ndarray | None = None
 
     def image(self, direction: str, width: float, k: int) -> np.ndarray:
         return self.images[self.directions.index(direction), self.widths.index(width), k]

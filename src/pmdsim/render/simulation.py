@@ -560,8 +560,11 @@ class Simulation:
             "finer_rule": fine.describe(), "safety": pl.SAFETY, "local_pixels": n_local,
             "orders_tried": None if tried is None else [t[0] for t in tried],
             "camera_renders": renders})
+        # the finest width's signed error pattern (the areal statistics' errors)
+        wi, nw = int(np.argmin(widths)), len(widths)
+        signed = pilot.signed_field(n, [di * nw + wi for di in range(len(directions))])
         fr = replace(fr, stated_phase_error=stated, sums_err=None, convergence=None,
-                     sampling=info)
+                     sampling=info, signed_phase_error=signed.astype(np.float32))
         if rule.n < pl.MIN_NODES:
             warnings.warn(
                 f"sampling.n_rays = {n}: a rule of {rule.n} nodes is too small to state its "

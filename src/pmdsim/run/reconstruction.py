@@ -62,7 +62,7 @@ def from_chain(cfg, scene, measured, reference_rec=None):
     if rec is None:
         return {}, {"reconstruction": {"error": problem}}
     stats = statistics(cfg, rec, err, reference_rec)
-    moves = None
+    moves = patterns = None
     ex, ey = ((dc.numerical or {}).get("coord_px") for dc in (dx, dy))
     if ex is not None and ey is not None:  # the render's numerical error, carried through
         moved = moved_errors(cfg, scene, rec, u, v, ex, ey, valid)
@@ -70,7 +70,9 @@ def from_chain(cfg, scene, measured, reference_rec=None):
             add_numerical_error(stats, err, moved, rec)
             moves = {a: np.nan_to_num(getattr(moved, a) - getattr(err, a), nan=0.0)
                      for a, _, _ in AREAL_MAPS}
-    avars, stats["areal"] = areal_of(rec, err, moves, reference_rec)
+            patterns = pattern_moves(cfg, scene, rec, err, u, v, valid,
+                                     dx.signed_coord_px, dy.signed_coord_px)
+    avars, stats["areal"] = areal_of(rec, err, moves, reference_rec, patterns)
     return {**variables(rec, err, reference_rec), **avars}, {"reconstruction": stats}
 
 
@@ -82,14 +84,21 @@ AREAL_MAPS = (("height_nm", "height_error", "nm"), ("slope_x_urad", "slope_error
 PSD_COORDS = ("psd_fx", "psd_fy", "psd_f")
 
 
-def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
+def areal_of(rec, err, moves=None, reference_rec=None, patterns=None) -> tuple[dict, dict]:
     """(dataset variables, statistics) of the areal parameters and PSDs of the surface
     errors (:mod:`pmdsim.measure.areal`): per map its Sq ... Sdq, band RMS and radial PSD
-    (with their numerical errors from ``moves``, ``{attribute: (H, W)}``: each node's signed
-    change when the decoded coordinates move by their numerical error; its magnitude plus
-    the solver's floor (``Reconstruction.solver_floor``) is the node's error), its 2-D and radial
-    PSD as variables; the reference's height error too (the chain's floor; exact, no
-    error). The bands are those of the height error's measured region, for every map."""
+    with their numerical errors, its 2-D and radial PSD as variables; the reference's
+    height error too (the chain's floor; exact, no error). The bands are those of the
+    height error's measured region, for every map.
+
+    The errors: Sq, Sa and Sz from ``moves``, ``{attribute: (H, W)}``, each node's signed
+    change when the decoded coordinates move by their numerical error (its magnitude plus
+    the solver's floor, ``Reconstruction.solver_floor``, is the node's error, any signs);
+    Ssk, Sku, Sdq and the PSDs from ``patterns`` (:func:`pattern_moves`: the change for the
+    error's own signed pattern, times its safety factor) where given, with the solver's
+    floor for any signs, else from the nodes' errors for any signs (an error that
+    alternated in sign from node to node: a bound 10^3 to 10^5 times the true change of
+    Sdq and of the high band on Fig. 3)."""
     from ..measure import areal
 
     dx, dy = rec.spacing
@@ -101,16 +110,19 @@ def areal_of(rec, err, moves=None, reference_rec=None) -> tuple[dict, dict]:
     bands = areal.default_bands(valid, dx, dy)
     # each node's error: the magnitude of its change plus the solver's floor
     maps = [(getattr(err, a), name, unit,
-             None if moves is None else np.abs(moves[a]) + rec.solver_floor(a))
+             None if moves is None else np.abs(moves[a]) + rec.solver_floor(a),
+             None if patterns is None else (patterns[a], rec.solver_floor(a)))
             for a, name, unit in AREAL_MAPS]
     if reference_rec is not None and reference_rec[1].height_nm.shape == err.height_nm.shape:
-        maps.append((reference_rec[1].height_nm, "reference_height_error", "nm", None))
-    for z, name, unit, dz in maps:
-        # the bound for any signs of the node errors: the pilot's stated errors are an
-        # envelope (blocks of 8 x 8 pixels), not a smooth signed field, and the signed map's
-        # spectrum missed the repeated reconstruction's by 5x at high frequencies
-        # (tests/test_reconstruct.py)
-        st, p = areal.describe(z, dx, dy, unit, error=dz, bands=bands)
+        maps.append((reference_rec[1].height_nm, "reference_height_error", "nm", None, None))
+    for z, name, unit, dz, pattern in maps:
+        # the envelope's moves are no signed pattern (blocks of 8 x 8 pixels, every
+        # coordinate moved the same way: their spectrum missed the true change's by up to
+        # 6 x): the pattern's change where there is one, else any signs
+        kw = {} if pattern is None else {
+            "error_maps": [pattern[0], -pattern[0]],
+            "floor": np.where(np.isfinite(z), pattern[1], 0.0)}
+        st, p = areal.describe(z, dx, dy, unit, error=dz, bands=bands, **kw)
         stats[f"{name}_{unit}"] = st
         if p is None:
             continue
@@ -148,6 +160,24 @@ def moved_errors(cfg, scene, rec, u, v, ex, ey, valid):
     _, err, _ = reconstruct_coords(cfg, scene, u + np.nan_to_num(ex), v + np.nan_to_num(ey),
                                    valid, start=rec.height_mm, tables=False)
     return err
+
+
+def pattern_moves(cfg, scene, rec, err, u, v, valid, sx, sy) -> dict | None:
+    """``{attribute: (H, W)}``: :data:`~pmdsim.render.pilot.PATTERN_SAFETY` times each
+    node's signed change of the surface errors ``err`` (of the reconstruction ``rec`` of
+    ``u``, ``v``) when the decoded coordinates move by the render's estimated signed error
+    ``sx``, ``sy`` (monitor px, :attr:`pmdsim.measure.chain.DirectionChain.signed_coord_px`):
+    the error's pattern carried through the reconstruction (repeated, as
+    :func:`moved_errors`). None without both patterns, or where the repetition fails."""
+    from ..render.pilot import PATTERN_SAFETY
+
+    if sx is None or sy is None:
+        return None
+    moved = moved_errors(cfg, scene, rec, u, v, sx, sy, valid)
+    if moved is None or moved.height_nm.shape != err.height_nm.shape:
+        return None
+    return {a: PATTERN_SAFETY * np.nan_to_num(getattr(moved, a) - getattr(err, a), nan=0.0)
+            for a, _, _ in AREAL_MAPS}
 
 
 #: The statistics of each surface error that get a numerical error, with what they are of:

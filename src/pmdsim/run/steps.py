@@ -90,6 +90,7 @@ class Member:
     images: np.ndarray | None = None      # (monitor images, H, W)
     off_monitor: np.ndarray | None = None  # (H, W) bundles that partly miss the monitor
     phase_error: dict | None = None  # direction -> (H, W) numerical phase error, finest width
+    signed_phase_error: dict | None = None  # direction -> (H, W) its estimated signed pattern
     sensor: Sensor | None = None
     exposure: float = float("nan")
     ds: xr.Dataset | None = None   # replaced (never changed) by steps
@@ -231,6 +232,8 @@ def dataset(m: Member) -> None:
             "fringe sum decodes to, per direction and width: "
             + describe_error(m.fringes.sampling)})
         m.phase_error = {d: finest_phase_error(m.fringes, d, pe) for d in m.fringes.directions}
+    if m.fringes is not None and m.fringes.signed_phase_error is not None:
+        m.signed_phase_error = dict(zip(m.fringes.directions, m.fringes.signed_phase_error))
     m.ds = ds
     if m.fringes is not None and m.fringes.sums is not None:
         # the dataset holds the sums' real and imaginary parts: free the complex copy
@@ -268,7 +271,8 @@ def compare(m: Member) -> None:
         cfg.monitor.pixel_pitch_mm, cfg.decode, len(m.fringes.shifts),
         slope_geometry=chain.SlopeGeometry(geometry.points, m.sim.scene.camera.viewpoint,
                                            m.sim.scene.monitor),
-        off_monitor=m.off_monitor, phase_error=m.phase_error)
+        off_monitor=m.off_monitor, phase_error=m.phase_error,
+        signed_phase_error=m.signed_phase_error)
     m.decoded = None
     m.stats = chain.statistics(m.measured, cfg.name)
     if m.fringes is not None and m.fringes.sampling:  # the rule rendered (order used)

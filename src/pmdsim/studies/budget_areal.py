@@ -33,12 +33,15 @@ def areal_of(err, spacing_mm, shifted=None, floors: dict | None = None) -> dict:
     out = {}
     for attr, key, unit in MAPS:
         z = np.asarray(getattr(err, attr), np.float64)
-        e = maps = None
+        e = maps = floor = None
         if ne is not None:
             e = np.nan_to_num(np.asarray(ne[attr], np.float64), nan=0.0)
             maps = [np.nan_to_num(np.asarray(getattr(h, attr), np.float64) - z, nan=0.0)
                     for h in shifted or ()] or None
-        out[key] = areal.summary(z, dx, dy, unit, error=e, bands=bands, error_maps=maps)
+            if maps and floors is not None:  # the solvers' floors beside the maps' changes
+                floor = np.where(np.isfinite(z), floors[attr], 0.0)
+        out[key] = areal.summary(z, dx, dy, unit, error=e, bands=bands, error_maps=maps,
+                                 floor=floor)
     return out
 
 
