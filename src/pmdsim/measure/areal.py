@@ -64,10 +64,10 @@ pattern, and its opposite; the budget's with them moved by +-e) ``a`` is the lar
 their spectra: the bound for any error whose spectrum is no larger, whatever its phase (the
 quadrature's errors vary smoothly across pixels); a ``floor`` (node errors of any signs,
 e.g. a solver's tolerance) adds the amplitudes any signs of it give. With node errors ``e``
-alone (magnitudes, no signs) it is the bound for any signs: with ``e'`` = ``e`` plus the largest shift of the
-weighted mean, ``a^2 = min(n T^2, N sum (w e')^2)`` for n frequencies, ``T = sum w e'``;
-never more than the window-weighted RMS of ``e'`` for a band, but a flat floor across the
-spectrum (an error that alternated sign from node to node would put its power at the
+alone (magnitudes, no signs) it is the bound for any signs: with ``e'`` = ``e`` plus the
+largest shift of the weighted mean, ``a^2 = min(n T^2, N sum (w e')^2)`` for n
+frequencies, ``T = sum w e'``; never more than the window-weighted RMS of ``e'`` for a
+band, but a flat floor across the spectrum (an error that alternated sign from node to node would put its power at the
 highest frequencies). Where a PSD is below its error the simulation does not resolve the
 map's spectrum there.
 """

@@ -68,8 +68,7 @@ def from_chain(cfg, scene, measured, reference_rec=None):
         moved = moved_errors(cfg, scene, rec, u, v, ex, ey, valid)
         if moved is not None and moved.height_nm.shape == err.height_nm.shape:
             add_numerical_error(stats, err, moved, rec)
-            moves = {a: np.nan_to_num(getattr(moved, a) - getattr(err, a), nan=0.0)
-                     for a, _, _ in AREAL_MAPS}
+            moves = _changes(moved, err)
             patterns = pattern_moves(cfg, scene, rec, err, u, v, valid,
                                      dx.signed_coord_px, dy.signed_coord_px)
     avars, stats["areal"] = areal_of(rec, err, moves, reference_rec, patterns)
@@ -176,7 +175,14 @@ def pattern_moves(cfg, scene, rec, err, u, v, valid, sx, sy) -> dict | None:
     moved = moved_errors(cfg, scene, rec, u, v, sx, sy, valid)
     if moved is None or moved.height_nm.shape != err.height_nm.shape:
         return None
-    return {a: PATTERN_SAFETY * np.nan_to_num(getattr(moved, a) - getattr(err, a), nan=0.0)
+    return _changes(moved, err, PATTERN_SAFETY)
+
+
+def _changes(moved, err, scale: float = 1.0) -> dict:
+    """``{attribute: (H, W)}``: ``scale`` times each node's signed change from the surface
+    errors ``err`` to ``moved`` for every map of :data:`AREAL_MAPS` (0 where either is
+    undefined)."""
+    return {a: scale * np.nan_to_num(getattr(moved, a) - getattr(err, a), nan=0.0)
             for a, _, _ in AREAL_MAPS}
 
 
