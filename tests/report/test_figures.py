@@ -447,3 +447,30 @@ def test_setup_footprint_marks_p_at_the_specular_point(tmp_path, monkeypatch, mo
     u, v, _, _, _ = sim.transport([pixel[0]], [pixel[1]], directions=False)
     first = np.hypot(u[0, 0] - geo.specular_u[pixel], v[0, 0] - geo.specular_v[pixel])
     assert (first > 0.05) if mode == "rule" else (first < 1e-9)  # ray 0 is P only there
+
+
+def test_log_tick_labels_are_powers_of_ten_in_plain_text():
+    """The PSD figures' log axes label 10^k as "10" and a superscript k (no mathtext), read
+    back to the value they stand for; other values as %g; nothing at 0 or below."""
+    from matplotlib.ticker import LogLocator
+
+    from pmdsim.report.psd import log_ticks, power_label
+
+    digits = str.maketrans("⁻⁰¹²³⁴⁵⁶⁷⁸⁹", "-0123456789")
+    for k in range(-15, 16):
+        label = power_label(10.0 ** k)
+        assert label.startswith("10") and "$" not in label
+        assert float("1e" + label[2:].translate(digits)) == pytest.approx(10.0 ** k, rel=1e-12)
+    assert power_label(2e-3) == "0.002" and power_label(50.0) == "50"
+    assert power_label(0.0) == "" and power_label(-1.0) == ""
+    fig = Figure(figsize=(3.0, 3.0))
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.2, 0.2, 0.7, 0.7))
+    ax.set_yscale("log")
+    ax.set_ylim(1e-7, 1e5)
+    ax.yaxis.set_major_locator(LogLocator(numticks=20))
+    log_ticks(ax.yaxis)
+    fig.canvas.draw()
+    shown = [t.get_text() for t in ax.yaxis.get_ticklabels() if t.get_text()]
+    assert "10⁻⁷" in shown and "10⁵" in shown and "10⁰" in shown
+    assert not ax.yaxis.get_minor_ticks()

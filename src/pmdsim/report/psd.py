@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 from matplotlib.colors import LogNorm
-from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+from matplotlib.ticker import FuncFormatter, LogLocator, NullLocator
 
 from .scene import _axes_at, _fixed_figure
 
@@ -62,11 +62,34 @@ def shade_bands(ax, bands: dict, f_lo: float, f_hi: float) -> None:
                 ha="center", va="top", fontsize=8, color="0.35")
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
+
+
+def power_label(v, _pos=None) -> str:
+    """A log axis's tick label: ``10`` with a superscript exponent at a power of ten (plain
+    text: matplotlib's mathtext, its default, took a third of the PSD figure's drawing),
+    else ``v`` as ``%g``."""
+    if not v > 0:
+        return ""
+    k = round(math.log10(v))
+    if abs(v / 10.0**k - 1) < 1e-9:
+        return "10" + str(k).translate(_SUPERSCRIPT)
+    return f"{v:g}"
+
+
+def log_ticks(axis) -> None:
+    """A log axis labelled by :func:`power_label`, without minor ticks (each is a matplotlib
+    artist of its own; the grid and the labels carry the scale)."""
+    axis.set_major_formatter(FuncFormatter(power_label))
+    axis.set_minor_locator(NullLocator())
+
+
 def psd_axes(ax, f, unit: str) -> None:
     ax.set_xscale("log")
     ax.set_yscale("log")
+    log_ticks(ax.yaxis)
     ax.set_xlabel("spatial frequency f (1/mm)")
-    ax.set_ylabel(f"1-D radial PSD ({unit}$^2$ mm)")
+    ax.set_ylabel(f"1-D radial PSD ({unit}\u00b2 mm)")
     ax.grid(True, which="major", alpha=0.3)
     ax.set_xlim(f[0] * 0.9, f[-1] * 1.1)
     top = ax.secondary_xaxis("top", functions=(lambda x: 1 / np.maximum(x, 1e-300),
@@ -75,7 +98,7 @@ def psd_axes(ax, f, unit: str) -> None:
     for a in (ax.xaxis, top.xaxis):  # 1, 2, 5 x 10^k labelled: a span of under two decades
         a.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
         a.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-        a.set_minor_formatter(NullFormatter())
+        a.set_minor_locator(NullLocator())
     top.tick_params(labelsize=7)
 
 
@@ -186,7 +209,8 @@ def plot_surface_psd(ds, name: str = "", description: str = ""):
     ax_2.set_title("height error: 2-D PSD, |f| < 3 x the radius of 99.9 % of its power\n"
                    "(ridges: directional structure; streaks normal to the measured\n"
                    "region's edges: window leakage)", fontsize=8.5)
-    fig.colorbar(im, cax=cax).set_label("2-D PSD (nm$^2$ mm$^2$)", fontsize=8)
+    fig.colorbar(im, cax=cax).set_label("2-D PSD (nm\u00b2 mm\u00b2)", fontsize=8)
+    log_ticks(cax.yaxis)
     fig.suptitle(f"{name}: power spectral density of the reconstructed minus true surface; "
                  "bands shaded, band-limited RMS in the legends; dotted: numerical error "
                  "(the spectrum is resolved above it)"
