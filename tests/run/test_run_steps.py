@@ -185,3 +185,49 @@ def test_a_fork_inside_paused_never_copies_a_held_dask_lock(tmp_path, monkeypatc
         child.kill()
     writer.close()
     assert not hung and child.exitcode == 0
+
+
+def test_the_reconstructions_repetitions_in_two_threads_give_the_same_bytes(tmp_path,
+                                                                            monkeypatch):
+    """The reconstruct step repeats the reconstruction twice for its stated errors (moved
+    coordinates, and the error's signed pattern), the second in a thread where Numba takes
+    two threads: the statistics and the PSD errors are the bytes of the same run with both
+    repetitions in turn. A reduced turned sphere (64 x 48 px, dx != dy grid of a rotated
+    part, the Gauss rule's stated errors) so that every error is non-zero."""
+    from pathlib import Path
+
+    from pmdsim.config import load_config
+    from pmdsim.run import reconstruction, run_simulation
+    from pmdsim.store.schema import load_run
+
+    d = load_config(Path(__file__).parents[2] / "examples" / "turned_sphere.toml").model_dump()
+    d["camera"].update(resolution=(64, 48), pixel_pitch_mm=0.03)
+    d["sampling"].update(n_rays=16, mode="rule", target_error_mrad=None)
+    d["variants"] = [{"name": "kinematic", "brdf": d["variants"][1]["brdf"]}]
+    d["reconstruct"]["spacing_mm"] = 1.0
+    cfg = parse_config(d)
+    calls = []
+    real = reconstruction.pattern_moves
+
+    def counted(*a, **k):
+        calls.append(threading.current_thread().name)
+        return real(*a, **k)
+
+    monkeypatch.setattr(reconstruction, "pattern_moves", counted)
+    out = {}
+    for threads in (True, False):  # as the run decides (two threads here), then in turn
+        if not threads:
+            monkeypatch.setattr(reconstruction, "numba_takes_two_threads", lambda: False)
+        run_simulation(cfg, tmp_path / str(threads), diagnostics=False)
+        if threads and not calls[0].startswith("pmdsim-pattern"):
+            pytest.skip("Numba's threading layer takes parallel kernels from one thread only")
+        ds = load_run(tmp_path / str(threads), variant="kinematic")
+        out[threads] = ((tmp_path / str(threads) / "kinematic" / "statistics.json").read_bytes(),
+                        {v: ds[v].values for v in ds.data_vars if v.endswith("_err")})
+    assert calls[0].startswith("pmdsim-pattern") and calls[1] == threading.main_thread().name
+    rec = json.loads(out[True][0])["reconstruction"]
+    assert rec["height_error_nm"]["rms_err"] > 0 and rec["areal"]["height_error_nm"]["sdq_err"] > 0
+    assert out[True][0] == out[False][0]
+    assert out[True][1].keys() == out[False][1].keys() and "height_error_psd_err" in out[True][1]
+    for v, a in out[True][1].items():
+        assert np.array_equal(a, out[False][1][v], equal_nan=True), v
