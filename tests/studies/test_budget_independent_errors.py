@@ -2,7 +2,8 @@
 display with a gamma and on a nearest-pixel monitor, each surface row states its own
 non-zero, finite numerical error, and that error bounds the row's actual change to the
 same budget at a target ten times tighter (the independent reference: a render of many
-more nodes), in every statistic (phase, slope, height)."""
+more nodes), in every statistic (phase, slope, height, and each map's areal parameters and
+band-limited RMS)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ LOOSE, TIGHT = 20.0, 2.0
 ROW_KEYS = ("rms_mrad", "p95_mrad", "rms_urad", "p95_urad")
 HEIGHT_KEYS = ("slope_rms_x_urad", "slope_rms_y_urad", "slope_p95_x_urad", "slope_p95_y_urad",
                "height_rms_nm", "height_p95_nm", "height_pv_nm")
+AREAL_KEYS = ("sq", "sa", "sz", "ssk", "sku", "sdq")
 MONITORS = {"gamma": {"gamma": 2.2, "pixel_model": "continuous"},
             "nearest": {"pixel_model": "nearest"}}
 
@@ -83,9 +85,19 @@ def test_stated_errors_bound_the_change_to_a_tighter_target(pair):
         for k in HEIGHT_KEYS:
             assert abs(a[k] - b[k]) <= a[f"{k}_err"] + b[f"{k}_err"], (kind, name, k)
             checked += 1
+        # the areal parameters and band RMS of each map (pmdsim.studies.budget_areal)
+        for m in ("height_error_nm", "slope_error_x_urad", "slope_error_y_urad"):
+            sa, sb = a["areal"][m], b["areal"][m]
+            pairs = [(k, sa[k], sa[f"{k}_err"], sb[k], sb[f"{k}_err"]) for k in AREAL_KEYS]
+            pa, pb = sa["psd"], sb["psd"]
+            pairs += [(f"band_{k}", pa["band_rms"][k], pa["band_rms_err"][k], pb["band_rms"][k],
+                       pb["band_rms_err"][k]) for k in pa["band_rms"]]
+            for k, va, ea, vb, eb in pairs:
+                assert abs(va - vb) <= ea + eb, (kind, name, m, k, va, ea, vb, eb)
+                checked += 1
     # the tight reference is tighter where the target sets the order (the ideal system's
     # row; the full system renders at that order and states what it has there)
     worst = [max(_row(b.rows, "numerical_surface_ideal", d)["p95_mrad"] for d in "xy")
              for b in (tight, loose)]
     assert worst[0] < 0.5 * worst[1], worst
-    assert checked == 2 * (2 * len(ROW_KEYS) + len(HEIGHT_KEYS))
+    assert checked == 2 * (2 * len(ROW_KEYS) + len(HEIGHT_KEYS) + 3 * (len(AREAL_KEYS) + 3))

@@ -17,11 +17,19 @@ def areal_of(err, spacing_mm, shifted=None, floors: dict | None = None) -> dict:
     """``{statistics key: areal summary}`` (:func:`pmdsim.measure.areal.summary`) of the
     maps of a :class:`~pmdsim.studies.height_rows.HeightError` on a grid of ``spacing_mm`` (dx,
     dy). ``shifted``: the row's HeightErrors with the decoded coordinates moved by +-their
-    numerical error: the nodes' errors (:func:`pmdsim.studies.budget_error.node_errors`)
-    and, for the PSDs, the signed changes themselves; ``floors``: the reconstruction
-    solvers' floors (:func:`pmdsim.studies.budget_error.solver_floors`), in every node's
-    error (alone where nothing is ``shifted``: a mirror's exact render). The bands are
-    those of the height error's measured region."""
+    numerical error: the nodes' errors (:func:`pmdsim.studies.budget_error.node_errors`);
+    ``floors``: the reconstruction solvers' floors
+    (:func:`pmdsim.studies.budget_error.solver_floors`), in every node's error (alone where
+    nothing is ``shifted``: a mirror's exact render). The bands are those of the height
+    error's measured region.
+
+    Every statistic's error is for node errors of any signs, Ssk, Sku, Sdq and the PSDs
+    included: the shifted maps move every coordinate the same way, which is no signed
+    pattern of the error. Their changes as the PSDs' and Sdq's error maps (as until
+    2026-12-07) missed the change of a full-system row to a target 10 x tighter by up to
+    2.1 x (Sdq of the slope error dz/dy on a nearest-pixel monitor, whose staircase part
+    is a randomised rule: an error without a smooth pattern) and 1.2 x (the form band of
+    dz/dx through a display gamma; tests/studies/test_budget_independent_errors.py)."""
     from .budget_error import node_errors
 
     dx, dy = (float(s) for s in spacing_mm)
@@ -33,15 +41,8 @@ def areal_of(err, spacing_mm, shifted=None, floors: dict | None = None) -> dict:
     out = {}
     for attr, key, unit in MAPS:
         z = np.asarray(getattr(err, attr), np.float64)
-        e = maps = floor = None
-        if ne is not None:
-            e = np.nan_to_num(np.asarray(ne[attr], np.float64), nan=0.0)
-            maps = [np.nan_to_num(np.asarray(getattr(h, attr), np.float64) - z, nan=0.0)
-                    for h in shifted or ()] or None
-            if maps and floors is not None:  # the solvers' floors beside the maps' changes
-                floor = np.where(np.isfinite(z), floors[attr], 0.0)
-        out[key] = areal.summary(z, dx, dy, unit, error=e, bands=bands, error_maps=maps,
-                                 floor=floor)
+        e = None if ne is None else np.nan_to_num(np.asarray(ne[attr], np.float64), nan=0.0)
+        out[key] = areal.summary(z, dx, dy, unit, error=e, bands=bands)
     return out
 
 
