@@ -29,8 +29,9 @@ class SamplingConfig(_Model):
     ``"stratified"`` (the earlier default) is P plus a Fibonacci lattice, the same for
     every pixel (a structured error, not estimated); ``"random"`` rotates it per pixel by
     a seeded Cranley-Patterson shift (noise). ``target_error_mrad``: the cheapest rule
-    ``n_rays 2^k`` whose stated phase error (P95 over pixels, each fringe) is below it
-    (picked by the pilot, then the camera rendered once). Neither ``n_rays`` nor
+    ``n_rays 2^k`` (or 3/2 of one that missed by at most 4 x) whose stated phase error
+    (P95 over pixels, each fringe) is below it (picked by the pilot, then the camera
+    rendered once; :func:`pmdsim.render.pilot.choose_order`). Neither ``n_rays`` nor
     ``target_error_mrad`` given (mode ``rule``): the target :data:`DEFAULT_TARGET_MRAD`
     from :data:`DEFAULT_TARGET_START` nodes; ``n_rays`` alone renders exactly that rule.
     ``max_rays`` caps a target only.
@@ -43,12 +44,14 @@ class SamplingConfig(_Model):
     seed: Annotated[Int, Field(ge=0, lt=2**63)] = 0
     replicates: Annotated[Int, Field(ge=2, le=1024)] = 8
     error_estimate: bool = Field(
-        True, description="render the two embedded rules (mode 'rule') to state every sum's "
-        "numerical error; false saves those passes (about 81 % more rays, 58 % on large "
-        "cameras) and states none")
+        True, description="state the numerical error (mode 'rule'): by the pilot's rules on "
+        "1/64 of the pixels where it applies (fringes on a smooth integrand), else by "
+        "rendering the two embedded rules (about 81 % more rays, 58 % on large cameras); "
+        "false states none")
     target_error_mrad: Annotated[Float, Field(gt=0)] | None = Field(
-        None, description="the cheapest rule n_rays 2^k whose stated phase error (P95 over "
-        "pixels, every fringe) is below this, picked by a pilot on a sparse grid of pixels; "
+        None, description="the cheapest rule n_rays 2^k (or 3/2 of one that missed by at "
+        "most 4 x) whose stated phase error (P95 over pixels, every fringe) is below this, "
+        "picked by a pilot on a sparse grid of pixels; "
         "None: render n_rays as given (neither given in mode 'rule': 0.1 from 16 nodes)")
     max_rays: Annotated[Int, Field(ge=1, le=MAX_RAYS)] = 65536
     estimator: Literal["paper", "weighted_mean", "radiometric"] = Field(
