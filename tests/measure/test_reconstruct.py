@@ -401,7 +401,7 @@ def test_run_states_the_reconstructions_numerical_error(tmp_path):
     cfg = load_config(Path(__file__).parents[2] / "examples" / "turned_sphere.toml")
     d = cfg.model_dump()
     d["camera"].update(resolution=(64, 48), pixel_pitch_mm=0.03)
-    d["sampling"].update(n_rays=16, mode="rule")
+    d["sampling"].update(n_rays=16, mode="rule")  # the pilot starts at 16 nodes; the example's target picks the order
     d["variants"] = [{"name": "kinematic", "brdf": d["variants"][1]["brdf"]}]
     d["reconstruct"]["spacing_mm"] = 1.0
     out = tmp_path / "run"
