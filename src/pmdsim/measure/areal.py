@@ -175,12 +175,12 @@ def areal_parameters(z, dx: float, dy: float, mask=None, error=None, error_maps=
     neighbouring valid nodes, Ssk/Sku NaN for a constant map."""
     z, v = _valid(z, mask)
     maps = _error_maps(error_maps, v)
-    if error is None and maps:
-        error = np.fmax.reduce([np.abs(m) for m in maps])
-        if floor is not None:
-            error = error + np.abs(np.asarray(floor, np.float64))
-    e = _node_error(error, v)
     fl = _node_error(floor, v) if maps and floor is not None else None
+    # each node's largest change under the maps, plus the floor's: the node errors where
+    # ``error`` is not given, and Ssk's and Sku's (any signs) either way
+    map_err = (np.fmax.reduce([np.abs(m) for m in maps]) + (0.0 if fl is None else fl)
+               if maps else None)
+    e = _node_error(map_err if error is None else error, v)
     n = int(np.count_nonzero(v))
     nan = float("nan")
     out = {k: nan for k in AREAL}
@@ -218,13 +218,9 @@ def areal_parameters(z, dx: float, dy: float, mask=None, error=None, error_maps=
         dm4 = 4 * (d3 - m3) / n
         g_sk = dm3 / m2**1.5 - 1.5 * m3 / m2**2.5 * dm2
         g_ku = dm4 / m2**2 - 2 * m4 / m2**3 * dm2
-        if maps:  # any signs of the maps' largest change at each node, and the floor's
-            mv = np.fmax.reduce([np.abs(m[v]) for m in maps]) + (0.0 if fl is None else fl[v])
-            out["ssk_err"] = float(np.sum(np.abs(g_sk) * mv))
-            out["sku_err"] = float(np.sum(np.abs(g_ku) * mv))
-        else:
-            out["ssk_err"] = float(np.sum(np.abs(g_sk) * ev))
-            out["sku_err"] = float(np.sum(np.abs(g_ku) * ev))
+        ek = ev if map_err is None else map_err[v]  # any signs of these node errors
+        out["ssk_err"] = float(np.sum(np.abs(g_sk) * ek))
+        out["sku_err"] = float(np.sum(np.abs(g_ku) * ek))
     if gx.size or gy.size:
         if maps:  # the change of each difference (and the floor's, any signs)
             ex = np.fmax.reduce([np.abs(np.diff(m, axis=1))[okx] for m in maps]) / dx
