@@ -400,6 +400,45 @@ def test_compiled_floors_match_numpy():
     np.testing.assert_allclose(ed[0, 0].ravel(), ref_edge[:24], rtol=1e-12)
 
 
+def test_statement_floors_in_place_match_numpy():
+    """The statement's in-place finish (compiled, per pixel) against the whole-array
+    steps it replaces: stated + floor + roundoff + edge, pi where the rule is too small to
+    state an error (finite pixels only), at most pi, NaN where the render is not valid; on
+    unequal shifts, a NaN image value, zero / NaN weights, stated values above pi."""
+    from pmdsim.kernels.fringe_finish import add_phase_floors
+
+    rng = np.random.default_rng(37)
+    deltas = np.array([0.2, 1.1, 3.0, 4.4])
+    n = 4000
+    imgs = np.array([10.0 ** rng.uniform(-6, 2, n) * rng.uniform(0.2, 1.0, n)
+                     for _ in deltas]).astype(np.float32)
+    imgs[1, 11] = np.nan
+    weight = rng.uniform(0, 0.2, n)
+    weight[::5] = 0.0
+    weight[13] = np.nan
+    ok = rng.uniform(size=n) > 0.1
+    ok[11] = True  # a valid render whose image is NaN: NaN, not pi
+    stated0 = 10.0 ** rng.uniform(-9, 1, n)
+    stated0[17] = np.inf
+    ref_floor, ref_edge = _naive_floors(imgs, deltas, weight, 0.7)
+    for unknown in (False, True):
+        want = stated0 + ref_floor
+        want += 1e-9
+        want += ref_edge
+        if unknown:
+            want[np.isfinite(want)] = math.pi
+        want = np.minimum(want, math.pi)
+        want[~ok] = np.nan
+        got = stated0.copy()
+        add_phase_floors(imgs, np.cos(deltas), np.sin(deltas), weight, 0.7, pl.F32_SIGMAS,
+                         1e-9, unknown, ok, got)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=0)
+        assert np.isnan(got[11])
+        assert (got[ok & np.isfinite(got)] <= math.pi).all()
+        assert np.count_nonzero(got[ok] == math.pi) > (0 if not unknown else n // 2)
+
+
 # ------------------------------------------------------------------ the run's statistics
 def _run_statistics(n, tmp):
     from pmdsim.run import run_simulation

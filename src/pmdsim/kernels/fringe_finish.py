@@ -230,6 +230,29 @@ def half_width_rows(m2_re, m2_im, half, p0, p1, out):
 F32_SPACING = np.array([2.0**-149] + [2.0 ** (e - 150) for e in range(1, 255)] + [math.nan])
 
 
+@jit(fastmath=_FINISH_FLAGS)
+def _floor_edge(imgs, bits, p, cos_d, sin_d, w, lmax, sigmas):
+    """``(floor, edge)`` of pixel ``p`` (:func:`phase_floor_rows`)."""
+    k = imgs.shape[0]
+    zr = 0.0
+    zi = 0.0
+    for j in range(k):
+        v = np.float64(imgs[j, p])
+        zr += v * cos_d[j]
+        zi -= v * sin_d[j]
+    a2 = zr * zr + zi * zi
+    a = math.sqrt(a2)
+    var = 0.0
+    for j in range(k):
+        u = F32_SPACING[(bits[j, p] >> 23) & 0xFF]
+        if a2 > 0.0:
+            t = (zi * cos_d[j] + zr * sin_d[j]) / a
+        else:
+            t = sin_d[j]
+        var += (u * u / 12.0) * t * t
+    return sigmas * math.sqrt(var) / a, (k * w * lmax / a if w > 0.0 else 0.0)
+
+
 @parallel_jit(fastmath=_FINISH_FLAGS)
 def phase_floor_rows(imgs, cos_d, sin_d, weight, lmax, sigmas, floor, edge):
     """The phase floors of one fringe's K shifted float32 images ``imgs`` (K, P), in
@@ -244,25 +267,30 @@ def phase_floor_rows(imgs, cos_d, sin_d, weight, lmax, sigmas, floor, edge):
     weight at luminance up to ``lmax`` can give, ``K weight lmax / |Z|`` (0 where
     ``weight`` is not > 0). NaN images give NaN.
     """
-    k, n = imgs.shape
+    n = imgs.shape[1]
     bits = imgs.view(np.uint32)
     for p in prange(n):
-        zr = 0.0
-        zi = 0.0
-        for j in range(k):
-            v = np.float64(imgs[j, p])
-            zr += v * cos_d[j]
-            zi -= v * sin_d[j]
-        a2 = zr * zr + zi * zi
-        a = math.sqrt(a2)
-        var = 0.0
-        for j in range(k):
-            u = F32_SPACING[(bits[j, p] >> 23) & 0xFF]
-            if a2 > 0.0:
-                t = (zi * cos_d[j] + zr * sin_d[j]) / a
-            else:
-                t = sin_d[j]
-            var += (u * u / 12.0) * t * t
-        floor[p] = sigmas * math.sqrt(var) / a
-        w = weight[p]
-        edge[p] = k * w * lmax / a if w > 0.0 else 0.0
+        floor[p], edge[p] = _floor_edge(imgs, bits, p, cos_d, sin_d, weight[p], lmax, sigmas)
+
+
+@parallel_jit(fastmath={"nsz"})
+def add_phase_floors(imgs, cos_d, sin_d, weight, lmax, sigmas, roundoff, unknown, ok, stated):
+    """Finish a stated phase error (P,) in place with the floors of its fringe's images
+    (K, P) (:func:`phase_floor_rows`), in parallel over pixels, with no (P,) temporaries:
+    ``stated + floor + roundoff + edge`` (in that order), pi where ``unknown`` and finite,
+    at most pi, NaN where not ``ok``: the same values as those steps on whole arrays."""
+    n = imgs.shape[1]
+    bits = imgs.view(np.uint32)
+    for p in prange(n):
+        if not ok[p]:
+            stated[p] = math.nan
+            continue
+        f, e = _floor_edge(imgs, bits, p, cos_d, sin_d, weight[p], lmax, sigmas)
+        v = stated[p] + f
+        v = v + roundoff
+        v = v + e
+        if unknown and math.isfinite(v):
+            v = math.pi
+        if v > math.pi:
+            v = math.pi
+        stated[p] = v

@@ -50,7 +50,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..kernels import bundle as kb
-from ..kernels.fringe_finish import phase_floor_rows
+from ..kernels.fringe_finish import add_phase_floors, phase_floor_rows
 from .results import MAX_OFF, ROUNDOFF_PHASE, in_blocks
 from .geometry_rows import reduce_subrays, scene_geometry_rows, vision_geometry_rows
 
@@ -450,19 +450,19 @@ class Pilot:
                 e[:, k] = np.maximum(e[:, k], far)
             stated[:, rr, cc] = SAFETY * e
         self._local = (rr, cc, a, b) if rr.size else None
-        nd, nw = images.shape[:2]
-        stated = stated.reshape(nd, nw, h, w)
+        nd, nw, k = images.shape[:3]
+        stated = stated.reshape(nd, nw, h * w)
         bounded = np.where((off <= CUT_MEASURED) | (off > MAX_OFF), off, 0.0)
-        floor, edge = image_floors(images, deltas, _edge_weight(f_total, bounded),
-                                   self.layout.lmax)
-        stated += floor  # in place, in the order of stated + floor + ROUNDOFF_PHASE + edge
-        stated += ROUNDOFF_PHASE
-        stated += edge
-        if self.probe(n_rays).nodes < MIN_NODES:
-            stated[np.isfinite(stated)] = math.pi
-        np.minimum(stated, math.pi, out=stated)
-        stated[:, :, ~sums_ok] = np.nan
-        return stated, int(rr.size)
+        weight = _edge_weight(f_total, bounded).reshape(-1)
+        d = np.asarray(deltas, np.float64)
+        unknown = self.probe(n_rays).nodes < MIN_NODES
+        ok = np.ascontiguousarray(sums_ok, np.bool_).reshape(-1)
+        for di in range(nd):  # stated + floor + ROUNDOFF_PHASE + edge, pi at most, in place
+            for wi in range(nw):
+                add_phase_floors(np.ascontiguousarray(images[di, wi], np.float32).reshape(k, -1),
+                                 np.cos(d), np.sin(d), weight, float(self.layout.lmax),
+                                 F32_SIGMAS, ROUNDOFF_PHASE, unknown, ok, stated[di, wi])
+        return stated.reshape(nd, nw, h, w), int(rr.size)
 
     def signed_field(self, n_rays: int, fringes) -> np.ndarray:
         """(len(fringes), H, W) rad: the rule's signed phase error ``arg(Z_rule / Z_fine)``
