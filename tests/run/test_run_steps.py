@@ -231,3 +231,78 @@ def test_the_reconstructions_repetitions_in_two_threads_give_the_same_bytes(tmp_
     assert out[True][1].keys() == out[False][1].keys() and "height_error_psd_err" in out[True][1]
     for v, a in out[True][1].items():
         assert np.array_equal(a, out[False][1][v], equal_nan=True), v
+
+
+def _fig3_small(**sampling):
+    """Fig. 3 on a 96 x 64 camera (the same field of view), its target's pilot, no
+    figures or images."""
+    import tomllib
+    from pathlib import Path
+
+    d = tomllib.loads((Path(__file__).parents[2] / "examples" / "paper_fig3.toml").read_text())
+    d["camera"].update(resolution=[96, 64], pixel_pitch_mm=0.0048 * 1280 / 96)
+    d["sampling"].update(sampling)
+    d["output"] = {"figures": False, "write_images": False}
+    return parse_config(d)
+
+
+def test_the_pilot_made_beside_the_reference_gives_the_same_bytes(tmp_path, monkeypatch):
+    """The pilot's choice of the rule runs in a thread from the run's start (beside the
+    vision rays and the specular reference) where Numba takes two threads: statistics.json
+    (the rule, every ray traced, the stated errors) and the stated phase errors are the
+    bytes of the run whose render step makes the choice itself."""
+    from pmdsim.render import Simulation
+    from pmdsim.run import run_simulation, simulate
+    from pmdsim.store.schema import load_run
+
+    cfg = _fig3_small(target_error_mrad=0.1, n_rays=16)
+    calls = []
+    real = Simulation.choose_rule
+
+    def counted(self, *a, **k):
+        calls.append(threading.current_thread().name)
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(Simulation, "choose_rule", counted)
+    out = {}
+    for early in (True, False):
+        if not early:
+            monkeypatch.setattr(simulate, "start_pilot", lambda cfg, sim: None)
+        run_simulation(cfg, tmp_path / str(early), diagnostics=False)
+        if early and not calls[0].startswith("pmdsim-pilot"):
+            pytest.skip("Numba's threading layer takes parallel kernels from one thread only")
+        ds = load_run(tmp_path / str(early))
+        out[early] = ((tmp_path / str(early) / "statistics.json").read_bytes(),
+                      ds["fringe_phase_error"].values if "fringe_phase_error" in ds else None)
+    assert calls[0].startswith("pmdsim-pilot") and calls[1] == threading.main_thread().name
+    stats = json.loads(out[True][0])
+    assert stats["sampling"]["pilot"]["orders_tried"][0] == 16 and stats["sampling"]["n_rays"] > 16
+    assert stats["sampling"]["rays_traced"] > 0
+    assert out[True][0] == out[False][0]
+    assert out[True][1] is not None and np.array_equal(out[True][1], out[False][1],
+                                                       equal_nan=True)
+
+
+def test_a_run_that_fails_before_its_render_stops_its_pilot(tmp_path, monkeypatch):
+    """A run whose vision rays fail after the pilot started: the error is the run's, no
+    folder is left, and the pilot's thread is stopped (it ends before run_simulation
+    returns); a pilot cancelled before its first probe raises Cancelled."""
+    from pmdsim.render import Simulation
+    from pmdsim.render.pilot import Cancelled
+    from pmdsim.run import run_simulation
+
+    cfg = _fig3_small(target_error_mrad=0.1, n_rays=16)
+
+    def broken(self):
+        raise RuntimeError("geometry failed")
+
+    monkeypatch.setattr(Simulation, "geometry", broken)
+    with pytest.raises(RuntimeError, match="geometry failed"):
+        run_simulation(cfg, tmp_path / "run", diagnostics=False)
+    assert not (tmp_path / "run").exists()
+    assert not [t for t in threading.enumerate() if t.name.startswith("pmdsim-pilot")]
+    stop = threading.Event()
+    stop.set()
+    fr = cfg.patterns.fringes
+    with pytest.raises(Cancelled):
+        Simulation.from_config(cfg).choose_rule(fr.widths_px, fr.directions, fr.shifts, stop)

@@ -102,6 +102,25 @@ def parallel_jit(fn=None, **overrides):
     return numba.njit(**options)(fn)
 
 
+@parallel_jit
+def _layer_probe(out):
+    for i in numba.prange(out.shape[0]):
+        out[i] = i
+
+
+def threading_layer() -> str:
+    """Numba's threading layer (``"omp"``, ``"tbb"`` or ``"workqueue"``), chosen now by a
+    tiny cached parallel kernel where no parallel kernel has run yet (Numba chooses it at
+    the first launch)."""
+    try:
+        return numba.threading_layer()
+    except ValueError:
+        import numpy as np
+
+        _layer_probe(np.empty(2))
+        return numba.threading_layer()
+
+
 @intrinsic
 def borrow(typingctx, arr):
     """A view of ``arr`` without a reference count (no meminfo), for per-pixel loops.

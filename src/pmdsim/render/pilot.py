@@ -79,6 +79,10 @@ MIN_NODES = 16
 F32_EPS = 2.0**-24
 
 
+class Cancelled(Exception):
+    """A pilot stopped from outside (:attr:`Pilot.cancel`) before its next probe."""
+
+
 def grid_stride(shape) -> int:
     """The grid step of a camera ``shape`` (H, W): :data:`GRID_STRIDE`, halved until the
     camera holds at least 3 blocks each way."""
@@ -343,6 +347,8 @@ class Pilot:
     geometry: dict = field(default_factory=dict)
     #: the last :meth:`statement`'s own-pilot pixels: (rows, cols, rule probe, finer probe)
     _local: tuple | None = None
+    #: a :class:`threading.Event`: once set, the next probe raises :class:`Cancelled`
+    cancel: object = None
 
     def __post_init__(self):
         h, w = self.shape
@@ -361,6 +367,8 @@ class Pilot:
         grid = rows is None
         if grid and n_rays in self.probes:
             return self.probes[n_rays]
+        if self.cancel is not None and self.cancel.is_set():
+            raise Cancelled("the pilot was cancelled")
         if grid:
             rr, cc = np.meshgrid(self.rows, self.cols, indexing="ij")
             rows, cols = rr.ravel(), cc.ravel()

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import threading
 import uuid
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -73,6 +73,20 @@ class TargetNotMet(UserWarning):
 
 class RuleTooSmall(UserWarning):
     """A rule too small to state its numerical error (its phase is stated as unknown)."""
+
+
+@dataclass(frozen=True, eq=False)
+class RuleChoice:
+    """:meth:`Simulation.choose_rule`'s result: for ``scene`` and the fringes ``key``
+    (widths, directions, shifts), the :class:`~pmdsim.render.pilot.Pilot` with its grid
+    probes, the rule's ``n_rays`` and the orders ``tried`` [(n_rays, grid P95)] (None
+    without a target)."""
+
+    scene: Scene
+    key: tuple
+    pilot: object
+    n_rays: int
+    tried: list | None
 
 
 class Simulation:
@@ -475,6 +489,7 @@ class Simulation:
         directions: Sequence[str] = DIRECTIONS,
         shifts: int = 4,
         progress: ProgressFn | None = None,
+        choice: "RuleChoice | None" = None,
     ) -> FringeResult:
         """Camera images of X/Y fringes of the given widths (periods, monitor px), K shifts.
 
@@ -485,10 +500,12 @@ class Simulation:
         >= 0.05, worst fringe) is below the target or ``max_rays`` is reached (then a
         ``RuntimeWarning`` with the figure); ``sampling`` of the result reports
         ``target_error_mrad``, ``achieved_p95_mrad``, ``n_rays`` used and ``target_met``.
+        ``choice``: the pilot's :meth:`choose_rule` for these fringes, made beforehand (a
+        run makes it in a thread while the specular reference renders); the same result.
         """
         samp = self.scene.sampling
         if self.pilot_applies():
-            return self._fringes_pilot(widths, directions, shifts, progress)
+            return self._fringes_pilot(widths, directions, shifts, progress, choice)
         if samp.target_error is None or self.scene.brdf.is_delta:
             return self._fringes_once(widths, directions, shifts, progress)
 
@@ -517,22 +534,50 @@ class Simulation:
         return (not self.scene.brdf.is_delta and samp.mode == "rule" and samp.error_estimate
                 and self.fringes_smooth())
 
-    def _fringes_pilot(self, widths, directions, shifts, progress) -> FringeResult:
+    def choose_rule(self, widths, directions, shifts, cancel=None) -> "RuleChoice":
+        """The pilot's part of :meth:`render_fringes` that comes before the camera's render
+        (mode ``rule`` on a smooth integrand, :meth:`pilot_applies`): the rule of the target
+        (:func:`pmdsim.render.pilot.choose_order`), or ``n_rays`` and its grid probes
+        without one. It needs nothing of the camera's render, so it may run beside other
+        work (in a thread: the kernels release the GIL); ``cancel``, a
+        :class:`threading.Event`, stops it between two probes (:class:`~pmdsim.render.
+        pilot.Cancelled`)."""
+        from . import pilot as pl
+
+        if not self.pilot_applies():
+            raise ValueError("choose_rule: the pilot applies to mode 'rule' with an error "
+                             "estimate on a smooth integrand only (Simulation.pilot_applies)")
+        samp = self.scene.sampling
+        key = (tuple(float(w) for w in widths), tuple(directions), int(shifts))
+        lay, ku, kv, ncols = self._harmonic_layout(key[0], key[1], key[2])
+        pilot = pl.Pilot(self, lay, kb.MODE_HARMONIC, ncols, {"k_u": ku, "k_v": kv},
+                         self.shape, cancel=cancel)
+        if samp.target_error is None:
+            pilot.measured(samp.n_rays)  # the rule's and the finer rule's grid probes
+            return RuleChoice(self.scene, key, pilot, samp.n_rays, None)
+        n, _, tried = pl.choose_order(pilot, samp.n_rays, samp.target_error, samp.max_rays)
+        return RuleChoice(self.scene, key, pilot, n, tried)
+
+    def _fringes_pilot(self, widths, directions, shifts, progress, choice=None) -> FringeResult:
         """The fringes of mode ``rule`` on a smooth integrand: the order from the target by
-        the pilot (when the sampling has one), the camera rendered once with that rule, and
-        its phase error from the pilot (:mod:`pmdsim.render.pilot`)."""
+        the pilot (when the sampling has one; ``choice``: :meth:`choose_rule` made
+        beforehand), the camera rendered once with that rule, and its phase error from the
+        pilot (:mod:`pmdsim.render.pilot`)."""
         import warnings
 
         from . import pilot as pl
 
         samp = self.scene.sampling
         widths = tuple(float(w) for w in widths)
-        lay, ku, kv, ncols = self._harmonic_layout(widths, tuple(directions), shifts)
-        pilot = pl.Pilot(self, lay, kb.MODE_HARMONIC, ncols, {"k_u": ku, "k_v": kv}, self.shape)
-        tried, renders = None, 0
-        n = samp.n_rays
-        if samp.target_error is not None:
-            n, _, tried = pl.choose_order(pilot, samp.n_rays, samp.target_error, samp.max_rays)
+        if choice is None:
+            choice = self.choose_rule(widths, directions, shifts)
+        elif choice.scene is not self.scene or choice.key != (widths, tuple(directions),
+                                                               int(shifts)):
+            raise ValueError("choice: made for another simulation or other fringes "
+                             "(Simulation.choose_rule of these widths, directions, shifts)")
+        pilot, n, tried = choice.pilot, choice.n_rays, choice.tried
+        pilot.cancel = None  # the render's own part is not cancelled from outside
+        renders = 0
         while True:
             main = self.with_sampling(replace(samp, n_rays=n, error_estimate=False,
                                               target_error=None, max_rays=max(samp.max_rays, n)))

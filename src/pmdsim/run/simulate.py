@@ -51,6 +51,7 @@ resolved configuration as JSON in ``attrs["config_json"]``, so that
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import dataclass, replace
@@ -63,7 +64,7 @@ from ..patterns import resolve_dots, resolve_images
 from ..render import Simulation
 from ..scene import resolved_camera
 from ..store.manifest import write_run_manifest, write_variants_manifest
-from .steps import RunInputs, run_member
+from .steps import RunInputs, run_member, start_pilot
 from .reference import chain_mode, specular_reference
 from .result import ProgressFn, RunResult, _Steps
 from .threads import single_blas
@@ -163,7 +164,13 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
     plan = plan_run(cfg, progress, figures, decode, diagnostics)
     if client is not None:
         on_cluster(plan, client)
-    with atomic_run_dir(outdir, overwrite=overwrite) as tmp, _current(client):
+    with atomic_run_dir(outdir, overwrite=overwrite) as tmp, _current(client), \
+            contextlib.ExitStack() as stack:
+        # the pilot's choice of the rule needs no camera render: in a thread while the
+        # vision rays and the specular reference are rendered (stopped on any error)
+        pilot = None if client is not None or cfg.variants else start_pilot(cfg, plan.sim)
+        if pilot is not None:
+            stack.callback(pilot.stop)
         t = time.perf_counter()
         # The vision rays and the ideal specular reference do not depend on what a variant
         # may change (BRDF, anisotropy frame, sampling): one of each for all.
@@ -187,7 +194,7 @@ def run_simulation(cfg: RunConfig, outdir: str | Path, progress: ProgressFn | No
                 result = run_variants(plan, geometry, reference, tmp, shared)
             else:
                 result, _ = run_member(plan, cfg, plan.sim, geometry, tmp,
-                                       reference=reference, standalone=True)
+                                       reference=reference, standalone=True, pilot=pilot)
                 result = replace(result, notes=tuple(plan.notes) + result.notes,
                                  timings=dict(result.timings, **shared))
         finally:

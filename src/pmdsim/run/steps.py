@@ -83,6 +83,7 @@ class Member:
     writer: DatasetWriter | None = None
     images_writer: ThreadPoolExecutor | None = None
     helpers: ThreadPoolExecutor | None = None  # a thread for the diagnostics
+    pilot: "EarlyPilot | None" = None  # the rule's choice, started before (start_pilot)
 
     fringes: FringeResult | None = None
     dot_images: np.ndarray | None = None  # (dots, H, W)
@@ -133,7 +134,8 @@ def render(m: Member) -> None:
             warnings.simplefilter("always", TargetNotMet)
             warnings.simplefilter("always", RuleTooSmall)
             m.fringes = sim.render_fringes(fr_cfg.widths_px, fr_cfg.directions, fr_cfg.shifts,
-                                           progress=steps.tiles(n_tiles))
+                                           progress=steps.tiles(n_tiles),
+                                           choice=None if m.pilot is None else m.pilot.result())
         for w in caught:
             if issubclass(w.category, (TargetNotMet, RuleTooSmall)):
                 m.notes.append(str(w.message))
@@ -376,9 +378,49 @@ STEPS = ((render, "render"), (capture, "render"), (start_diagnose, "diagnostics"
          (diagnose, "diagnostics"), (write, "write"), (draw, "figures"))
 
 
+# ----------------------------------------------------------------------------- the pilot
+class EarlyPilot:
+    """The pilot's choice of the fringes' rule (:meth:`Simulation.choose_rule
+    <pmdsim.render.Simulation.choose_rule>`) made in a thread from the start of a run: it
+    needs no camera render, and the vision rays and the specular reference leave a core
+    idle part of the time (their compiled kernels and the pilot's release the GIL). The
+    render step takes its :meth:`result`; :meth:`stop` ends it early (a run that fails
+    before its render) and waits for the thread."""
+
+    def __init__(self, sim: Simulation, widths, directions, shifts):
+        import threading
+
+        self.cancel = threading.Event()
+        pool = ThreadPoolExecutor(1, thread_name_prefix="pmdsim-pilot")
+        self.future = pool.submit(sim.choose_rule, widths, directions, shifts, self.cancel)
+        pool.shutdown(wait=False)  # its one thread ends with the job
+
+    def result(self):
+        """The :class:`~pmdsim.render.simulation.RuleChoice` (waits; raises its error)."""
+        return self.future.result()
+
+    def stop(self) -> None:
+        """Cancel what is left of the pilot and wait for its thread (its error, if any, is
+        the render's to raise, not this one's)."""
+        self.cancel.set()
+        self.future.exception()
+
+
+def start_pilot(cfg: RunConfig, sim: Simulation) -> EarlyPilot | None:
+    """An :class:`EarlyPilot` for the fringes of ``cfg`` where the pilot applies
+    (:meth:`~pmdsim.render.Simulation.pilot_applies`) and Numba takes parallel kernels
+    from two threads at once (:func:`~pmdsim.run.threads.numba_takes_two_threads`);
+    else None (the render step runs the pilot itself: the same result)."""
+    fr = cfg.patterns.fringes
+    if fr is None or not sim.pilot_applies() or not numba_takes_two_threads(choose=True):
+        return None
+    return EarlyPilot(sim, fr.widths_px, fr.directions, fr.shifts)
+
+
 # ----------------------------------------------------------------------------- the run
 def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder: Path,
-               reference=None, standalone: bool = True) -> tuple[RunResult, object]:
+               reference=None, standalone: bool = True,
+               pilot: "EarlyPilot | None" = None) -> tuple[RunResult, object]:
     """Render one configuration ``cfg`` (no variants; one member of the
     :class:`~pmdsim.run.simulate.RunPlan` ``plan``, which gives the inputs, the progress
     steps and whether to draw and diagnose) and write its images, dataset, config and
@@ -392,7 +434,7 @@ def run_member(plan, cfg: RunConfig, sim: Simulation, geometry: Geometry, folder
     into the dataset, statistics.json and summary.txt, and their warnings into the result."""
     folder.mkdir(parents=True, exist_ok=True)
     m = Member(cfg, sim, geometry, folder, plan.steps, plan.inputs, reference, standalone,
-               plan.diagnostics)
+               plan.diagnostics, pilot=pilot)
     m.timings = {"render": 0.0, "write": 0.0, "decode": 0.0, "diagnostics": 0.0,
                  "figures": 0.0}
     with contextlib.ExitStack() as stack:

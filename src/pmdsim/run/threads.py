@@ -71,12 +71,18 @@ def blas_pool_at_start() -> None:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", str(limit))
 
 
-def numba_takes_two_threads() -> bool:
+def numba_takes_two_threads(choose: bool = False) -> bool:
     """True when Numba's threading layer (chosen at the first parallel kernel) accepts
     parallel kernels launched from several threads at once (omp, tbb; not workqueue): the
-    run's helper threads (the reference's reconstruction, the diagnostics) need it; False
-    while no parallel kernel has run (not known yet)."""
+    run's helper threads (the reference's reconstruction, the diagnostics, the early
+    pilot) need it; False while no parallel kernel has run (not known yet), unless
+    ``choose``: then a tiny parallel kernel makes Numba choose it now."""
     import numba
+
+    if choose:
+        from ..kernels._jit import threading_layer
+
+        return threading_layer() in ("omp", "tbb")
 
     try:
         return numba.threading_layer() in ("omp", "tbb")
