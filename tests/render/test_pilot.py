@@ -598,3 +598,42 @@ def test_lobe_width_of_the_box_rule_is_a_lower_bound_across_the_gate():
     for name in ("x", "y"):
         assert sig[name] <= widths[name].min(), name
     assert control.box_plan(sim, [20.0], True)[0] is None
+
+
+def test_compiled_worst_phase_error_matches_numpy():
+    """The target's worst P95 (worst fringe, decodable pixels) by the compiled gather
+    against the whole-array NumPy expression, written out here: NaN errors, modulations
+    across the 0.05 threshold, lobes across MAX_OFF off the monitor, NaN weights, unequal
+    fringes (2 directions x 3 widths, H != W); complex64 sums take NumPy's own path."""
+    from types import SimpleNamespace
+
+    from pmdsim.quantiles import percentile
+    from pmdsim.render.results import MAX_OFF, worst_phase_error
+
+    rng = np.random.default_rng(52)
+    shape = (2, 3, 23, 31)
+    pe = 10.0 ** rng.uniform(-7, -3, shape)
+    pe[rng.uniform(size=shape) < 0.05] = np.nan
+    f_total = rng.uniform(0.5, 1.0, shape[2:])
+    f_hit = f_total * (1.0 - rng.uniform(0, 2 * MAX_OFF, shape[2:]))
+    f_hit[0, :3] = np.nan
+    f_total[1, :2] = 0.0
+    mod = rng.uniform(0.0, 0.12, shape)
+    sums = (mod * f_hit * np.exp(1j * rng.uniform(-np.pi, np.pi, shape))).astype(np.complex64)
+    pe[0, 2] *= 50  # the worst fringe is not the first
+
+    def fr(s):
+        return SimpleNamespace(phase_error=lambda: pe, sums=s, f_hit=f_hit, f_total=f_total,
+                               images=None, shifts=None)
+
+    s128 = sums.astype(np.complex128)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m = np.abs(s128) / f_hit
+        m = np.where(1.0 - np.abs(f_hit) / np.abs(f_total) > MAX_OFF, 0.0, m)
+    want = max(percentile(pe[i, j][np.isfinite(pe[i, j]) & (m[i, j] >= 0.05)], 95)
+               for i in range(2) for j in range(3))
+    assert worst_phase_error(fr(s128)) == want
+    assert worst_phase_error(fr(sums)) == pytest.approx(want, rel=1e-12)  # NumPy's path
+    # only modulations below the threshold: nothing decodable on any fringe
+    none = fr((sums * 0.01).astype(np.complex128))
+    assert worst_phase_error(none) is None

@@ -31,6 +31,34 @@ def test_to_integer_image_rounds_clips_and_zeroes_nan():
     assert img16.dtype == np.uint16 and img16[1, 0] == 65535 and img16[0, 2] == 20000
 
 
+def test_compiled_image_passes_match_numpy():
+    """The compiled exposure peak and integer conversion against the NumPy expressions they
+    replace (float32 and float64 camera values, NaN, +-inf, negatives, exact halves for
+    rint's ties to even, values past full scale, a 2-D non-square image)."""
+    rng = np.random.default_rng(22)
+    for dtype in (np.float32, np.float64):
+        v = (rng.uniform(-0.2, 1.3, (37, 53)) * 1000).astype(dtype)
+        v[0, :6] = [np.nan, np.inf, -np.inf, 0.5, 1.5, 2.5]
+        v[1, 0] = 70000.0
+        finite = np.isfinite(v)
+        peak = float(v[finite].max())
+        assert exposure_factor([v], headroom=1.0) == 65535 / peak
+        for exposure, depth in ((1.0, 16), (0.37, 8), (61.0, 16)):
+            want = np.multiply(v, exposure, dtype=np.float64)
+            want[~np.isfinite(want)] = 0.0
+            want = np.rint(np.clip(want, 0.0, 2**depth - 1)).astype(
+                np.uint16 if depth == 16 else np.uint8)
+            got = to_integer_image(v, exposure, depth)
+            assert got.dtype == want.dtype and got.shape == v.shape
+            np.testing.assert_array_equal(got, want)
+    # ties to even at the exposure 1: 0.5 -> 0, 1.5 -> 2, 2.5 -> 2
+    assert to_integer_image(np.array([0.5, 1.5, 2.5]), 1.0).tolist() == [0, 2, 2]
+    # integer values and non-contiguous views convert as floats do
+    ints = np.arange(12).reshape(3, 4)
+    np.testing.assert_array_equal(to_integer_image(ints[:, ::2], 2.0, 8), ints[:, ::2] * 2)
+    assert exposure_factor([ints]) == 0.95 * 65535 / 11
+
+
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
 @pytest.mark.parametrize("fmt", ["tiff", "png"])
 def test_image_files_round_trip(tmp_path, fmt, dtype):

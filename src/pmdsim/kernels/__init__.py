@@ -1,7 +1,8 @@
 """Compiled numeric kernels: vision rays (``primary``), scattered bundles and pattern sums
 (``bundle``), the fringes' per-tile finishing and error sums (``fringe_finish``), phase
 decoding (``decode``), reconstruction (``reconstruct``), sag surfaces (``surface``),
-mantissa rounding for storage (``bits``), polynomial exp/sin/cos (``fastmath``); every
+mantissa rounding for storage (``bits``), the exposure and integer images of camera
+values (``images``), polynomial exp/sin/cos (``fastmath``); every
 Numba option in ``_jit``.
 
 Modules here import nothing from the rest of :mod:`pmdsim`; they take and return plain

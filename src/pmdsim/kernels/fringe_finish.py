@@ -294,3 +294,28 @@ def add_phase_floors(imgs, cos_d, sin_d, weight, lmax, sigmas, roundoff, unknown
         if v > math.pi:
             v = math.pi
         stated[p] = v
+
+
+@jit
+def decodable_values(err, sums, f_hit, f_total, min_modulation, max_off, out):
+    """Gather into ``out`` (P,) the finite values of ``err`` (P,) (one fringe's stated
+    phase error) at the pixels whose fringe keeps a modulation ``|sums| / f_hit >=
+    min_modulation`` and whose lobe puts at most ``max_off`` of its weight off the monitor
+    (``1 - |f_hit| / |f_total|``; NaN counts as at most), in pixel order; returns how many.
+    The NumPy reference is the whole-array expression of
+    :func:`pmdsim.render.results.worst_phase_error`."""
+    n = 0
+    for p in range(err.shape[0]):
+        e = err[p]
+        if not math.isfinite(e):
+            continue
+        fh = f_hit[p]
+        off = 1.0 - abs(fh) / abs(f_total[p])
+        if off > max_off:
+            continue  # modulation 0
+        s = sums[p]
+        mod = math.hypot(s.real, s.imag) / fh
+        if mod >= min_modulation:
+            out[n] = e
+            n += 1
+    return n

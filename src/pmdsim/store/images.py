@@ -42,12 +42,19 @@ def exposure_factor(arrays: Iterable[np.ndarray], bit_depth: int = 16,
     maps to ``headroom`` x full scale. Returns 1.0 when there is no positive finite value."""
     if not 0 < headroom <= 1:
         raise ValueError(f"headroom must be in (0, 1], got {headroom}")
+    from ..kernels.images import finite_max
+
     peak = 0.0
     for a in arrays:
         a = np.asarray(a)
-        finite = np.isfinite(a)
-        if finite.any():
-            peak = max(peak, float(a[finite].max()))
+        if a.size and a.dtype.kind == "f":  # one compiled pass (no mask, no copy)
+            m, found = finite_max(a.reshape(-1))
+        else:
+            finite = np.isfinite(a)
+            found = bool(finite.any())
+            m = float(a[finite].max()) if found else 0.0
+        if found:
+            peak = max(peak, float(m))
     if peak <= 0:
         return 1.0
     return headroom * full_scale(bit_depth) / peak
@@ -55,13 +62,17 @@ def exposure_factor(arrays: Iterable[np.ndarray], bit_depth: int = 16,
 
 def to_integer_image(values: np.ndarray, exposure: float, bit_depth: int = 16) -> np.ndarray:
     """``round(clip(values * exposure, 0, full scale))`` as uint8/uint16; NaN -> 0."""
+    from ..kernels.images import to_integer
+
     top = full_scale(bit_depth)
-    # one float64 temporary, changed in place (the same numbers as the plain expression)
-    scaled = np.multiply(values, exposure, dtype=np.float64)
-    scaled[~np.isfinite(scaled)] = 0.0
-    np.clip(scaled, 0.0, top, out=scaled)
-    np.rint(scaled, out=scaled)
-    return scaled.astype(np.uint16 if bit_depth == 16 else np.uint8)
+    values = np.asarray(values)
+    out = np.empty(values.shape, np.uint16 if bit_depth == 16 else np.uint8)
+    if values.dtype.kind != "f":  # integers: as floats (the kernel's own types)
+        values = values.astype(np.float64)
+    # one compiled pass (the numbers of multiply in float64, clip, rint and the cast)
+    to_integer(np.ascontiguousarray(values).reshape(-1), float(exposure), float(top),
+               out.reshape(-1))
+    return out
 
 
 # ----------------------------------------------------------------------------- image files

@@ -1,0 +1,44 @@
+"""Compiled passes over camera images: the brightest finite value (the run's exposure) and
+the integer image of a float one, each one pass without temporaries. The NumPy references
+are the expressions they replace (:func:`pmdsim.store.images.exposure_factor`,
+:func:`pmdsim.store.images.to_integer_image`); ``tests/store/test_io.py`` compares them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._jit import jit
+
+
+@jit
+def finite_max(a):
+    """The largest finite value of ``a`` (1-D, any float type) as float64, and whether
+    there is one (``(-inf, False)`` where none is finite)."""
+    best = -math.inf
+    found = False
+    for i in range(a.shape[0]):
+        v = np.float64(a[i])
+        if math.isfinite(v) and (not found or v > best):
+            best = v
+            found = True
+    return best, found
+
+
+@jit
+def to_integer(values, exposure, top, out):
+    """``out = rint(clip(values * exposure, 0, top))`` with NaN and inf products as 0
+    (``values`` 1-D, any float type, each product in float64; ``out`` 1-D integers):
+    NumPy's ``multiply(values, exposure, dtype=float64)``, ``clip``, ``rint`` (half to
+    even) and the cast, in one pass."""
+    for i in range(values.shape[0]):
+        v = np.float64(values[i]) * exposure
+        if not math.isfinite(v):
+            v = 0.0
+        elif v < 0.0:
+            v = 0.0
+        elif v > top:
+            v = top
+        out[i] = np.rint(v)
