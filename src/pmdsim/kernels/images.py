@@ -1,7 +1,9 @@
-"""Compiled passes over camera images: the brightest finite value (the run's exposure) and
-the integer image of a float one, each one pass without temporaries. The NumPy references
+"""Compiled passes over camera images: the brightest finite value (the run's exposure), the
+integer image of a float one and the finite values of a masked map (the statistics of a
+deviation), each one pass without temporaries. The NumPy references
 are the expressions they replace (:func:`pmdsim.store.images.exposure_factor`,
-:func:`pmdsim.store.images.to_integer_image`); ``tests/store/test_io.py`` compares them.
+:func:`pmdsim.store.images.to_integer_image`, :func:`pmdsim.measure.deviation.deviation_stats`);
+``tests/store/test_io.py`` and ``tests/measure/test_deviation_stats.py`` compare them.
 """
 
 from __future__ import annotations
@@ -42,3 +44,25 @@ def to_integer(values, exposure, top, out):
         elif v > top:
             v = top
         out[i] = np.rint(v)
+
+
+@jit
+def gather_finite(values, mask, out):
+    """Gather into ``out`` (float64) the finite values of ``values`` (1-D, any float type)
+    where ``mask`` (1-D bool, or an empty array: everywhere) holds, in order; returns
+    ``(n, n_either)``: how many were gathered, and how many elements are in ``mask`` or
+    finite (a deviation's considered pixels). The NumPy reference is
+    ``values[mask & isfinite(values)]`` and ``count_nonzero(mask | isfinite(values))``."""
+    n = 0
+    either = 0
+    everywhere = mask.shape[0] == 0
+    for i in range(values.shape[0]):
+        v = np.float64(values[i])
+        fin = math.isfinite(v)
+        m = everywhere or mask[i]
+        if m or fin:
+            either += 1
+        if m and fin:
+            out[n] = v
+            n += 1
+    return n, either

@@ -301,9 +301,9 @@ def _flag_counts(flags: np.ndarray, where: np.ndarray) -> dict:
     return {b.name: int(np.count_nonzero(f & int(b))) for b in dec.DecodeFlag}
 
 
-def _median(a) -> float | None:
-    a = np.asarray(a, np.float64)
-    a = a[np.isfinite(a)]
+def _median(a, where=None) -> float | None:
+    """The median of the finite values of ``a`` (where ``where`` holds), None if none."""
+    a, _ = analysis.finite_values(a, where)
     return median(a, overwrite=True) if a.size else None
 
 
@@ -358,10 +358,10 @@ def statistics(chain: ChainResult, name: str) -> dict:
                     chain.surface_mask & ~considered)),
             },
             modulation={
-                "median_by_width": [_median(m[dc.decoded.valid]) for m in dc.decoded.modulation],
-                "reference_median_by_width": [_median(m[considered])
+                "median_by_width": [_median(m, dc.decoded.valid) for m in dc.decoded.modulation],
+                "reference_median_by_width": [_median(m, considered)
                                               for m in dc.reference.modulation],
-                "ratio_median_by_width": [_median(r[considered]) for r in ratio],
+                "ratio_median_by_width": [_median(r, considered) for r in ratio],
             },
             reference_vs_exact_px=_stats_dict(analysis.deviation_stats(ref_q, considered)),
             coord_vs_exact_px=_stats_dict(analysis.deviation_stats(vs_exact, dv.valid,

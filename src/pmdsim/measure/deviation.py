@@ -19,6 +19,25 @@ import numpy as np
 from ..quantiles import percentile
 
 
+def finite_values(values: np.ndarray, where: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """``(values[where & isfinite(values)] as float64, count_nonzero(where |
+    isfinite(values)))`` in one compiled pass (:func:`pmdsim.kernels.images.gather_finite`;
+    ``where`` None: everywhere)."""
+    from ..kernels.images import gather_finite
+
+    values = np.asarray(values)
+    flat = np.ascontiguousarray(values).reshape(-1)
+    if values.dtype.kind != "f":
+        flat = flat.astype(np.float64)
+    if where is None:
+        mask = np.empty(0, np.bool_)
+    else:
+        mask = np.ascontiguousarray(np.broadcast_to(np.asarray(where, bool), values.shape)).reshape(-1)
+    out = np.empty(flat.size)
+    n, either = gather_finite(flat, mask, out)
+    return out[:n], int(either)
+
+
 def wrap(phase: np.ndarray) -> np.ndarray:
     """Wrap phases (rad) to (-pi, pi]."""
     w = np.mod(np.asarray(phase, np.float64) + np.pi, 2 * np.pi) - np.pi
@@ -58,14 +77,9 @@ def deviation_stats(deviation: np.ndarray, valid: np.ndarray, considered: np.nda
         Pixels that could have been valid (e.g. those seeing the monitor); default: all
         finite pixels of ``deviation`` or ``valid``.
     """
-    deviation = np.asarray(deviation, np.float64)
-    given = np.asarray(valid, bool)
-    valid = given & np.isfinite(deviation)
-    if considered is None:  # a pixel marked valid whose deviation is NaN is masked, not hidden
-        considered = given | np.isfinite(deviation)
-    considered = np.asarray(considered, bool)
-    n_cons = int(considered.sum())
-    d = deviation[valid]
+    d, n_either = finite_values(deviation, valid)  # deviation[valid & isfinite(deviation)]
+    # a pixel marked valid whose deviation is NaN is masked, not hidden (default considered)
+    n_cons = n_either if considered is None else int(np.count_nonzero(considered))
     n = d.size
     if n == 0:
         nan = float("nan")

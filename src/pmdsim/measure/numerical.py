@@ -63,11 +63,12 @@ def propagate(phase_err: np.ndarray, width_px: float, pitch_mm: float,
 def summary(error_maps: dict, valid: np.ndarray) -> dict:
     """{quantity: {"rms", "p95", "max"}} of the numerical error over the valid pixels (None
     where there are none)."""
+    from .deviation import finite_values
+
     out = {}
     v = np.asarray(valid, bool)
     for k, m in error_maps.items():
-        a = np.asarray(m, np.float64)[v]
-        a = a[np.isfinite(a)]
+        a, _ = finite_values(m, v)  # one pass: m[v & isfinite(m)]
         if a.size == 0:
             out[k] = {"rms": None, "p95": None, "max": None}
             continue
