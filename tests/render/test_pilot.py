@@ -637,3 +637,18 @@ def test_compiled_worst_phase_error_matches_numpy():
     # only modulations below the threshold: nothing decodable on any fringe
     none = fr((sums * 0.01).astype(np.complex128))
     assert worst_phase_error(none) is None
+
+
+def test_compiled_block_fill_matches_numpy():
+    """The statement's block fill (every pixel its s x s block's envelope) against NumPy's
+    broadcast, on a camera that is no multiple of the step either way (H != W)."""
+    from pmdsim.kernels.fringe_finish import fill_blocks
+
+    rng = np.random.default_rng(8)
+    for s, (h, w) in ((8, (37, 50)), (4, (16, 9)), (1, (3, 5))):
+        gh, gw = -(-h // s), -(-w // s)
+        env = rng.uniform(size=(3, gh, gw))
+        want = np.repeat(np.repeat(env, s, axis=1), s, axis=2)[:, :h, :w]
+        got = np.empty((3, h, w))
+        fill_blocks(env, s, got)
+        np.testing.assert_array_equal(got, want)

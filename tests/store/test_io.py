@@ -59,6 +59,26 @@ def test_compiled_image_passes_match_numpy():
     assert exposure_factor([ints]) == 0.95 * 65535 / 11
 
 
+def test_lit_images_stop_at_the_first_positive_value():
+    """The rendered-images check (any value > 0, NaN never) against numpy.any, and the
+    run's error for black fringes (float32 stacks of the render's shape, a last-pixel light)."""
+    from pmdsim.config import ConfigError
+    from pmdsim.kernels.images import any_positive
+    from pmdsim.studies.coverage import check_rendered
+
+    for a in (np.full(7, np.nan), np.zeros(5), -np.ones(3), np.array([np.nan, -1.0, 0.0, 2e-45]),
+              np.array([0.0, np.inf]), np.array([-np.inf, np.nan])):
+        for dtype in (np.float32, np.float64):
+            b = a.astype(dtype)
+            assert any_positive(b) == bool(np.any(b > 0))
+    black = np.zeros((2, 3, 4, 5, 6), np.float32)
+    black[0, 0, 0, 0, :2] = np.nan
+    with pytest.raises(ConfigError, match="every fringe image is black"):
+        check_rendered(black)
+    black[1, 2, 3, 4, 5] = 1e-6
+    check_rendered(black)
+
+
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
 @pytest.mark.parametrize("fmt", ["tiff", "png"])
 def test_image_files_round_trip(tmp_path, fmt, dtype):

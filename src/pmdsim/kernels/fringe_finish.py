@@ -319,3 +319,17 @@ def decodable_values(err, sums, f_hit, f_total, min_modulation, max_off, out):
             out[n] = e
             n += 1
     return n
+
+
+@parallel_jit
+def fill_blocks(values, s, out):
+    """``out[b, r, c] = values[b, r // s, c // s]`` (``values`` (B, gh, gw), ``out`` (B, H,
+    W) with ``H <= gh s``, ``W <= gw s``), in parallel over rows: every pixel takes its
+    ``s x s`` block's value (the pilot's envelope on the camera)."""
+    nb, h, w = out.shape
+    for rr in prange(nb * h):
+        b = rr // h
+        r = rr - b * h
+        i = r // s
+        for c in range(w):
+            out[b, r, c] = values[b, i, c // s]

@@ -1,8 +1,8 @@
 """Compiled passes over camera images: the brightest finite value (the run's exposure), the
-integer image of a float one and the finite values of a masked map (the statistics of a
-deviation), each one pass without temporaries. The NumPy references
+integer image of a float one, the finite values of a masked map (the statistics of a
+deviation) and whether any value is lit, each one pass without temporaries. The NumPy references
 are the expressions they replace (:func:`pmdsim.store.images.exposure_factor`,
-:func:`pmdsim.store.images.to_integer_image`, :func:`pmdsim.measure.deviation.deviation_stats`);
+:func:`pmdsim.store.images.to_integer_image`, :func:`pmdsim.measure.deviation.deviation_stats`, :func:`pmdsim.studies.coverage.check_rendered`);
 ``tests/store/test_io.py`` and ``tests/measure/test_deviation_stats.py`` compare them.
 """
 
@@ -66,3 +66,13 @@ def gather_finite(values, mask, out):
             out[n] = v
             n += 1
     return n, either
+
+
+@jit
+def any_positive(values):
+    """Whether any value of ``values`` (1-D, any float type) is > 0 (NaN is not); stops at
+    the first. The NumPy reference is ``numpy.any(values > 0)``."""
+    for i in range(values.shape[0]):
+        if values[i] > 0:
+            return True
+    return False

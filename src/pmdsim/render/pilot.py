@@ -50,7 +50,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..kernels import bundle as kb
-from ..kernels.fringe_finish import add_phase_floors, phase_floor_rows
+from ..kernels.fringe_finish import add_phase_floors, fill_blocks, phase_floor_rows
 from .results import MAX_OFF, ROUNDOFF_PHASE, in_blocks
 from .geometry_rows import reduce_subrays, scene_geometry_rows, vision_geometry_rows
 
@@ -437,13 +437,10 @@ class Pilot:
         env, trusted = self.envelope(n_rays)
         bi = np.minimum(np.arange(h) // s, self.rows.size - 1)
         bj = np.minimum(np.arange(w) // s, self.cols.size - 1)
-        # every block's value over its s x s pixels, in one copy (the grid has ceil(h / s)
-        # rows: bi and bj index its blocks)
-        nb, gh, gw = env.shape
-        blocks = np.broadcast_to(env[:, :, None, :, None],
-                                 (nb, gh, s, gw, s)).reshape(nb, gh * s, gw * s)[:, :h, :w]
-        # (a step of 1 reshapes without a copy: a read-only view of env)
-        stated = blocks if blocks.flags.writeable and blocks.flags.c_contiguous else blocks.copy()
+        # every block's value over its s x s pixels (the grid has ceil(h / s) rows: bi and
+        # bj index its blocks), one compiled pass
+        stated = np.empty((env.shape[0], h, w))
+        fill_blocks(np.ascontiguousarray(env, np.float64), s, stated)
         off = np.nan_to_num(np.asarray(off, np.float64), nan=1.0)
         cut = sums_ok & (off > CUT_MEASURED) & (off <= MAX_OFF)
         local = sums_ok & ~(trusted[bi][:, bj]) | cut

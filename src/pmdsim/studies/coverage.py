@@ -158,10 +158,13 @@ def check_rendered(fringe_images: np.ndarray | None = None,
     ConfigError
         Naming ``brdf`` (fringes) or ``patterns.dots`` (dots).
     """
-    def lit(a) -> bool:
+    def lit(a) -> bool:  # any value > 0 (NaN compares False), stopping at the first
+        from ..kernels.images import any_positive
+
         a = np.asarray(a)
-        with np.errstate(invalid="ignore"):
-            return bool(np.any(a > 0))  # NaN compares False
+        if a.dtype.kind != "f":
+            return bool(np.any(a > 0))
+        return bool(any_positive(np.ascontiguousarray(a).reshape(-1)))
 
     if fringe_images is not None and not lit(fringe_images):
         raise ConfigError(
