@@ -1,8 +1,9 @@
 """Compiled passes over camera images: the brightest finite value (the run's exposure), the
 integer image of a float one, the finite values of a masked map (the statistics of a
-deviation) and whether any value is lit, each one pass without temporaries. The NumPy references
+deviation), whether any value is lit and the float32 parts of complex sums, each one pass
+without temporaries. The NumPy references
 are the expressions they replace (:func:`pmdsim.store.images.exposure_factor`,
-:func:`pmdsim.store.images.to_integer_image`, :func:`pmdsim.measure.deviation.deviation_stats`, :func:`pmdsim.studies.coverage.check_rendered`);
+:func:`pmdsim.store.images.to_integer_image`, :func:`pmdsim.measure.deviation.deviation_stats`, :func:`pmdsim.studies.coverage.check_rendered`, :func:`pmdsim.store.schema.build_dataset`);
 ``tests/store/test_io.py`` and ``tests/measure/test_deviation_stats.py`` compare them.
 """
 
@@ -12,7 +13,9 @@ import math
 
 import numpy as np
 
-from ._jit import jit
+from numba import prange
+
+from ._jit import jit, parallel_jit
 
 
 @jit
@@ -76,3 +79,13 @@ def any_positive(values):
         if values[i] > 0:
             return True
     return False
+
+
+@parallel_jit
+def parts_float32(z, re, im):
+    """``re, im = z.real, z.imag`` as float32 (``z`` 1-D complex128), one parallel pass:
+    NumPy's ``z.real.astype(float32)`` and ``z.imag.astype(float32)`` (round to nearest)."""
+    for i in prange(z.shape[0]):
+        v = z[i]
+        re[i] = np.float32(v.real)
+        im[i] = np.float32(v.imag)
