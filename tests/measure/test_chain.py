@@ -457,26 +457,46 @@ def test_dot_moments_table_and_figures(tmp_path):
     assert ds["dot_centroid_col"].values[q] == pytest.approx(m.centroid[0])
 
 
-def test_numerical_error_reuses_the_slope_at_the_deviation():
-    """``propagate(..., slope_at_coord=)`` (the chain passes the slope deviation it has)
-    gives the slope error of two conversions where the coordinate is finite, and NaN
-    where it is not (masked by the chain anyway)."""
+def test_slope_and_its_numerical_change_in_one_pass():
+    """``slope_and_change_urad`` (the chain's slope and its numerical error's change, the
+    reference's normal once in one compiled pass) gives the numbers of two conversions by
+    ``slope_deviation_urad``: the slope at the deviation, and ``|s(c + delta c) - s(c)|``
+    where the deviation is finite, NaN where it is not; both fringe directions on a 3-D
+    geometry (a tilted monitor, dx != dy spread of points) and the small-angle fallback."""
+    from pmdsim.measure.chain import SlopeGeometry, slope_and_change_urad, slope_deviation_urad
     from pmdsim.measure.numerical import propagate
+    from pmdsim.render import Geometry, Simulation
 
+    cfg = parse_config({
+        "camera": {"resolution": [40, 30], "focal_length_px": 60.0,
+                   "position_mm": [-845.2, 0.0, 1812.6], "look_at_mm": [0, 0, 0]},
+        "monitor": {"resolution": [1920, 1080], "pixel_pitch_mm": 0.25,
+                    "centre_mm": [253.6, 10.0, 543.8], "look_at_mm": [0, 0, 0]},
+        "surface": {"type": "flat", "size_mm": [300.0, 200.0]},
+        "brdf": {"model": "mirror"},
+    })
+    monitor = Simulation.from_config(cfg).scene.monitor
     rng = np.random.default_rng(2)
-    pe = rng.uniform(1e-5, 1e-3, (5, 7))
-    coord = rng.normal(0.0, 0.3, (5, 7))
+    shape = (30, 40)
+    points = np.concatenate([rng.uniform(-120, 120, shape + (1,)), rng.uniform(-80, 80, shape + (1,)),
+                             rng.uniform(-1, 1, shape + (1,))], -1)
+    su, sv = rng.uniform(0, 1919, shape), rng.uniform(0, 1079, shape)
+    coord = rng.normal(0.0, 0.4, shape)
     coord[1, 2] = np.nan
-
-    def slope(c):  # nonlinear, so that where it is evaluated matters
-        return np.arctan(0.01 * c) * 1e6 + 3.0 * c * c
-
-    both = propagate(pe, 50.0, 0.25, slope, coord)
-    reused = propagate(pe, 50.0, 0.25, slope, coord, slope_at_coord=slope(coord))
-    finite = np.isfinite(coord)
-    assert np.array_equal(reused["slope_urad"][finite], both["slope_urad"][finite])
-    assert np.isnan(reused["slope_urad"][~finite]).all()
-    expected = np.abs(slope(coord + pe * 50.0 / (2 * math.pi)) - slope(coord))
-    np.testing.assert_allclose(reused["slope_urad"][finite], expected[finite], rtol=1e-12)
-    for k in ("phase_mrad", "coord_px", "coord_mm"):
-        assert np.array_equal(reused[k], both[k])
+    points[2, :3] = np.nan
+    pe = rng.uniform(1e-5, 1e-3, shape)
+    pe[3, 4] = np.nan
+    delta = propagate(pe, 50.0, 0.25)["coord_px"]
+    geo = Geometry(np.ones(shape, bool), np.ones(shape, bool), su, sv, points)
+    dist = np.full(shape, 600.0)
+    for sg in (SlopeGeometry(points, np.asarray(cfg.camera.position_mm, np.float64), monitor),
+               None):
+        for d in ("x", "y"):
+            slope, change = slope_and_change_urad(d, coord, delta, geo, sg, dist, 0.25)
+            s0 = slope_deviation_urad(d, coord, geo, sg, dist, 0.25)
+            c0 = np.where(np.isfinite(coord), coord, 0.0)
+            want = np.abs(slope_deviation_urad(d, c0 + delta, geo, sg, dist, 0.25) - s0)
+            assert np.array_equal(slope, s0, equal_nan=True)
+            assert np.array_equal(change, want, equal_nan=True)
+            assert np.isnan(change[1, 2]) and np.isnan(change[3, 4])
+            assert np.nanmax(change) > 0 and np.isfinite(change).sum() > 1000

@@ -154,6 +154,25 @@ def bisector_slopes_planar(points, camera_position, u, v, centre, e_u, e_v, pitc
                                                mx, my, mz, rotation)
 
 
+@jit(inline="always")
+def _tilt(nx0, ny0, nz0, sx, sy, sz, camera_position, ur, vr, uu, vv, centre, e_u, e_v, pitch,
+          u_mid, v_mid):
+    """The signed tilt (rad) from the bisector normal ``n0`` (at the reference monitor point
+    ``(ur, vr)``) to the one at ``(uu, vv)``, of the surface point ``s``
+    (:func:`slope_deviation_3d`)."""
+    mx, my, mz = _monitor_point(uu, vv, centre, e_u, e_v, pitch, u_mid, v_mid)
+    nx1, ny1, nz1 = _bisector(sx, sy, sz, camera_position, mx, my, mz)
+    # the angle between the normals: atan2(|n0 x n1|, n0 . n1) (their scale cancels)
+    cx = ny0 * nz1 - nz0 * ny1
+    cy = nz0 * nx1 - nx0 * nz1
+    cz = nx0 * ny1 - ny0 * nx1
+    ang = math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz),
+                     nx0 * nx1 + ny0 * ny1 + nz0 * nz1)
+    du, dv = uu - ur, vv - vr
+    d = du if abs(du) >= abs(dv) else dv
+    return (1.0 if d > 0 else (-1.0 if d < 0 else 0.0)) * ang
+
+
 @parallel_jit(fastmath=False)
 def slope_deviation_3d(points, camera_position, centre, e_u, e_v, pitch, u_mid, v_mid,
                        u_ref, v_ref, u, v, out):
@@ -172,17 +191,39 @@ def slope_deviation_3d(points, camera_position, centre, e_u, e_v, pitch, u_mid, 
             continue
         mx, my, mz = _monitor_point(ur, vr, centre, e_u, e_v, pitch, u_mid, v_mid)
         nx0, ny0, nz0 = _bisector(sx, sy, sz, camera_position, mx, my, mz)
-        mx, my, mz = _monitor_point(uu, vv, centre, e_u, e_v, pitch, u_mid, v_mid)
-        nx1, ny1, nz1 = _bisector(sx, sy, sz, camera_position, mx, my, mz)
-        # the angle between the normals: atan2(|n0 x n1|, n0 . n1) (their scale cancels)
-        cx = ny0 * nz1 - nz0 * ny1
-        cy = nz0 * nx1 - nx0 * nz1
-        cz = nx0 * ny1 - ny0 * nx1
-        ang = math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz),
-                         nx0 * nx1 + ny0 * ny1 + nz0 * nz1)
-        du, dv = uu - ur, vv - vr
-        d = du if abs(du) >= abs(dv) else dv
-        out[p] = (1.0 if d > 0 else (-1.0 if d < 0 else 0.0)) * ang
+        out[p] = _tilt(nx0, ny0, nz0, sx, sy, sz, camera_position, ur, vr, uu, vv, centre, e_u,
+                       e_v, pitch, u_mid, v_mid)
+
+
+@parallel_jit(fastmath=False)
+def slope_deviation_pair_3d(points, camera_position, centre, e_u, e_v, pitch, u_mid, v_mid,
+                            u_ref, v_ref, coord, delta, along_u, scale, out, change):
+    """:func:`slope_deviation_3d` of one fringe direction at two coordinate deviations, with
+    the reference's normal once: ``out[p] = scale s(c)`` and ``change[p] = |scale s(c0 +
+    delta) - scale s(c)|`` (``c = coord[p]``, ``c0`` = c or 0 where c is not finite: the
+    numerical error's slope change, :func:`pmdsim.measure.numerical.propagate`), the
+    deviation along u (``along_u``, x fringes) or v; NaN where an input is not finite."""
+    for p in numba.prange(points.shape[0]):
+        ur, vr, c = u_ref[p], v_ref[p], coord[p]
+        sx, sy, sz = points[p, 0], points[p, 1], points[p, 2]
+        s1 = np.nan
+        s2 = np.nan
+        if (math.isfinite(ur) and math.isfinite(vr) and math.isfinite(sx)
+                and math.isfinite(sy) and math.isfinite(sz)):
+            mx, my, mz = _monitor_point(ur, vr, centre, e_u, e_v, pitch, u_mid, v_mid)
+            nx0, ny0, nz0 = _bisector(sx, sy, sz, camera_position, mx, my, mz)
+            uu, vv = (ur + c, vr) if along_u else (ur, vr + c)
+            if math.isfinite(uu) and math.isfinite(vv):
+                s1 = _tilt(nx0, ny0, nz0, sx, sy, sz, camera_position, ur, vr, uu, vv, centre,
+                           e_u, e_v, pitch, u_mid, v_mid)
+            cm = (c if math.isfinite(c) else 0.0) + delta[p]
+            uu, vv = (ur + cm, vr) if along_u else (ur, vr + cm)
+            if math.isfinite(uu) and math.isfinite(vv):
+                s2 = _tilt(nx0, ny0, nz0, sx, sy, sz, camera_position, ur, vr, uu, vv, centre,
+                           e_u, e_v, pitch, u_mid, v_mid)
+        v1 = s1 * scale
+        out[p] = v1
+        change[p] = abs(s2 * scale - v1)
 
 
 #: :func:`node_support` codes: served by the spline, by the rim fit, not served (the pixel the

@@ -166,6 +166,36 @@ def slope_deviation_urad(direction, coord_px, geometry, slope_geometry, distance
     return out.reshape(shape) * 1e6
 
 
+def slope_and_change_urad(direction, coord_px, delta_px, geometry, slope_geometry,
+                          distance_mm, pitch_mm):
+    """``(slope, change)`` (urad): :func:`slope_deviation_urad` at ``coord_px``, and the
+    change ``|s(c0 + delta_px) - s(coord_px)|`` of a coordinate error ``delta_px``
+    (``c0`` the coordinate, 0 where it is not finite; NaN there): the numerical error's
+    slope, as :func:`pmdsim.measure.numerical.propagate` takes it. On a planar monitor
+    with the 3-D geometry one compiled pass (the reference's normal once); the same
+    numbers as the two conversions."""
+    from ..kernels import reconstruct as kr
+    from .reconstruct import planar_monitor
+
+    planar = None if slope_geometry is None else planar_monitor(slope_geometry.monitor)
+    if planar is None:
+        slope = slope_deviation_urad(direction, coord_px, geometry, slope_geometry,
+                                     distance_mm, pitch_mm)
+        c0 = np.where(np.isfinite(coord_px), coord_px, 0.0)
+        moved = slope_deviation_urad(direction, c0 + delta_px, geometry, slope_geometry,
+                                     distance_mm, pitch_mm)
+        return slope, np.abs(moved - slope)
+    shape = np.shape(coord_px)
+    flat = [np.ascontiguousarray(np.broadcast_to(a, shape), np.float64).ravel()
+            for a in (geometry.specular_u, geometry.specular_v, coord_px, delta_px)]
+    out, change = np.empty(flat[0].size), np.empty(flat[0].size)
+    kr.slope_deviation_pair_3d(
+        np.ascontiguousarray(slope_geometry.points_mm, np.float64).reshape(-1, 3),
+        np.asarray(slope_geometry.camera_position, np.float64), *planar, *flat,
+        direction == "x", 1e6, out, change)
+    return out.reshape(shape), change.reshape(shape)
+
+
 @dataclass(frozen=True, eq=False)
 class DirectionChain:
     """Decoded surface and reference of one direction, and their deviation."""
@@ -251,16 +281,19 @@ def compare(decoded: dict, reference: dict, geometry, distance_mm: np.ndarray, p
                 res.valid if keep is None else res.valid & keep,
                 ref.absolute_phase, ref.monitor_coord_px, ref.modulation, ref.valid, pitch_mm,
                 decode_cfg.min_modulation_ratio)
-        slope = slope_deviation_urad(d, dev.coord_px, geometry, slope_geometry, distance_mm, pitch_mm)
         considered = np.asarray(ref.valid, bool)
         num = None
         if phase_error is not None and phase_error.get(d) is not None:
-            num = numerical.propagate(
-                phase_error[d], float(min(res.widths_px)), pitch_mm,
-                lambda c, d=d: slope_deviation_urad(d, c, geometry, slope_geometry, distance_mm,
-                                                    pitch_mm),
-                dev.coord_px, slope_at_coord=slope)
+            # the slope and its numerical error's change in one pass (numerical.propagate
+            # with the chain's own slope conversion)
+            num = numerical.propagate(phase_error[d], float(min(res.widths_px)), pitch_mm)
+            slope, num["slope_urad"] = slope_and_change_urad(
+                d, dev.coord_px, num["coord_px"], geometry, slope_geometry, distance_mm,
+                pitch_mm)
             num = {k: np.where(dev.valid, v, np.nan) for k, v in num.items()}
+        else:
+            slope = slope_deviation_urad(d, dev.coord_px, geometry, slope_geometry,
+                                         distance_mm, pitch_mm)
         signed = None
         if signed_phase_error is not None and signed_phase_error.get(d) is not None:
             signed = np.where(dev.valid, np.asarray(signed_phase_error[d], np.float64)
@@ -434,4 +467,5 @@ def dot_table(dot_images: np.ndarray, dots, variant: str = "",
 
 
 __all__ = ["DirectionChain", "ChainResult", "decode_problem", "decode_fringes", "compare",
-           "surface_to_monitor_mm", "SlopeGeometry", "slope_deviation_urad", "statistics", "dot_table", "DOT_COLUMNS", "QUANTITIES", "STATISTICS", "DOT_THRESHOLD_FRACTION"]
+           "surface_to_monitor_mm", "SlopeGeometry", "slope_deviation_urad",
+           "slope_and_change_urad", "statistics", "dot_table", "DOT_COLUMNS", "QUANTITIES", "STATISTICS", "DOT_THRESHOLD_FRACTION"]

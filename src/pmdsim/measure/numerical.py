@@ -11,10 +11,10 @@ linear maps as the deviation itself:
 - phase: ``delta phi`` (rad; reported in mrad);
 - monitor coordinate: ``delta c = delta phi w / (2 pi)`` (monitor px; times the pitch in mm);
 - slope: the slope change for a coordinate change ``delta c`` at the pixel's deviation,
-  ``|s(c + delta c) - s(c)|`` with the chain's own slope conversion (3-D or small angle).
+  ``|s(c + delta c) - s(c)|`` with the chain's own slope conversion (3-D or small angle):
+  :func:`pmdsim.measure.chain.slope_and_change_urad`.
 
-Everything here works on plain arrays; :func:`propagate` is what the chain, the budget and
-the fit use.
+Everything here works on plain arrays; :func:`propagate` is what the chain uses.
 """
 
 from __future__ import annotations
@@ -42,22 +42,14 @@ def finest_phase_error(fringes, direction: str, phase_error: np.ndarray | None =
     return pe[fringes.directions.index(direction), wi]
 
 
-def propagate(phase_err: np.ndarray, width_px: float, pitch_mm: float,
-              slope_of_coord=None, coord_px: np.ndarray | None = None,
-              slope_at_coord: np.ndarray | None = None) -> dict:
+def propagate(phase_err: np.ndarray, width_px: float, pitch_mm: float) -> dict:
     """Numerical error maps {quantity: (H, W)} from a phase error (rad) of fringes of
-    period ``width_px``. ``slope_of_coord``: the chain's conversion coord deviation (px) ->
-    slope deviation (urad), evaluated at ``coord_px`` and ``coord_px + delta c``;
-    ``slope_at_coord``: its value at ``coord_px`` when the caller has it already (one
-    conversion less; the slope error is then NaN where ``coord_px`` is not finite)."""
+    period ``width_px``: the phase (mrad), the monitor coordinate (px, mm). The slope's
+    (urad) is the change of the chain's own slope conversion,
+    :func:`pmdsim.measure.chain.slope_and_change_urad` (it needs the geometry)."""
     phase_err = np.asarray(phase_err, np.float64)
     dc = phase_err * width_px / (2 * math.pi)
-    out = {"phase_mrad": phase_err * 1e3, "coord_px": dc, "coord_mm": dc * pitch_mm}
-    if slope_of_coord is not None:
-        c0 = np.zeros_like(dc) if coord_px is None else np.where(np.isfinite(coord_px), coord_px, 0.0)
-        s0 = slope_of_coord(c0) if slope_at_coord is None or coord_px is None else slope_at_coord
-        out["slope_urad"] = np.abs(slope_of_coord(c0 + dc) - s0)
-    return out
+    return {"phase_mrad": phase_err * 1e3, "coord_px": dc, "coord_mm": dc * pitch_mm}
 
 
 def summary(error_maps: dict, valid: np.ndarray) -> dict:
