@@ -357,3 +357,21 @@ def test_a_floor_beside_the_error_maps_covers_any_signs_of_it():
     bare = areal.power_spectrum(smooth, dx, dy, error_maps=[up, -up], bands=p.bands)
     p2 = areal.power_spectrum(smooth + up + floor * checker, dx, dy, bands=p.bands)
     assert abs(p2.band_rms["high"] - p0.band_rms["high"]) > bare.band_rms_err["high"]
+
+
+def test_an_error_map_and_its_negative_give_one_spectrum():
+    """The PSD's errors from a signed pattern and its opposite (what a run passes) are those
+    of the pattern alone, to the bit (its negative's spectrum is the same: one FFT), and a
+    third, different map still counts (dx != dy, a masked corner)."""
+    rng = np.random.default_rng(41)
+    z = rng.normal(size=(40, 56))
+    z[:6, :9] = np.nan
+    p = 1e-3 * rng.normal(size=z.shape)
+    q = 3e-3 * rng.normal(size=z.shape)
+    one = areal.power_spectrum(z, 0.5, 0.7, error_maps=[p])
+    both = areal.power_spectrum(z, 0.5, 0.7, error_maps=[p, -p])
+    for name in ("psd_2d_err", "psd_radial_err", "psd_iso_err"):
+        assert np.array_equal(getattr(one, name), getattr(both, name), equal_nan=True)
+    assert one.band_rms_err == both.band_rms_err
+    three = areal.power_spectrum(z, 0.5, 0.7, error_maps=[p, -p, q])
+    assert np.nanmax(three.psd_radial_err - both.psd_radial_err) > 0

@@ -386,7 +386,13 @@ def power_spectrum(z, dx: float, dy: float, mask=None, error=None, window_kind: 
 
     if error_maps is not None:  # the spectra of the error maps themselves (the larger)
         a2 = np.zeros_like(s)
+        done: list = []
         for dz in _error_maps(error_maps, v):
+            # a map that is another's negative (a signed pattern and its opposite) has the
+            # same power spectrum to the bit: one FFT for both
+            if any(np.array_equal(dz, -prev) for prev in done):
+                continue
+            done.append(dz)
             fd = np.fft.fft2(np.where(v, (dz - np.sum(wgt * dz) / sw) * wgt, 0.0))
             a2 = np.maximum(a2, fd.real**2 + fd.imag**2)
         a2_bin = np.bincount(k[inbin], weights=a2[inbin], minlength=n_bins + 1)[1:]
