@@ -500,3 +500,40 @@ def test_slope_and_its_numerical_change_in_one_pass():
             assert np.array_equal(change, want, equal_nan=True)
             assert np.isnan(change[1, 2]) and np.isnan(change[3, 4])
             assert np.nanmax(change) > 0 and np.isfinite(change).sum() > 1000
+
+
+def test_surface_to_monitor_distance_compiled_equals_numpy():
+    """The surface-to-monitor distance in one compiled pass against NumPy's pixel_to_world,
+    difference and sum of squares (to the last bit or so) on a tilted monitor, with a
+    coordinate and a point missing (NaN); a pixel grid of H != W; another monitor model
+    takes NumPy's own path."""
+    from types import SimpleNamespace
+
+    from pmdsim.measure.chain import surface_to_monitor_mm
+    from pmdsim.render import Geometry, Simulation
+
+    cfg = parse_config({
+        "camera": {"resolution": [40, 30], "focal_length_px": 60.0,
+                   "position_mm": [-845.2, 0.0, 1812.6], "look_at_mm": [0, 0, 0]},
+        "monitor": {"resolution": [1920, 1080], "pixel_pitch_mm": 0.25,
+                    "centre_mm": [253.6, 40.0, 543.8], "look_at_mm": [0, 0, 0]},
+        "surface": {"type": "flat", "size_mm": [300.0, 200.0]},
+        "brdf": {"model": "mirror"},
+    })
+    sim = Simulation.from_config(cfg)
+    rng = np.random.default_rng(9)
+    shape = (23, 31)
+    points = rng.uniform(-150, 150, shape + (3,))
+    su, sv = rng.uniform(0, 1919, shape), rng.uniform(0, 1079, shape)
+    su[0, 0] = np.nan
+    points[1, 1] = np.nan
+    geo = Geometry(np.ones(shape, bool), np.ones(shape, bool), su, sv, points)
+    got = surface_to_monitor_mm(sim, geo)
+    target = sim.scene.monitor.pixel_to_world(su, sv) - points
+    want = np.sqrt(np.einsum("...k,...k->...", target, target))
+    assert np.array_equal(np.isnan(got), np.isnan(want))
+    np.testing.assert_allclose(got, want, rtol=1e-15)  # the order of a sum of three
+    assert np.isnan(got[0, 0]) and np.isnan(got[1, 1]) and np.nanmin(got) > 100
+    other = SimpleNamespace(scene=SimpleNamespace(monitor=SimpleNamespace(
+        pixel_to_world=sim.scene.monitor.pixel_to_world)))  # another monitor model: NumPy
+    assert np.array_equal(surface_to_monitor_mm(other, geo), want, equal_nan=True)

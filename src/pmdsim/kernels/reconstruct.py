@@ -226,6 +226,20 @@ def slope_deviation_pair_3d(points, camera_position, centre, e_u, e_v, pitch, u_
         change[p] = abs(s2 * scale - v1)
 
 
+@parallel_jit(fastmath=False)
+def monitor_distance(points, u, v, centre, e_u, e_v, pitch, u_mid, v_mid, out):
+    """Distance (mm) from each point (P, 3) to the monitor point of its coordinates (u, v)
+    (P,) px on a planar pixel grid (:func:`_monitor_point`), into ``out`` (P,): NumPy's
+    ``pixel_to_world`` and difference, the squares summed as NumPy's einsum sums three
+    (x and z first); NaN where an input is NaN."""
+    for p in numba.prange(points.shape[0]):
+        mx, my, mz = _monitor_point(u[p], v[p], centre, e_u, e_v, pitch, u_mid, v_mid)
+        dx = mx - points[p, 0]
+        dy = my - points[p, 1]
+        dz = mz - points[p, 2]
+        out[p] = math.sqrt((dx * dx + dz * dz) + dy * dy)
+
+
 #: :func:`node_support` codes: served by the spline, by the rim fit, not served (the pixel the
 #: node falls in is invalid; it falls outside the image, or its coordinates are not finite)
 SUPPORT_SPLINE, SUPPORT_RIM, SUPPORT_PIXEL_INVALID, SUPPORT_OUTSIDE = 0, 1, 2, 3

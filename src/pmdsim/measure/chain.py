@@ -122,9 +122,23 @@ def decode_fringes(fringes, monitor_resolution, decode_cfg, saturation_level=Non
 def surface_to_monitor_mm(sim, geometry) -> np.ndarray:
     """(H, W) distance (mm) from each pixel's surface point (``geometry.points``) to the
     exact monitor point of its principal reflection P; NaN where P misses the monitor."""
-    target = sim.scene.monitor.pixel_to_world(geometry.specular_u, geometry.specular_v)
-    target -= geometry.points
-    return np.sqrt(np.einsum("...k,...k->...", target, target))
+    from .reconstruct import planar_monitor
+
+    planar = planar_monitor(sim.scene.monitor)
+    if planar is None:
+        target = sim.scene.monitor.pixel_to_world(geometry.specular_u, geometry.specular_v)
+        target -= geometry.points
+        return np.sqrt(np.einsum("...k,...k->...", target, target))
+    from ..kernels.reconstruct import monitor_distance
+
+    shape = np.shape(geometry.specular_u)
+    out = np.empty(shape)
+    # one compiled pass, the same numbers (no (H, W, 3) temporaries)
+    monitor_distance(np.ascontiguousarray(geometry.points, np.float64).reshape(-1, 3),
+                     *(np.ascontiguousarray(a, np.float64).reshape(-1)
+                       for a in (geometry.specular_u, geometry.specular_v)),
+                     *planar, out.reshape(-1))
+    return out
 
 
 @dataclass(frozen=True, eq=False)
