@@ -314,6 +314,13 @@ def test_a_start_next_to_the_fixed_point_ends_there_sooner():
     assert warm.converged and warm.iterations < cold.iterations
     with pytest.raises(ValueError, match="start"):
         reconstruct(u, v, *args, spacing_mm=0.5, start=first.height_mm[:-1])
+    # a repetition without its own slope tolerance: the same height and slopes, NaN there
+    bare = reconstruct(u + du, v, *args, spacing_mm=0.5, start=first.height_mm,
+                       slope_tolerance=False)
+    for a in ("height_mm", "slope_x", "slope_y"):
+        assert np.array_equal(getattr(bare, a), getattr(warm, a), equal_nan=True)
+    assert np.isnan(bare.slope_tolerance) and warm.slope_tolerance > 0
+    assert bare.tolerance_mm == warm.tolerance_mm
 
 
 def test_settled_rule():

@@ -27,6 +27,7 @@ rectangle with ``size`` works as well).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -210,7 +211,7 @@ SOLVE_RTOL = 1e-3
 
 def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, grid=None,
                 anchor="centre", order=4, max_iter=30, tol_mm=1e-8, solver="auto",
-                start=None) -> Reconstruction:
+                start=None, slope_tolerance=True) -> Reconstruction:
     """Surface height and slopes from decoded monitor coordinates (monocular PMD).
 
     Parameters
@@ -238,6 +239,10 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
         The first height on the grid (mm; NaN nodes start from the nominal sag), e.g. the
         height of a reconstruction from nearly the same coordinates: the iteration then
         starts next to its fixed point (same ``tol_mm``, fewer iterations).
+    slope_tolerance : bool
+        Compute :attr:`Reconstruction.slope_tolerance` (the slopes' change for the
+        height's tolerance: two bisector-normal passes over the nodes); False: NaN, for a
+        repetition whose solver floor is not asked (a run's numerical-error repeats).
     """
     u = np.asarray(u, np.float64)
     v = np.asarray(v, np.float64)
@@ -343,8 +348,8 @@ def reconstruct(u, v, camera, monitor, prior, *, valid=None, spacing_mm=0.5, gri
     node_status = np.full(mask.shape, NODE_OUTSIDE_APERTURE, np.int8)
     node_status[mask] = status
     tolerance = _remaining(history)
-    slope_tol = 0.0
-    if sx is not None and ok_m.any():  # the slopes' change for the height's tolerance
+    slope_tol = 0.0 if slope_tolerance else math.nan
+    if slope_tolerance and sx is not None and ok_m.any():  # the slopes' change for the height's tolerance
         pts = s[ok_m]
         m3 = np.asarray(monitor.pixel_to_world(mu, mv), np.float64)
         moved = [slopes_in_frame(bisector_normals(p, cam_pos, m3), rot)

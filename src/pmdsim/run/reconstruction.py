@@ -31,10 +31,11 @@ def wanted(cfg, directions) -> bool:
     return have
 
 
-def reconstruct_coords(cfg, scene, u, v, valid, start=None, tables=True):
+def reconstruct_coords(cfg, scene, u, v, valid, start=None, tables=True,
+                       slope_tolerance=True):
     """:class:`~pmdsim.measure.reconstruct.Reconstruction` and its
     :class:`~pmdsim.measure.reconstruct.SurfaceErrors` (None, message on failure).
-    ``start``: the first height (:func:`~pmdsim.measure.reconstruct.reconstruct`);
+    ``start``, ``slope_tolerance``: :func:`~pmdsim.measure.reconstruct.reconstruct`'s;
     ``tables=False``: the errors without their Zernike tables."""
     rc = cfg.reconstruct
     if rc.prior is None:
@@ -46,7 +47,7 @@ def reconstruct_coords(cfg, scene, u, v, valid, start=None, tables=True):
     try:
         rec = reconstruct(u, v, scene.camera, scene.monitor, prior, valid=valid,
                           spacing_mm=rc.spacing_mm, anchor=rc.anchor, order=rc.order,
-                          start=start)
+                          start=start, slope_tolerance=slope_tolerance)
     except ValueError as err:
         return None, None, str(err)
     return rec, surface_errors(rec, scene.surface, rc.remove, tables=tables), None
@@ -169,7 +170,8 @@ def moved_errors(cfg, scene, rec, u, v, ex, ey, valid):
     linearisation was measured 40 % cheaper but disagreed with this repetition at the rim
     fit's nodes by more than the change itself (docs/performance.md)."""
     _, err, _ = reconstruct_coords(cfg, scene, u + np.nan_to_num(ex), v + np.nan_to_num(ey),
-                                   valid, start=rec.height_mm, tables=False)
+                                   valid, start=rec.height_mm, tables=False,
+                                   slope_tolerance=False)  # its solver floor: rec's
     return err
 
 
