@@ -457,6 +457,22 @@ def test_dot_moments_table_and_figures(tmp_path):
     assert ds["dot_centroid_col"].values[q] == pytest.approx(m.centroid[0])
 
 
+def _mirror_scene(monitor_y_mm: float):
+    """(config, simulation) of a 40 x 30 camera over the Fig. 3 plate and monitor, the
+    monitor's centre moved ``monitor_y_mm`` off the plane of incidence (a tilted monitor)."""
+    from pmdsim.render import Simulation
+
+    cfg = parse_config({
+        "camera": {"resolution": [40, 30], "focal_length_px": 60.0,
+                   "position_mm": [-845.2, 0.0, 1812.6], "look_at_mm": [0, 0, 0]},
+        "monitor": {"resolution": [1920, 1080], "pixel_pitch_mm": 0.25,
+                    "centre_mm": [253.6, monitor_y_mm, 543.8], "look_at_mm": [0, 0, 0]},
+        "surface": {"type": "flat", "size_mm": [300.0, 200.0]},
+        "brdf": {"model": "mirror"},
+    })
+    return cfg, Simulation.from_config(cfg)
+
+
 def test_slope_and_its_numerical_change_in_one_pass():
     """``slope_and_change_urad`` (the chain's slope and its numerical error's change, the
     reference's normal once in one compiled pass) gives the numbers of two conversions by
@@ -465,17 +481,10 @@ def test_slope_and_its_numerical_change_in_one_pass():
     geometry (a tilted monitor, dx != dy spread of points) and the small-angle fallback."""
     from pmdsim.measure.chain import SlopeGeometry, slope_and_change_urad, slope_deviation_urad
     from pmdsim.measure.numerical import propagate
-    from pmdsim.render import Geometry, Simulation
+    from pmdsim.render import Geometry
 
-    cfg = parse_config({
-        "camera": {"resolution": [40, 30], "focal_length_px": 60.0,
-                   "position_mm": [-845.2, 0.0, 1812.6], "look_at_mm": [0, 0, 0]},
-        "monitor": {"resolution": [1920, 1080], "pixel_pitch_mm": 0.25,
-                    "centre_mm": [253.6, 10.0, 543.8], "look_at_mm": [0, 0, 0]},
-        "surface": {"type": "flat", "size_mm": [300.0, 200.0]},
-        "brdf": {"model": "mirror"},
-    })
-    monitor = Simulation.from_config(cfg).scene.monitor
+    cfg, sim = _mirror_scene(10.0)
+    monitor = sim.scene.monitor
     rng = np.random.default_rng(2)
     shape = (30, 40)
     points = np.concatenate([rng.uniform(-120, 120, shape + (1,)), rng.uniform(-80, 80, shape + (1,)),
@@ -510,17 +519,9 @@ def test_surface_to_monitor_distance_compiled_equals_numpy():
     from types import SimpleNamespace
 
     from pmdsim.measure.chain import surface_to_monitor_mm
-    from pmdsim.render import Geometry, Simulation
+    from pmdsim.render import Geometry
 
-    cfg = parse_config({
-        "camera": {"resolution": [40, 30], "focal_length_px": 60.0,
-                   "position_mm": [-845.2, 0.0, 1812.6], "look_at_mm": [0, 0, 0]},
-        "monitor": {"resolution": [1920, 1080], "pixel_pitch_mm": 0.25,
-                    "centre_mm": [253.6, 40.0, 543.8], "look_at_mm": [0, 0, 0]},
-        "surface": {"type": "flat", "size_mm": [300.0, 200.0]},
-        "brdf": {"model": "mirror"},
-    })
-    sim = Simulation.from_config(cfg)
+    _, sim = _mirror_scene(40.0)
     rng = np.random.default_rng(9)
     shape = (23, 31)
     points = rng.uniform(-150, 150, shape + (3,))

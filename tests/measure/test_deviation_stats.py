@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pmdsim.measure.deviation import deviation_stats, finite_values
-from pmdsim.quantiles import percentile
+from pmdsim.measure.deviation import deviation_stats, finite_median, finite_values
+from pmdsim.quantiles import median, percentile
 
 
 def _maps(dtype, seed=5):
@@ -51,3 +51,15 @@ def test_deviation_stats_against_numpy(dtype):
     empty = deviation_stats(d, np.zeros_like(given))
     assert empty.n_valid == 0 and np.isnan(empty.mean)
     assert empty.n_masked == np.count_nonzero(np.isfinite(d))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_finite_median_of_the_masked_values(dtype):
+    """The chain's, the sweep's and the decoder's modulation medians: the median of the
+    finite masked values (NumPy's median of the gather), None where there is none."""
+    d, given = _maps(dtype)
+    assert finite_median(d, given) == median(d[given & np.isfinite(d)].astype(np.float64))
+    assert finite_median(d, given) == pytest.approx(np.median(d[given & np.isfinite(d)]),
+                                                    rel=1e-6)
+    assert finite_median(d, np.zeros_like(given)) is None
+    assert finite_median(np.full(3, np.nan)) is None

@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import DecodeConfig, FringeConfig
-from ..quantiles import median
 from . import deviation as analysis
 from . import decode as dec
 from .decode_plan import unambiguous_range_px
@@ -348,12 +347,6 @@ def _flag_counts(flags: np.ndarray, where: np.ndarray) -> dict:
     return {b.name: int(np.count_nonzero(f & int(b))) for b in dec.DecodeFlag}
 
 
-def _median(a, where=None) -> float | None:
-    """The median of the finite values of ``a`` (where ``where`` holds), None if none."""
-    a, _ = analysis.finite_values(a, where)
-    return median(a, overwrite=True) if a.size else None
-
-
 def statistics(chain: ChainResult, name: str) -> dict:
     """JSON-ready statistics of a chain: per direction the deviation statistics of each
     quantity, the pixel counts (what was masked and why), modulation medians and the
@@ -405,10 +398,11 @@ def statistics(chain: ChainResult, name: str) -> dict:
                     chain.surface_mask & ~considered)),
             },
             modulation={
-                "median_by_width": [_median(m, dc.decoded.valid) for m in dc.decoded.modulation],
-                "reference_median_by_width": [_median(m, considered)
+                "median_by_width": [analysis.finite_median(m, dc.decoded.valid)
+                                    for m in dc.decoded.modulation],
+                "reference_median_by_width": [analysis.finite_median(m, considered)
                                               for m in dc.reference.modulation],
-                "ratio_median_by_width": [_median(r, considered) for r in ratio],
+                "ratio_median_by_width": [analysis.finite_median(r, considered) for r in ratio],
             },
             reference_vs_exact_px=_stats_dict(analysis.deviation_stats(ref_q, considered)),
             coord_vs_exact_px=_stats_dict(analysis.deviation_stats(vs_exact, dv.valid,

@@ -38,6 +38,15 @@ def finite_values(values: np.ndarray, where: np.ndarray | None = None) -> tuple[
     return out[:n], int(either)
 
 
+def finite_median(values: np.ndarray, where: np.ndarray | None = None) -> float | None:
+    """The median of the finite values of ``values`` where ``where`` holds
+    (:func:`finite_values`), None if there is none."""
+    from ..quantiles import median
+
+    a, _ = finite_values(values, where)
+    return median(a, overwrite=True) if a.size else None
+
+
 def wrap(phase: np.ndarray) -> np.ndarray:
     """Wrap phases (rad) to (-pi, pi]."""
     w = np.mod(np.asarray(phase, np.float64) + np.pi, 2 * np.pi) - np.pi

@@ -460,12 +460,13 @@ class Pilot:
         bounded = np.where((off <= CUT_MEASURED) | (off > MAX_OFF), off, 0.0)
         weight = _edge_weight(f_total, bounded).reshape(-1)
         d = np.asarray(deltas, np.float64)
+        cos_d, sin_d = np.cos(d), np.sin(d)
         unknown = self.probe(n_rays).nodes < MIN_NODES
         ok = np.ascontiguousarray(sums_ok, np.bool_).reshape(-1)
         for di in range(nd):  # stated + floor + ROUNDOFF_PHASE + edge, pi at most, in place
             for wi in range(nw):
                 add_phase_floors(np.ascontiguousarray(images[di, wi], np.float32).reshape(k, -1),
-                                 np.cos(d), np.sin(d), weight, float(self.layout.lmax),
+                                 cos_d, sin_d, weight, float(self.layout.lmax),
                                  F32_SIGMAS, ROUNDOFF_PHASE, unknown, ok, stated[di, wi])
         return stated.reshape(nd, nw, h, w), int(rr.size)
 

@@ -11,6 +11,7 @@ import numpy as np
 from matplotlib.colors import to_rgba
 from matplotlib.patches import Patch
 
+from ..measure.deviation import finite_values
 from ..quantiles import percentile as quantile_of
 from .scene import imshow
 
@@ -96,8 +97,8 @@ def symmetric_limit(arrays, percentile: float = 99.5) -> float:
     """A symmetric colour limit: the largest ``percentile`` of |a| over ``arrays``, rounded."""
     vals = []
     for a in arrays:
-        a = np.abs(np.asarray(a, np.float64))
-        a = a[np.isfinite(a)]
+        a, _ = finite_values(a)
+        np.abs(a, out=a)
         if a.size:
             vals.append(quantile_of(a, percentile, overwrite=True))
     lim = max(vals) if vals else 0.0
@@ -199,8 +200,7 @@ def _histogram(ax, data: dict, colours: dict, stats: dict, bins: int = 121, lim=
     edges = np.linspace(-lim, lim, bins + 1)
     top = 0.0
     for key, a in data.items():
-        a = np.asarray(a, np.float64)
-        a = a[np.isfinite(a)]
+        a, _ = finite_values(a)
         if not a.size:
             continue
         s = stats.get(key, {})

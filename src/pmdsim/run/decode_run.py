@@ -36,7 +36,7 @@ from ..config import InputError, MissingInputError
 from ..measure import decode as dec
 from ..measure.decode_plan import METHODS, unambiguous_range_px
 from ..measure.images import load_image_stack
-from ..quantiles import median
+from ..measure.deviation import finite_median
 from ..store.folder import MANIFEST, atomic_run_dir, check_output_dir, is_run_dir
 from ..store.manifest import write_manifest
 from ..store.tables import write_json
@@ -170,11 +170,7 @@ def _stats(res: dec.DecodeResult, setup: DecodeSetup) -> dict:
     valid = res.valid
     n = valid.size
     coord = res.monitor_coord_px[valid]
-    med = []
-    for m in res.modulation:
-        a = np.asarray(m, np.float64)[valid]
-        a = a[np.isfinite(a)]
-        med.append(median(a, overwrite=True) if a.size else None)
+    med = [finite_median(m, valid) for m in res.modulation]
     return {
         "pixels": n,
         "valid": int(valid.sum()),

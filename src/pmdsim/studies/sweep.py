@@ -40,7 +40,7 @@ import numpy as np
 from ..measure.chain import QUANTITIES, STATISTICS, decode_problem
 from ..config import ConfigError, RunConfig, SweepConfig, SweepRange, parse_config, physical_estimator
 from ..config.resources import check_sweep_size
-from ..quantiles import median as sample_median
+from ..measure.deviation import finite_median
 
 #: Variables of a point: name -> (dimensions after the sweep's own, dtype, attributes).
 #: ``width`` is the index into ``patterns.fringes.widths_px`` (as given), ``row``/``col``
@@ -418,9 +418,8 @@ def measure_point(cfg: RunConfig, decimation: int = 8, scheduler: str = "synchro
                        for q in QUANTITIES] for st in per_direction], np.float64)
 
     def median(a, where):
-        a = np.asarray(a, np.float64)[where]
-        a = a[np.isfinite(a)]
-        return sample_median(a, overwrite=True) if a.size else np.nan
+        m = finite_median(a, where)
+        return np.nan if m is None else m
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
