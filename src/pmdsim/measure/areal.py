@@ -60,7 +60,8 @@ spectrum there (triangle inequality), so the PSD's error is ``(sqrt(P) + a)^2 - 
 normalisation and the band RMS's is ``a / sqrt(N sum w^2)`` (N grid nodes). With
 ``error_maps`` (signed maps of how the map moves by its numerical error: the run's
 reconstruction repeated with the decoded coordinates moved by the rule's signed error
-pattern, and its opposite; the budget's with them moved by +-e) ``a`` is the larger of
+pattern, and its opposite; the budget passes none: its shifted maps are no signed
+pattern, :mod:`pmdsim.studies.budget_areal`) ``a`` is the larger of
 their spectra: the bound for any error whose spectrum is no larger, whatever its phase (the
 quadrature's errors vary smoothly across pixels); a ``floor`` (node errors of any signs,
 e.g. a solver's tolerance) adds the amplitudes any signs of it give. With node errors ``e``
