@@ -15,6 +15,7 @@ import json
 import math
 import tomllib
 import warnings
+from types import SimpleNamespace
 
 import naive_quadrature as nq
 import numpy as np
@@ -24,6 +25,7 @@ from test_quadrature import FIG3, WIDTHS, fig3, pick
 from pmdsim.config import parse_config
 from pmdsim.kernels import bundle as kb
 from pmdsim.render import Simulation
+from pmdsim.render import order
 from pmdsim.render import pilot as pl
 from pmdsim.render.simulation import RuleTooSmall
 
@@ -173,19 +175,49 @@ def test_target_check_catches_a_pilot_one_order_too_low(monkeypatch):
     check(fr, ref)
     picked = fr.sampling["n_rays"]
     assert picked > 16
-    real = pl.choose_order
+    real = order.choose_order
 
     def too_low(pilot, n0, t, m):
         n, p, tried = real(pilot, n0, t, m)
         return n // 2, p, tried
 
-    monkeypatch.setattr(pl, "choose_order", too_low)
+    monkeypatch.setattr(order, "choose_order", too_low)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         _, low = render(d)
     assert picked in low.sampling["pilot"]["orders_tried"]  # what the pilot saw
     with pytest.raises(AssertionError):
         check(low, ref)
+
+
+def test_the_ladder_takes_the_cheapest_step_that_meets_the_target():
+    """choose_order on a pilot whose statement (grid P95) is given per rule, not monotonic
+    between two orders: after a rule within STEPS_WITHIN x of the target, the steps 9/8 ...
+    3/2 of it are tried in turn and the first that meets the target is taken (not the
+    3/2 step, not twice the rule); a step whose rule has the nodes of one tried before is
+    skipped; a rule further than STEPS_WITHIN x from the target goes straight to twice it;
+    max_rays bounds the steps."""
+    p95 = {16: 5.0, 32: 0.35, 36: 0.2, 40: 0.12, 44: 0.09, 48: 0.05, 64: 0.01, 128: 0.001}
+    same_nodes = {40: 36}  # the rule of 40 rays has the 36 nodes of the rule of 36
+
+    class Stub:
+        def nodes(self, n):
+            return same_nodes.get(n, n)
+
+        def grid_statement(self, n):
+            return np.full((2, 3, 4), p95[n])
+
+        def probe(self, n):
+            return SimpleNamespace(off=np.zeros((2, 3, 4)), mod=np.ones((2, 3, 4)))
+
+    n, got, tried = order.choose_order(Stub(), 16, 0.1, 10 ** 6)
+    assert (n, got) == (44, 0.09)
+    assert [t for t, _ in tried] == [16, 32, 36, 44]  # 40 skipped: the nodes of 36
+    n, _, tried = order.choose_order(Stub(), 16, 0.1, 40)  # max_rays: no step above 40
+    assert [t for t, _ in tried] == [16, 32, 36] and n == 36
+    p95[32] = 0.5  # beyond STEPS_WITHIN x the target: twice the rule at once
+    n, _, tried = order.choose_order(Stub(), 16, 0.1, 10 ** 6)
+    assert [t for t, _ in tried] == [16, 32, 64] and n == 64
 
 
 def test_target_renders_the_frame_once_and_the_manifest_counts_every_ray(tmp_path, monkeypatch):

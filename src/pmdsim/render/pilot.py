@@ -34,12 +34,7 @@ finer rule bounds their error (a 1-node rule and its 4-node refinement can agree
 accident): their phase is stated as known to within pi, with a warning naming
 ``sampling.n_rays``.
 
-**The order from a target** (:func:`choose_order`): the pilot renders the grid at
-``n0, 2 n0, 4 n0, ...`` nodes (``n0 = sampling.n_rays``), each rule's error against the
-rule four times finer, until the statement's P95 over the grid (worst fringe, pixels whose
-fringe keeps a modulation >= 0.05) is below the target or the next rule would pass
-``max_rays`` (after a rule within :data:`THREE_HALVES_WITHIN` x of the target, the rule of
-3/2 its nodes first); the camera is then rendered once, with that rule.
+The order from a target, by the pilot's statement on its grid: :mod:`pmdsim.render.order`.
 """
 
 from __future__ import annotations
@@ -362,6 +357,10 @@ class Pilot:
         return replace(s, n_rays=int(n_rays), part=0, error_estimate=False, target_error=None,
                        max_rays=max(s.max_rays, int(n_rays)))
 
+    def nodes(self, n_rays: int) -> int:
+        """The nodes of the rule of ``n_rays`` (its Gauss orders may give fewer)."""
+        return self.sampling(n_rays).rule(self.sim._lobe).n
+
     def probe(self, n_rays: int, rows=None, cols=None) -> Probe:
         """The probe of the rule of ``n_rays`` at the grid pixels (or at ``rows, cols``)."""
         grid = rows is None
@@ -536,58 +535,3 @@ def _linear_weights(nodes: np.ndarray, n: int) -> np.ndarray:
     wts[np.arange(n), j] = 1.0 - t
     wts[np.arange(n), j + 1] = t
     return wts
-
-
-def worst_p95(stated: np.ndarray, mod: np.ndarray, min_modulation: float = 0.05) -> float | None:
-    """The largest over fringes (leading axes) of the P95 over pixels (last axes) of
-    ``stated``, over pixels whose modulation ``mod`` is at least ``min_modulation``."""
-    from ..quantiles import percentile
-
-    worst = None
-    for idx in np.ndindex(*stated.shape[:2]):
-        a = stated[idx][np.isfinite(stated[idx]) & (mod[idx] >= min_modulation)]
-        if a.size:
-            p = percentile(a, 95)
-            worst = p if worst is None else max(worst, p)
-    return worst
-
-
-#: A rule whose grid P95 is within this factor of the target is followed by the rule of
-#: 3/2 its nodes before the one of twice them (the rules' error falls steeply with the
-#: order: on Fig. 3 the grid P95 is 0.196 mrad at 64 nodes, 0.059 at 96, 0.0216 at 128).
-THREE_HALVES_WITHIN = 4.0
-
-
-def choose_order(pilot: Pilot, n0: int, target: float, max_rays: int) -> tuple[int, float | None, list]:
-    """``(n_rays, p95, tried)``: the cheapest rule of the ladder ``n0 2^k`` (at most
-    ``max_rays``) whose statement's P95 over the grid (per fringe over every grid pixel,
-    the worst fringe, modulation >= 0.05) is at most ``target`` (rad), else the largest
-    tried; after a rule ``n`` that misses the target by at most
-    :data:`THREE_HALVES_WITHIN` x, the rule of ``3 n / 2`` is tried first and taken if it
-    meets the target (half the order can miss the target by several times while three
-    quarters of the next meets it; where the error falls monotonically with the order
-    this is the pick of "twice n, or 3/4 of it where that meets the target too" without
-    the rule of 2 n and its 4 x finer one). ``tried``: [(n_rays, p95 or None)] in order."""
-    def p95_of(n):
-        st = pilot.grid_statement(n)
-        fine = pilot.probe(FINE_FACTOR * n)
-        mod = np.where(np.nan_to_num(fine.off, nan=1.0) > MAX_OFF, 0.0, fine.mod)
-        # per fringe over all grid pixels: (B, gh, gw) -> (B, 1, gh gw)
-        return worst_p95(st.reshape(st.shape[0], 1, -1), mod.reshape(st.shape[0], 1, -1))
-
-    def met(p95):
-        return p95 is not None and p95 <= target
-
-    n, tried = int(n0), []
-    while True:
-        p95 = p95_of(n)
-        tried.append((n, p95))
-        if met(p95) or 2 * n > max_rays:
-            return n, p95, tried
-        m = (3 * n) // 2
-        if p95 is not None and p95 <= THREE_HALVES_WITHIN * target and n < m < 2 * n:
-            pm = p95_of(m)
-            tried.append((m, pm))
-            if met(pm):
-                return m, pm, tried
-        n *= 2

@@ -537,12 +537,13 @@ class Simulation:
     def choose_rule(self, widths, directions, shifts, cancel=None) -> "RuleChoice":
         """The pilot's part of :meth:`render_fringes` that comes before the camera's render
         (mode ``rule`` on a smooth integrand, :meth:`pilot_applies`): the rule of the target
-        (:func:`pmdsim.render.pilot.choose_order`), or ``n_rays`` and its grid probes
+        (:func:`pmdsim.render.order.choose_order`), or ``n_rays`` and its grid probes
         without one. It needs nothing of the camera's render, so it may run beside other
         work (in a thread: the kernels release the GIL); ``cancel``, a
         :class:`threading.Event`, stops it between two probes (:class:`~pmdsim.render.
         pilot.Cancelled`)."""
         from . import pilot as pl
+        from .order import choose_order
 
         if not self.pilot_applies():
             raise ValueError("choose_rule: the pilot applies to mode 'rule' with an error "
@@ -555,7 +556,7 @@ class Simulation:
         if samp.target_error is None:
             pilot.measured(samp.n_rays)  # the rule's and the finer rule's grid probes
             return RuleChoice(self.scene, key, pilot, samp.n_rays, None)
-        n, _, tried = pl.choose_order(pilot, samp.n_rays, samp.target_error, samp.max_rays)
+        n, _, tried = choose_order(pilot, samp.n_rays, samp.target_error, samp.max_rays)
         return RuleChoice(self.scene, key, pilot, n, tried)
 
     def _fringes_pilot(self, widths, directions, shifts, progress, choice=None) -> FringeResult:
@@ -566,6 +567,7 @@ class Simulation:
         import warnings
 
         from . import pilot as pl
+        from .order import choose_order
 
         samp = self.scene.sampling
         widths = tuple(float(w) for w in widths)
@@ -594,7 +596,7 @@ class Simulation:
                 break
             # the grid did not see what the whole camera states (its local pixels, the
             # monitor's edge): the next order the pilot accepts from twice this one
-            n_next, _, more = pl.choose_order(pilot, 2 * n, samp.target_error, samp.max_rays)
+            n_next, _, more = choose_order(pilot, 2 * n, samp.target_error, samp.max_rays)
             n = max(n_next, 2 * n)  # always a higher order: the loop ends at max_rays
             tried += more
         info = main.describe_sampling(True)
