@@ -204,17 +204,20 @@ class DatasetWriter:
 __all__ = ["DatasetWriter", "finish_store"]
 
 
-#: Significant mantissa bits kept (of float32's 23) for the stored camera values, sums,
-#: deviations, modulations, phases within a period and flags' companions: relative
-#: precision 2**-17 = 7.6e-6, finer than a 16-bit camera (1.5e-5 of full scale) and far
-#: below any deviation the chain reports; the zeroed low bits make the data compress ~2x.
+#: Significant mantissa bits kept (of float32's 23) for the stored camera values, lobe
+#: weight sums, deviations, modulations, phases within a period and flags' companions:
+#: relative precision 2**-17 = 7.6e-6, finer than a 16-bit camera (1.5e-5 of full scale)
+#: and far below any deviation the chain reports; the zeroed low bits make the data
+#: compress ~2x.
 KEEP_BITS = 16
-#: Variables stored with full float32 precision (absolute coordinates and phases: their
-#: absolute precision matters, ~1e-4 monitor px at 2000 px).
+#: Variables stored with full float32 precision: absolute coordinates and phases (their
+#: absolute precision matters, ~1e-4 monitor px at 2000 px), and the fringe sums, whose
+#: phase ``fringe_phase_error`` states (16 bits decoded 4-5e-3 mrad off at wide fringes,
+#: where a Fig. 3 rule states 1e-4 to 1e-3 mrad; tests/render/test_pilot.py).
 FULL_PRECISION = frozenset({
     "absolute_phase", "reference_absolute_phase", "monitor_coord_px", "monitor_coord_mm",
     "reference_monitor_coord_px", "reference_monitor_coord_mm", "specular_u", "specular_v",
-    "surface_to_monitor_mm",
+    "surface_to_monitor_mm", "fringe_sums_real", "fringe_sums_imag",
 })
 
 
@@ -232,9 +235,10 @@ def keep_bits(values: np.ndarray, bits: int = KEEP_BITS) -> np.ndarray:
 
 
 #: Compressor of the camera-image variables: Blosc LZ4 with bit shuffling. On the Fig. 3
-#: run it encodes 512 MB of float32 in 0.5 CPU-s to 72 MB; zstd level 5 (the earlier
-#: choice) makes 50 MB but takes 3.7 CPU-s, zstd level 1 70 MB in 1.0 s. Noisy floats
-#: hardly compress further: the cheap codec is the right trade for a run folder.
+#: run (the fringe sums then at 16 bits) it encoded 512 MB of float32 in 0.5 CPU-s to
+#: 72 MB; zstd level 5 (the earlier choice) makes 50 MB but takes 3.7 CPU-s, zstd level 1
+#: 70 MB in 1.0 s. Noisy floats hardly compress further: the cheap codec is the right trade
+#: for a run folder.
 CODEC = dict(cname="lz4", clevel=5, shuffle="bitshuffle")
 
 
