@@ -31,9 +31,10 @@ class SamplingConfig(_Model):
     a seeded Cranley-Patterson shift (noise). ``target_error_mrad``: the cheapest rule
     ``n_rays 2^k`` (or a step of 9/8 ... 3/2 of one that missed by at most 4 x) whose
     stated phase error (P95 over pixels, each fringe) is below it (picked by the pilot,
-    then the camera rendered once; :func:`pmdsim.render.order.choose_order`). Neither ``n_rays`` nor
-    ``target_error_mrad`` given (mode ``rule``): the target :data:`DEFAULT_TARGET_MRAD`
-    from :data:`DEFAULT_TARGET_START` nodes; ``n_rays`` alone renders exactly that rule.
+    then the camera rendered once; :func:`pmdsim.render.order.choose_order`). Neither
+    ``n_rays`` nor ``target_error_mrad`` given (mode ``rule``): the target
+    :data:`DEFAULT_TARGET_MRAD` from :data:`DEFAULT_TARGET_START` nodes; ``n_rays`` alone
+    renders exactly that rule.
     ``max_rays`` caps a target only.
     """
 
@@ -50,8 +51,8 @@ class SamplingConfig(_Model):
         "false states none")
     target_error_mrad: Annotated[Float, Field(gt=0)] | None = Field(
         None, description="the cheapest rule n_rays 2^k (or a step of 9/8 ... 3/2 of "
-        "one that missed by at most 4 x) whose stated phase error (P95 over pixels, every fringe) is below this, "
-        "picked by a pilot on a sparse grid of pixels; "
+        "one that missed by at most 4 x) whose stated phase error (P95 over pixels, every "
+        "fringe) is below this, picked by a pilot on a sparse grid of pixels; "
         "None: render n_rays as given (neither given in mode 'rule': 0.1 from 16 nodes)")
     max_rays: Annotated[Int, Field(ge=1, le=MAX_RAYS)] = 65536
     estimator: Literal["paper", "weighted_mean", "radiometric"] = Field(

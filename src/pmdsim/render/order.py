@@ -64,20 +64,25 @@ def choose_order(pilot: Pilot, n0: int, target: float,
     def met(p95):
         return p95 is not None and p95 <= target
 
-    n, tried = int(n0), []
+    tried, seen = [], set()  # the rules tried, and their node counts
+
+    def trial(m, nodes):
+        seen.add(nodes)
+        p = p95_of(m)
+        tried.append((m, p))
+        return p
+
+    n = int(n0)
     while True:
-        p95 = p95_of(n)
-        tried.append((n, p95))
+        p95 = trial(n, pilot.nodes(n))
         if met(p95):
             return n, p95, tried
         if p95 is not None and p95 <= STEPS_WITHIN * target:
-            nodes = {pilot.nodes(t) for t, _ in tried}
-            for m in dict.fromkeys(int(n * f) for f in STEPS):
-                if not n < m < 2 * n or m > max_rays or pilot.nodes(m) in nodes:
+            for m in (int(n * f) for f in STEPS):
+                nodes = pilot.nodes(m)
+                if not n < m < 2 * n or m > max_rays or nodes in seen:
                     continue
-                nodes.add(pilot.nodes(m))
-                pm = p95_of(m)
-                tried.append((m, pm))
+                pm = trial(m, nodes)
                 if met(pm):
                     return m, pm, tried
         if 2 * n > max_rays:
