@@ -13,6 +13,15 @@ same bits as NumPy (``tests/test_quantiles.py`` compares them bit for bit).
 
 Only float32 and float64 samples take the fast path (taken over all their values, as NumPy
 without an ``axis``); anything else is handed to NumPy.
+
+A sample of at least :data:`WINDOW_MIN` values is not partitioned whole: a strided
+subsample of :data:`SUBSAMPLE` values, sorted, gives a window of values that holds the two
+order statistics wanted with a margin of :data:`WINDOW_SIGMAS` binomial standard
+deviations; one compiled pass (:func:`pmdsim.kernels.select.window_values`) counts the
+values below the window and gathers those inside it, and partitioning those few gives the
+same two order statistics (3-4 ms instead of 6-10 ms on a Fig. 3 map). Where the window
+misses them (a subsample unlike the sample), the whole sample is partitioned as before: the
+window decides only the time, never the value.
 """
 
 from __future__ import annotations
@@ -23,22 +32,68 @@ import numpy as np
 
 #: The types of the fast path (the arithmetic stays in the sample's type, as NumPy's).
 FLOATS = (np.float32, np.float64)
+#: Samples of at least this many values take the window (:func:`_order_pair`).
+WINDOW_MIN = 1 << 16
+#: Values of the strided subsample that places the window.
+SUBSAMPLE = 2048
+#: The window's margin about the wanted rank in the subsample, in binomial standard
+#: deviations of that rank (plus :data:`WINDOW_PAD` ranks).
+WINDOW_SIGMAS = 6.0
+WINDOW_PAD = 8
 
 
-def _sample(a, overwrite: bool) -> np.ndarray | None:
-    """``a`` as a 1-D float32/float64 array the caller lets us reorder, or None for NumPy."""
+def _order_pair(s: np.ndarray, k: int, reorder: bool):
+    """``(s_(k), s_(k+1))``: the k-th and (k+1)-th smallest values of the 1-D float sample
+    ``s`` (0-based, ``k + 1 < s.size``), as NumPy scalars of its type; None where ``s``
+    holds a NaN. ``reorder``: ``s`` may be reordered (else a partition works on a copy)."""
+    n = s.size
+    if n >= WINDOW_MIN:
+        from .kernels.select import window_values
+
+        stride = n // SUBSAMPLE
+        sub = np.sort(s[::stride])
+        if np.isnan(sub[-1]):
+            return None
+        m = sub.size
+        p = (k + 0.5) / n
+        margin = int(WINDOW_SIGMAS * math.sqrt(m * p * (1.0 - p))) + WINDOW_PAD
+        r = int(p * m)
+        low = sub[r - margin] if r - margin >= 0 else s.dtype.type(-np.inf)
+        high = sub[r + 1 + margin] if r + 1 + margin < m else s.dtype.type(np.inf)
+        buf = np.empty(min(n, 2 * (2 * margin + 2) * stride + 1024), s.dtype)
+        below, inside, nan = window_values(s, low, high, buf)
+        if nan:
+            return None
+        if below <= k and k + 1 < below + inside and inside < buf.size:
+            part = buf[:inside]
+            j = k - below
+            part.partition(j)
+            return part[j], part[j + 1:].min()
+    elif np.isnan(s).any():
+        return None
+    if not reorder:
+        s = s.copy()
+    s.partition(k)
+    return s[k], s[k + 1:].min()
+
+
+def _sample(a, overwrite: bool) -> tuple[np.ndarray | None, bool]:
+    """``(a as a 1-D float32/float64 array, whether it may be reordered)``: a view where
+    it can be, reordered in place only with ``overwrite`` (else copied before a partition);
+    ``(None, False)`` for NumPy."""
     arr = np.asarray(a)
     if arr.dtype not in FLOATS:
-        return None
-    arr = arr.ravel()  # a view where it can be: reordered in place with overwrite
-    return arr if overwrite and arr.flags.writeable else arr.copy()
+        return None, False
+    flat = arr.ravel()
+    own = not np.may_share_memory(flat, arr)  # ravel copied
+    return flat, own or (overwrite and flat.flags.writeable)
 
 
 def percentile(a, q: float, *, overwrite: bool = False) -> float:
     """``np.percentile(a, q)`` (method ``"linear"``, over all values) as a float, the same
     bits. ``overwrite``: ``a`` may be reordered (no copy). NaN where ``a`` holds a NaN;
     ``a`` must not be empty."""
-    s = _sample(a, overwrite)
+    s, reorder = _sample(a, overwrite)
     if s is None:
         return float(np.percentile(a, q))
     n = s.size
@@ -46,17 +101,16 @@ def percentile(a, q: float, *, overwrite: bool = False) -> float:
         raise ValueError("percentile of an empty sample")
     if not 0 <= q <= 100:
         raise ValueError(f"percentile: q must be within [0, 100], got {q}")
-    if np.isnan(s).any():
-        return math.nan
     qf = np.true_divide(q, 100)  # as NumPy: q / 100 in float64, then the virtual index
     virtual = (n - 1) * qf
     if virtual >= n - 1:  # NumPy takes the last value for both neighbours
-        return float(s.max())
+        return math.nan if np.isnan(s).any() else float(s.max())
     lo = int(np.floor(virtual))
     gamma = float(virtual - lo)  # a Python float (NumPy's for a Python q): the sample's type
-    s.partition(lo)
-    a_lo = s[lo]
-    a_hi = s[lo + 1:].min()
+    pair = _order_pair(s, lo, reorder)
+    if pair is None:
+        return math.nan
+    a_lo, a_hi = pair
     diff = a_hi - a_lo
     if gamma >= 0.5:
         return float(a_hi - diff * (1 - gamma))
@@ -102,19 +156,21 @@ def one_value_change(a, q: float) -> float:
 def median(a, *, overwrite: bool = False) -> float:
     """``np.median(a)`` (over all values) as a float, the same bits. ``overwrite``: ``a``
     may be reordered (no copy). NaN where ``a`` holds a NaN; ``a`` must not be empty."""
-    s = _sample(a, overwrite)
+    s, reorder = _sample(a, overwrite)
     if s is None:
         return float(np.median(a))
     n = s.size
     if n == 0:
         raise ValueError("median of an empty sample")
-    if np.isnan(s).any():
-        return math.nan
     k = (n - 1) // 2
-    s.partition(k)
+    if n == 1:
+        return float(s[0])
+    pair = _order_pair(s, k, reorder)
+    if pair is None:
+        return math.nan
     if n % 2:
-        return float(s[k])
-    return float((s[k] + s[k + 1:].min()) / s.dtype.type(2))  # NumPy's mean of the two
+        return float(pair[0])
+    return float((pair[0] + pair[1]) / s.dtype.type(2))  # NumPy's mean of the two
 
 
 def nanmedian(a) -> float:

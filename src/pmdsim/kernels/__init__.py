@@ -2,7 +2,8 @@
 (``bundle``), the fringes' per-tile finishing and error sums (``fringe_finish``), phase
 decoding (``decode``), reconstruction (``reconstruct``), sag surfaces (``surface``),
 mantissa rounding for storage (``bits``), the exposure and integer images of camera
-values (``images``), polynomial exp/sin/cos (``fastmath``); every
+values (``images``), the window of a large sample's order statistics (``select``),
+polynomial exp/sin/cos (``fastmath``); every
 Numba option in ``_jit``.
 
 Modules here import nothing from the rest of :mod:`pmdsim`; they take and return plain
