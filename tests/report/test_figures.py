@@ -474,3 +474,28 @@ def test_log_tick_labels_are_powers_of_ten_in_plain_text():
     shown = [t.get_text() for t in ax.yaxis.get_ticklabels() if t.get_text()]
     assert "10⁻⁷" in shown and "10⁵" in shown and "10⁰" in shown
     assert not ax.yaxis.get_minor_ticks()
+
+
+def test_histogram_counts_are_those_of_the_linspace_edges():
+    """The deviation histogram bins by NumPy's uniform path (bins and range): the counts of
+    the explicit edges linspace(-lim, lim, bins + 1), values on the edges and the clipped
+    tails (the end bins) included."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pmdsim.report.chain_common import _histogram
+
+    rng = np.random.default_rng(4)
+    lim, bins = 0.3, 121
+    edges = np.linspace(-lim, lim, bins + 1)
+    a = np.concatenate([rng.normal(0.02, 0.1, 50_000), edges, edges[::7] + 1e-17,
+                        [-5.0, 7.0, np.nan]])
+    fig, ax = plt.subplots()
+    _histogram(ax, {"X": a}, {"X": "C0"}, {}, bins=bins, lim=lim)
+    drawn = ax.patches[0].get_xy()  # the step outline: (x, height) of every bin
+    plt.close(fig)
+    want, _ = np.histogram(np.clip(a[np.isfinite(a)], -lim, lim), bins=edges)
+    heights = drawn[1:-1:2, 1]  # each bin's top-left and top-right corner hold its count
+    np.testing.assert_array_equal(heights, want)

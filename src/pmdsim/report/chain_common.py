@@ -197,15 +197,16 @@ def _histogram(ax, data: dict, colours: dict, stats: dict, bins: int = 121, lim=
     styles = styles or {}
     if log:
         ax.set_yscale("log")
-    edges = np.linspace(-lim, lim, bins + 1)
     top = 0.0
     for key, a in data.items():
         a, _ = finite_values(a)
         if not a.size:
             continue
         s = stats.get(key, {})
-        counts, _, _ = ax.hist(np.clip(a, -lim, lim), bins=edges, histtype="step",
-                               linewidth=1.3, color=colours.get(key),
+        # bins and range, not an array of edges: NumPy's uniform-bin path (the same edges,
+        # linspace(-lim, lim, bins + 1), and counts; no sort of the values)
+        counts, _, _ = ax.hist(np.clip(a, -lim, lim), bins=bins, range=(-lim, lim),
+                               histtype="step", linewidth=1.3, color=colours.get(key),
                                linestyle=styles.get(key, "-"),
                                label=f"{key}: RMS {_pm(s, 'rms')}, P95 {_pm(s, 'p95')}"
                                f"\n{'':>4}mean {_g(s.get('mean'))}, n = {a.size:,}")
