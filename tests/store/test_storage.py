@@ -125,3 +125,52 @@ def test_chain_variables_reference_the_chain_and_are_stored_rounded(tmp_path):
     stored = xr.open_zarr(tmp_path / "s.zarr")["modulation_ratio"].values
     assert stored.dtype == np.float32
     np.testing.assert_array_equal(stored, expected)
+
+
+def test_camera_image_chunks_are_the_bytes_zarr_writes(tmp_path, monkeypatch):
+    """The writer encodes the camera-image chunks itself (``write_chunks``: bytes, Blosc,
+    CRC-32C); the store is byte for byte the one Zarr writes them into, for every kind of
+    camera-image variable: rounded and full-precision floats with NaNs, 3-D and 4-D, bool
+    and uint8 maps, on a camera with rows != columns."""
+    import filecmp
+
+    import xarray as xr
+
+    from pmdsim.store import writer
+
+    rng = np.random.default_rng(5)
+    h, w = 24, 37
+    phase = rng.normal(size=(2, h, w))
+    phase[0, 3, 4] = np.nan
+    ds = xr.Dataset({
+        "modulation": (("direction", "width", "row", "col"), rng.random((2, 3, h, w))),
+        "absolute_phase": (("direction", "row", "col"), phase, {"units": "rad"}),
+        "fringe_sums_real": (("direction", "width", "row", "col"),
+                             rng.normal(size=(2, 3, h, w)).astype(np.float32)),
+        "empty": (("direction", "row", "col"), np.full((2, h, w), np.nan)),  # fill only
+        "valid": (("direction", "row", "col"), rng.random((2, h, w)) > 0.3),
+        "decode_flags": (("direction", "row", "col"), rng.integers(0, 5, (2, h, w), np.uint8)),
+        "stats": (("statistic",), rng.random(5)),
+    }, coords={"direction": ["x", "y"], "row": np.arange(h), "col": np.arange(w)},
+        attrs={"name": "chunks"})
+    assert "absolute_phase" in writer.FULL_PRECISION
+    writer.write_dataset(ds, tmp_path / "direct.zarr")
+    calls = []
+    monkeypatch.setattr(writer, "write_chunks",
+                        lambda array, var: calls.append(array.name)
+                        or writer.write_through_zarr(array, var))
+    writer.write_dataset(ds, tmp_path / "zarr.zarr")
+    assert sorted(calls) == sorted(n for n in ds.data_vars if n != "stats")
+
+    def files(root):
+        return sorted(str(p.relative_to(root)) for p in root.rglob("*") if p.is_file())
+
+    a, b = tmp_path / "direct.zarr", tmp_path / "zarr.zarr"
+    assert files(a) == files(b)
+    assert any("/c/1/2/0/0" in f for f in files(a))  # every chunk of the 4-D variables
+    for f in files(a):
+        assert filecmp.cmp(a / f, b / f, shallow=False), f
+    back = xr.open_zarr(a, consolidated=True).load()
+    np.testing.assert_array_equal(back["decode_flags"].values, ds["decode_flags"].values)
+    np.testing.assert_array_equal(back["absolute_phase"].values,
+                                  phase.astype(np.float32))
