@@ -3,6 +3,8 @@ and the thinned imshow drawing the same picture as matplotlib's own nearest resa
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -172,10 +174,12 @@ def test_the_chain_figures_start_before_the_reconstruction(tmp_path, monkeypatch
     d["output"] = {"figures": True, "write_images": False}
     res = pipeline.run_simulation(parse_config(d), tmp_path / "run")
     drawn = [e for e in events if e[0] == "figures" and e[1]]
-    assert events.index(("diagnostics",)) < events.index(("figures", ("setup",))) \
-        < events.index(("figures", ("overview",))) < events.index(("reconstruction",)) \
+    # the set-up figure (its data exist after the render) is drawn with the overview: one
+    # fork of the run's process fewer
+    assert events.index(("diagnostics",)) < events.index(("figures", ("setup", "overview"))) \
+        < events.index(("reconstruction",)) \
         < events.index(("figures", ("surface_errors", "surface_psd")))
-    assert [e[1] for e in drawn] == [("setup",), ("overview",), ("surface_errors", "surface_psd")]
+    assert [e[1] for e in drawn] == [("setup", "overview"), ("surface_errors", "surface_psd")]
     stats = json.loads((res.outdir / "statistics.json").read_text())
     assert "reconstruction" in stats and "diagnostics" in stats
     assert json.loads(schema.load_run(res.outdir).attrs["statistics_json"]) == stats
@@ -499,3 +503,76 @@ def test_histogram_counts_are_those_of_the_linspace_edges():
     want, _ = np.histogram(np.clip(a[np.isfinite(a)], -lim, lim), bins=edges)
     heights = drawn[1:-1:2, 1]  # each bin's top-left and top-right corner hold its count
     np.testing.assert_array_equal(heights, want)
+
+
+def test_figures_held_for_the_chain_start_at_the_end_when_it_never_comes(monkeypatch):
+    """In a decoding run the set-up figure waits for the chain's figures (one fork fewer);
+    a run whose chain figures never come draws it when the run collects its figures; a run
+    without decoding draws it at once."""
+    import xarray as xr
+
+    from pmdsim.run import figures as figures_mod
+
+    started = []
+    monkeypatch.setattr(figures_mod, "start_drawings",
+                        lambda names, *a, **k: started.append(tuple(names)) or [])
+    images = xr.Dataset({"fringes": (("row", "col"), np.zeros((2, 3)))})
+    chain = images.assign(phase_deviation=(("row", "col"), np.zeros((2, 3))))
+
+    sched = figures_mod.FigureSchedule("summary", True, Path("."), "r", "", sim=None)
+    assert sched.offer(images) == [] and started == []
+    assert sched.offer(chain) == ["setup", "overview"]
+    assert started == [("setup", "overview")]
+
+    started.clear()
+    sched = figures_mod.FigureSchedule("summary", True, Path("."), "r", "", sim=None)
+    sched.offer(images)
+    assert started == []
+    assert sched.paths([]) == [] and started == [("setup",)]
+
+    started.clear()
+    sched = figures_mod.FigureSchedule("summary", False, Path("."), "r", "", sim=None)
+    assert sched.offer(images) == ["setup", "fringes", "modulation"]
+
+
+def _compile_a_new_kernel() -> None:
+    from numba import njit
+
+    @njit(cache=False)
+    def twice(x):
+        return 2.0 * x
+
+    assert twice(1.5) == 3.0
+
+
+def test_a_figure_fork_waits_for_a_compiling_thread_and_the_child_compiles():
+    """No fork while another thread compiles or loads a kernel (Numba's compiler lock,
+    whose LLVM lock a forked process would inherit taken and hang on); the forked process
+    itself compiles (the lock it inherits is its own thread's, re-entrant)."""
+    import multiprocessing as mp
+    import threading
+    import time
+
+    from numba.core.compiler_lock import global_compiler_lock
+
+    from pmdsim.run.figures import _no_compilation
+
+    held, order = threading.Event(), []
+
+    def compiling():
+        with global_compiler_lock:
+            held.set()
+            time.sleep(0.3)
+            order.append("compiled")
+
+    t = threading.Thread(target=compiling)
+    t.start()
+    held.wait()
+    with _no_compilation():
+        order.append("fork")
+        child = mp.get_context("fork").Process(target=_compile_a_new_kernel)
+        child.start()
+    child.join(timeout=120)
+    t.join()
+    assert order == ["compiled", "fork"]
+    assert child.exitcode == 0

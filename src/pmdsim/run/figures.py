@@ -243,6 +243,23 @@ def _signals_deferred():
             signal.raise_signal(n)
 
 
+@contextlib.contextmanager
+def _no_compilation():
+    """Numba's compiler lock held while the block runs (it waits for a thread that is
+    compiling or loading a kernel): a fork in the middle of another thread's compilation
+    would leave the forked process with LLVM's lock taken, and it would hang at its first
+    kernel of a new signature (a figure's float32 map). The forked process inherits the
+    lock as held by its own (forking) thread, which may take it again: the lock is
+    re-entrant."""
+    if "numba" not in sys.modules:
+        yield
+        return
+    from numba.core.compiler_lock import global_compiler_lock
+
+    with global_compiler_lock:
+        yield
+
+
 def _draw_in_child(conn, names, folder, run_name, description, ds, sim) -> None:
     """Forked process: draw ``names`` from the inherited in-memory data; send back
     ``[(name, path or None, error or None)]``."""
@@ -293,7 +310,7 @@ class Drawing:
                                     args=(send, self.names, str(self.folder), *self.args),
                                     daemon=True)
             try:
-                with _signals_deferred():
+                with _signals_deferred(), _no_compilation():
                     self.proc.start()
             except OSError:  # no fork (e.g. strict memory overcommit): drawn here, later
                 send.close()
@@ -353,16 +370,30 @@ class Drawing:
 _COST = {"overview": 1.5, "deviation": 1.2, "phase": 1.2, "masks": 0.8, "histograms": 0.6,
          "modulation_ratio": 0.8, "fringes": 0.5, "modulation": 0.6, "setup": 0.5,
          "surface_errors": 0.4, "surface_psd": 0.5}
+#: Drawing cost (CPU-s, :data:`_COST`) that a process of its own must have by default: a
+#: fork of the run's process (gigabytes on a real camera) costs it copy-on-write page
+#: faults while the drawing process lives, and the process its own start and teardown
+#: (the Fig. 3 run with its four default figures in two processes instead of four: about
+#: 0.5 CPU-s less, docs/performance.md).
+PROCESS_COST = 2.0
+
+
+def default_processes(names) -> int:
+    """Processes for drawing ``names`` together by default: one per :data:`PROCESS_COST`
+    of their drawing cost, at least one, at most one per core and per figure."""
+    cost = sum(_COST.get(n, 1.0) for n in names)
+    return max(1, min(int(cost // PROCESS_COST), os.cpu_count() or 1, len(names)))
 
 
 def start_drawings(names, folder: Path, run_name: str, description: str, ds, sim,
                    workers: int | None = None) -> list[Drawing]:
-    """:class:`Drawing` jobs for ``names``: ``workers`` processes (default one per core, at
-    most one per figure), each given figures of about equal drawing cost."""
+    """:class:`Drawing` jobs for ``names``: ``workers`` processes (default
+    :func:`default_processes`; at most one per figure), each given figures of about equal
+    drawing cost."""
     names = list(names)
     if not names:
         return []
-    workers = min(len(names), workers or os.cpu_count() or 1)
+    workers = min(len(names), workers or default_processes(names))
     groups: list[list[str]] = [[] for _ in range(workers)]
     load = [0.0] * workers
     for n in sorted(names, key=lambda n: -_COST.get(n, 1.0)):
@@ -394,7 +425,9 @@ class FigureSchedule:
     (:func:`planned_names`) starts (:func:`start_drawings`, forked processes) at the first
     offer whose dataset holds what it needs (:data:`FIGURES`): the set-up and fringe
     figures once the images exist, the chain's once the deviation exists, the
-    reconstruction's once the surface is reconstructed. ``before_fork`` is called before
+    reconstruction's once the surface is reconstructed. In a run that decodes, the
+    figures that need only the images wait for the chain's and are drawn with them (one
+    fork of the run's process fewer: :data:`PROCESS_COST`). ``before_fork`` is called before
     the first start (the run waits there for the reference's reconstruction thread);
     every start runs inside ``fork_guard()`` (a context manager: the run's dataset writer
     pauses, so that no thread holds a lock the forked process needs).
@@ -409,6 +442,7 @@ class FigureSchedule:
         self.fork_guard = fork_guard or contextlib.nullcontext
         self.started: list[str] = []
         self.drawings: list[Drawing] = []
+        self.held = None  # (names, dataset): figures waiting for the chain's
 
     def offer(self, ds, sim=None) -> list[str]:
         """Start the planned figures that ``ds`` can give and that have not started;
@@ -418,8 +452,20 @@ class FigureSchedule:
             self.sim = sim
         names = [n for n in self.planned
                  if n not in self.started and _has(ds, FIGURES[n][1])]
+        chain = [n for n in self.planned if FIGURES[n][1] == "chain"]
+        self.held = None
+        if chain and not any(n in self.started or n in names for n in chain):
+            # the chain's figures are still to come: the others wait to be drawn with them
+            # (or, should they never come, at the end: :meth:`paths`)
+            early = [n for n in names if FIGURES[n][1] in (None, "fringes")]
+            self.held = (early, ds) if early else None
+            names = [n for n in names if n not in early]
+        self._start(names, ds)
+        return names
+
+    def _start(self, names, ds) -> None:
         if not names:
-            return []
+            return
         if self.before_fork is not None:
             self.before_fork()
             self.before_fork = None
@@ -427,11 +473,15 @@ class FigureSchedule:
         with self.fork_guard():
             self.drawings += start_drawings(names, self.folder, self.run_name,
                                             self.description, ds, self.sim, self.workers)
-        return names
 
     def paths(self, notes: list) -> list[Path]:
         """Wait for every started figure; their paths in the order of :data:`FIGURES` (a
-        figure that could not be drawn is a note)."""
+        figure that could not be drawn is a note). Figures held for the chain's, which
+        never came, start now."""
+        if self.held is not None:
+            names, ds = self.held
+            self.held = None
+            self._start([n for n in names if n not in self.started], ds)
         out: list[Path] = []
         for d in self.drawings:
             out += d.paths(notes)
@@ -444,5 +494,5 @@ class FigureSchedule:
 
 
 __all__ = ["FIGURES", "figure_names", "draw_figures", "draw_one", "default_workers",
-           "Drawing", "start_drawings", "can_fork",
+           "Drawing", "start_drawings", "default_processes", "PROCESS_COST", "can_fork",
            "planned_names", "FigureSchedule"]
