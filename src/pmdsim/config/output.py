@@ -20,5 +20,6 @@ class OutputConfig(_Model):
         "later from the run folder)")
     figure_workers: Annotated[Int, Field(ge=1, le=4096)] | None = Field(
         None, description="processes drawing a run's figures (forked on Linux, drawing "
-        "from the run's data while it computes and writes); default: one per core, at most "
-        "one per figure")
+        "from the run's data while it computes and writes); default: one per 2 CPU-s of "
+        "drawing of the figures started together (pmdsim.run.figures.PROCESS_COST), at most "
+        "one per core and per figure")
