@@ -19,7 +19,7 @@ subsample of :data:`SUBSAMPLE` values, sorted, gives a window of values that hol
 order statistics wanted with a margin of :data:`WINDOW_SIGMAS` binomial standard
 deviations; one compiled pass (:func:`pmdsim.kernels.select.window_values`) counts the
 values below the window and gathers those inside it, and partitioning those few gives the
-same two order statistics (3-4 ms instead of 6-10 ms on a Fig. 3 map). Where the window
+same two order statistics (2-3 ms instead of 6-10 ms on a Fig. 3 map). Where the window
 misses them (a subsample unlike the sample), the whole sample is partitioned as before: the
 window decides only the time, never the value.
 """

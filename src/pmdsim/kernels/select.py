@@ -10,7 +10,6 @@ partitioning the whole sample (:mod:`pmdsim.quantiles`). The NumPy reference is
 
 from __future__ import annotations
 
-
 from ._jit import jit
 
 
