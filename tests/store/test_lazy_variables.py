@@ -84,48 +84,29 @@ print("ok")
     assert out.stdout.strip().endswith("ok")
 
 
-def test_written_in_groups_byte_for_byte_as_at_once(tmp_path, monkeypatch):
-    """The writer stores a part's variables a group at a time (memory: xarray reads all
-    variables of one call first): every file of the store is the same as one call's."""
+def test_a_lazy_variable_is_read_one_camera_image_at_a_time(tmp_path, monkeypatch):
+    """The writer reads (and rounds) a lazy camera-image variable one camera image at a
+    time, whatever the variable's size (a 5 MP run's fringe images), and stores what the
+    whole converted stack holds."""
+    from pmdsim.store import lazy_arrays
     from pmdsim.store import writer as writing
 
     a, b = _parts()
-    ds = xr.Dataset({
-        "phase_deviation": (("direction", "row", "col"), lazy_stack([a, b])),
-        "modulation": (("width", "row", "col"), np.stack([a, b, a * 2]).astype(np.float32)),
-        "valid": (("direction", "row", "col"), lazy_stack([a > 0, b > 0])),
-        "deviation_stats": (("direction", "statistic"), np.arange(6.0).reshape(2, 3)),
-    }, coords={"direction": ["x", "y"], "width": [50.0, 400.0, 3200.0],
-               "row": np.arange(5), "col": np.arange(7) * 2})
-    monkeypatch.setattr(writing, "GROUP_BYTES", 1)
-    assert len(writing._groups(ds)) == 3  # the small variables with the first, then one each
-    _assert_same_files(ds, tmp_path, monkeypatch, "GROUP_BYTES", 2**40, 1)
+    reads = []
+    get = lazy_arrays._Lazy._get
 
+    def recording(self, key):
+        out = get(self, key)
+        reads.append(out.shape)
+        return out
 
-def test_a_large_variable_is_written_chunk_by_chunk_with_the_same_bytes(tmp_path, monkeypatch):
-    """A camera-image variable above LARGE_BYTES goes through Dask one image at a time (a
-    5 MP run's fringe images): the same files as from one converted copy."""
-
-    a, b = _parts()
-    ds = xr.Dataset({
-        "phase_deviation": (("direction", "row", "col"), lazy_stack([a, b])),
-        "fringes": (("width", "row", "col"), np.stack([a, b, a * 2]).astype(np.float32)),
-    }, coords={"direction": ["x", "y"], "row": np.arange(5), "col": np.arange(7) * 2})
-    _assert_same_files(ds, tmp_path, monkeypatch, "LARGE_BYTES", 2**40, 1)
-
-
-def _assert_same_files(ds, tmp_path, monkeypatch, setting: str, *limits) -> None:
-    """Write ``ds`` once per value of ``writing.<setting>``: every file byte for byte alike."""
-    from pmdsim.store import writer as writing
-
-    stores = []
-    for i, limit in enumerate(limits):
-        monkeypatch.setattr(writing, setting, limit)
-        path = tmp_path / f"{setting}-{i}.zarr"
-        writing._write_part(ds, path, create=True)
-        writing.finish_store(path, {"name": "t"})
-        stores.append({p.relative_to(path): p.read_bytes() for p in sorted(path.rglob("*"))
-                       if p.is_file()})
-    assert all(s.keys() == stores[0].keys() for s in stores)
-    for k in stores[0]:
-        assert all(s[k] == stores[0][k] for s in stores), k
+    monkeypatch.setattr(lazy_arrays._Lazy, "_get", recording)
+    ds = xr.Dataset({"fringes": (("width", "shift", "row", "col"),
+                                 lazy_stack([np.stack([a, b]), np.stack([b, a]),
+                                             np.stack([a * 2, b])]))},
+                    coords={"row": np.arange(5), "col": np.arange(7) * 2})
+    writing.write_dataset(ds, tmp_path / "run.zarr")
+    assert len(reads) == 6 and all(r == (5, 7) for r in reads)
+    back = xr.open_zarr(tmp_path / "run.zarr", consolidated=True)["fringes"].values
+    want = np.stack([np.stack([a, b]), np.stack([b, a]), np.stack([a * 2, b])])
+    np.testing.assert_array_equal(back, writing.keep_bits(want.astype(np.float32)))

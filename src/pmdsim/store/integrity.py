@@ -105,8 +105,9 @@ def _checksum_mismatch(arr, path: Path) -> tuple[str, str] | None:
     """(stored, computed) crc32c of the chunk file ``path`` of ``arr`` when the array has a
     ``crc32c`` codec (the last one: the file ends with the checksum of the bytes before it)
     and they differ; None otherwise."""
-    import google_crc32c
     from zarr.codecs import Crc32cCodec
+
+    from .writer import crc32c_checksum
 
     codecs = getattr(arr.metadata, "codecs", ())
     if not codecs or not isinstance(codecs[-1], Crc32cCodec):
@@ -118,7 +119,7 @@ def _checksum_mismatch(arr, path: Path) -> tuple[str, str] | None:
     if len(data) < 4:
         return data.hex() or "nothing", "a 4-byte checksum"
     stored = data[-4:]
-    computed = int(google_crc32c.value(data[:-4])).to_bytes(4, "little")
+    computed = crc32c_checksum(data[:-4])
     return None if stored == computed else (stored.hex(), computed.hex())
 
 

@@ -133,29 +133,4 @@ def converted(data, convert):
     return convert(np.asarray(data))
 
 
-def as_dask(data):
-    """A lazily read variable (:func:`lazy_stack`, :func:`converted`) as a Dask array of one
-    chunk per camera image (the last two axes), read chunk by chunk when computed: for a
-    variable too large to hold a converted copy of (imports ``dask.array``)."""
-    import dask.array as da
-
-    inner = data.array
-    chunks = (1,) * (len(inner.shape) - 2) + tuple(inner.shape[-2:])
-
-    class _Blocks:  # Dask slices with plain tuples of slices
-        shape, dtype, ndim = inner.shape, inner.dtype, len(inner.shape)
-
-        def __getitem__(self, key):
-            return inner._get(tuple(key))
-
-    return da.from_array(_Blocks(), chunks=chunks, name=False, asarray=False,
-                         meta=np.empty((0,) * len(inner.shape), inner.dtype))
-
-
-def is_lazy(data) -> bool:
-    """Whether an xarray variable's data is one of this module's lazily read arrays."""
-    return isinstance(data, indexing.LazilyIndexedArray) and isinstance(data.array, _Lazy)
-
-
-__all__ = ["lazy_array", "lazy_stack", "converted", "xarray_without_dask_import", "as_dask",
-           "is_lazy"]
+__all__ = ["lazy_array", "lazy_stack", "converted", "xarray_without_dask_import"]

@@ -13,7 +13,8 @@ The camera-image chunks are encoded here (:func:`write_chunks`: ``bytes``, Blosc
 ``crc32c`` as the array's ``zarr.json`` prescribes) and written as files, byte for byte
 what Zarr writes (``tests/store/test_storage.py`` compares every file): Zarr's asynchronous
 codec pipeline copied every chunk and took about twice the CPU of the compression itself
-(the Fig. 3 dataset: 1.6-2.0 CPU-s written by Zarr, 1.3-1.5 now).
+(the Fig. 3 dataset: 1.6-2.0 CPU-s written by Zarr, 1.1-1.2 now, in one ``to_zarr`` call
+for the whole part).
 
 Writing in parts: the rendered arrays are final when they are rendered, the chain's when
 they are computed: nothing needs to wait for the end of the run to be written. A run hands its dataset to the
@@ -40,65 +41,24 @@ import functools
 import numpy as np
 
 
-#: Variables of a part written per call of ``to_zarr`` up to this many bytes: xarray encodes
-#: (reads) every variable of a call before it writes any, so a call's variables are in
-#: memory at once (a variable larger than this is written alone).
-GROUP_BYTES = 64 * 2**20
-#: A camera-image variable larger than this (as stored) is written chunk by chunk through
-#: Dask (one image at a time, as all were before: 5 MP runs keep their memory) instead of
-#: from one converted copy; none of the Fig. 3 run's is (the largest, its fringe images,
-#: is 126 MB), so it never imports ``dask.array``.
-LARGE_BYTES = 256 * 2**20
-
-
-def _stored_bytes(var) -> int:
-    return var.size * (4 if var.dtype.kind == "f" else var.dtype.itemsize)
-
-
-def _groups(ds) -> list[list[str]]:
-    """The data variables of ``ds`` in groups of at most :data:`GROUP_BYTES` (as stored:
-    float32 for floats), in order; the small ones with the first group."""
-    small, big = [], []
-    for name, var in ds.data_vars.items():
-        (big if var.ndim >= 2 and var.dims[-2:] == ("row", "col") else small).append(name)
-    groups, size = [list(small)], 0
-    for name in big:
-        var = ds[name]
-        nbytes = _stored_bytes(var)
-        if size and size + nbytes > GROUP_BYTES:
-            groups.append([])
-            size = 0
-        groups[-1].append(name)
-        size += nbytes
-    return [g for g in groups if g]
-
-
 def _write_part(ds, path: Path, create: bool) -> None:
     """Write ``ds`` (a part of a run dataset) into the store ``path``: create it, or add
-    the part's variables to it. No consolidated metadata (see :func:`finish_store`). The
-    camera-image variables are rounded as they are read (:func:`pmdsim.store.lazy_arrays.converted`),
-    a group of at most :data:`GROUP_BYTES` at a time: xarray and Zarr create their arrays
-    (metadata and attributes) from a placeholder of the fill value, whose chunks Zarr
-    leaves out, and :func:`write_chunks` writes every chunk, one camera image at a time,
-    with the bytes Zarr would write. A part holding Dask arrays (a loaded run's, or a
-    variable above :data:`LARGE_BYTES`) is written through Zarr, computed on Dask's
-    threaded scheduler, passed explicitly (not through ``dask.config``, which is global:
-    the run's other threads use their own). Every chunk is written, also one that holds
-    only the fill value (``write_empty_chunks``): Zarr's check for such chunks compared
-    every value of every camera image (1 ms a chunk, ~0.25 CPU-s on Fig. 3), and a run's
-    chunks are whole images, which hold data."""
-    import sys
-
-
-    from . import lazy_arrays as lazy
-
+    the part's variables to it. No consolidated metadata (see :func:`finish_store`).
+    xarray and Zarr create the arrays (metadata and attributes), the camera-image ones from
+    a placeholder of the fill value whose chunks Zarr leaves out, and :func:`write_chunks`
+    writes every camera-image chunk with the bytes Zarr would write, rounding one camera
+    image at a time as it reads it (:func:`pmdsim.store.lazy_arrays.converted`): writing
+    holds one image, whatever the variable's size. A part holding Dask arrays (a loaded
+    run's) is written through Zarr, computed on Dask's threaded scheduler, passed explicitly
+    (not through ``dask.config``, which is global: the run's other threads use their own).
+    Every chunk is written, also one that holds only the fill value
+    (``write_empty_chunks``): Zarr's check for such chunks compared every value of every
+    camera image (1 ms a chunk, ~0.25 CPU-s on Fig. 3), and a run's chunks are whole
+    images, which hold data."""
     stored = storage_form(ds, lazy=True)
-    large = {n: lazy.as_dask(v.variable._data) for n, v in stored.data_vars.items()
-             if _stored_bytes(v) > LARGE_BYTES and lazy.is_lazy(v.variable._data)}
-    if large:  # chunk by chunk, as a loaded run's Dask arrays below
-        stored = stored.assign({n: stored[n].copy(data=a) for n, a in large.items()})
-    da = sys.modules.get("dask.array")
-    if da is not None and any(isinstance(v.data, da.Array) for v in stored.variables.values()):
+    # Dask arrays, asked of each variable without reading it (``Variable.data`` reads a
+    # lazily indexed variable whole)
+    if any(v.chunks is not None for v in stored.variables.values()):
         from ..render import local_scheduler
 
         stored.to_zarr(path, mode="w-" if create else "a", consolidated=False,
@@ -106,26 +66,15 @@ def _write_part(ds, path: Path, create: bool) -> None:
                        write_empty_chunks=True, compute=False).compute(
             scheduler=local_scheduler("threads"))
         return
-    # the camera-image variables: Zarr creates their arrays (metadata) from a placeholder of
-    # the fill value, whose chunks it leaves out, and their chunks are written here
     direct = [n for n, v in stored.data_vars.items() if _image_like(v)]
     template = stored.assign({n: stored[n].copy(data=_placeholder(stored[n])) for n in direct})
-    written: set = set()
-    for k, names in enumerate(_groups(template)):
-        part = template[names]
-        # coordinates of the part that came without a variable of this group
-        part = part.assign_coords({c: template.coords[c] for c in template.coords
-                                   if c not in part.coords and k == 0})
-        part = part.drop_vars([c for c in part.coords if c in written])
-        encoding = _encoding(part, None if create and k == 0 else path)
-        for name, e in encoding.items():
-            e["write_empty_chunks"] = name not in direct
-        part.to_zarr(path, mode="w-" if create and k == 0 else "a", consolidated=False,
+    encoding = _encoding(template, None if create else path)
+    for name, e in encoding.items():
+        e["write_empty_chunks"] = name not in direct
+    template.to_zarr(path, mode="w-" if create else "a", consolidated=False,
                      encoding=encoding, zarr_format=3)
-        written.update(part.coords)
-        for name in names:
-            if name in direct:
-                write_chunks(Path(path) / str(name), stored[name].variable)
+    for name in direct:
+        write_chunks(Path(path) / str(name), stored[name].variable)
 
 
 def _placeholder(var) -> np.ndarray:
@@ -145,6 +94,14 @@ def write_through_zarr(array: Path, var) -> None:
         target[index] = var[index].values
 
 
+def crc32c_checksum(data) -> bytes:
+    """The 4 bytes Zarr v3's ``crc32c`` codec appends to the encoded ``data``: its CRC-32C,
+    little endian."""
+    import google_crc32c
+
+    return int(google_crc32c.value(data)).to_bytes(4, "little")
+
+
 #: ``blosc`` codec configuration -> :class:`numcodecs.Blosc` shuffle
 _SHUFFLE = {"noshuffle": 0, "shuffle": 1, "bitshuffle": 2}
 
@@ -160,7 +117,6 @@ def write_chunks(array: Path, var) -> None:
     through Zarr."""
     import json
 
-    import google_crc32c
     from numcodecs import Blosc
 
     meta = json.loads((array / "zarr.json").read_text())
@@ -182,7 +138,7 @@ def write_chunks(array: Path, var) -> None:
     for index in np.ndindex(*shape[:-2]):
         block = np.ascontiguousarray(var[index].values, dtype)
         data = blosc.encode(block)
-        crc = np.array([google_crc32c.value(data)], "<u4").tobytes()
+        crc = crc32c_checksum(data)
         key = sep.join(["c", *map(str, index), "0", "0"])
         target = array / key
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -390,11 +346,11 @@ def write_dataset(ds, path: str | Path) -> Path:
     metadata so that a plain ``xarray.open_zarr(path)`` opens it without a warning);
     see :func:`storage_form` for the precision.
 
-    The camera-image variables are rounded and compressed one image at a time on Dask's
-    threaded scheduler (NumPy and Blosc release the GIL), whatever scheduler is active
-    (a ``dask.distributed`` client would ship the run's arrays to its workers). A run
-    writes its dataset in parts while it computes (:class:`DatasetWriter`), with the same
-    bytes."""
+    The camera-image variables are rounded, compressed and written one image at a time
+    (:func:`_write_part`; a loaded run's Dask arrays on Dask's threaded scheduler, whatever
+    scheduler is active: a ``dask.distributed`` client would ship the run's arrays to its
+    workers). A run writes its dataset in parts while it computes (:class:`DatasetWriter`),
+    with the same bytes."""
     path = Path(path)
     _write_part(ds, path, create=True)
     finish_store(path, dict(ds.attrs))
